@@ -1,0 +1,60 @@
+"""``apf-physics eval WORLD... --planner P [--model M] [--json OUT]``."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("eval", help="run planners from every start of every world; print a table, write JSON",
+                              description="Run planners from every start of every world (or from random free starts), "
+                                          "print a table and optionally write JSON.")
+    p.add_argument("worlds", nargs="+", metavar="WORLD", help="world files (.yaml) or directories of them")
+    p.add_argument("--planner", default="gradient",
+                   help="planner, or several separated by commas: gradient, dqn, astar, escape (default: gradient)")
+    p.add_argument("--model", help="DQN model file (default: the shipped model for the world's field)")
+    p.add_argument("--formation", action="store_true", help="run the world's formation (leader and followers)")
+    p.add_argument("--random-starts", type=int, metavar="N",
+                   help="instead of the world's starts, N random free starts per world")
+    p.add_argument("--seed", type=int, default=0, help="seed for --random-starts (default 0)")
+    p.add_argument("--max-steps", type=int, help="step limit per episode (default: 4 x (width + height))")
+    p.add_argument("--json", metavar="OUT", help="write the episodes and summary as JSON")
+    p.set_defaults(func=run)
+
+
+def random_starts(world, count: int, seed: int) -> np.ndarray:
+    """``count`` free starts, away from the targets, from a seeded generator."""
+    rng = np.random.default_rng(seed)
+    out = np.empty((0, 2))
+    while len(out) < count:
+        cand = world.random_free_positions(rng, count)
+        far = np.min(np.linalg.norm(cand[:, None] - world.targets[None], axis=2), axis=1) > world.goal_tolerance
+        out = np.vstack([out, cand[far]])
+    return out[:count]
+
+
+def run(args: argparse.Namespace) -> int:
+    from apf_physics.evaluate import evaluate, format_table, write_json
+    from apf_physics.planners import make_planner
+    from apf_physics.world import load_worlds
+
+    worlds = load_worlds(args.worlds)
+    starts = None
+    if args.random_starts is not None:
+        starts = {w.name: random_starts(w, args.random_starts, args.seed) for w in worlds}
+    names = [n.strip() for n in args.planner.split(",") if n.strip()]
+    evaluations = []
+    for name in names:
+        planner = make_planner(name, model=args.model)
+        if args.formation:
+            from apf_physics.formation import evaluate_formation
+            evaluations.append(evaluate_formation(planner, worlds, starts, max_steps=args.max_steps))
+        else:
+            evaluations.append(evaluate(planner, worlds, starts, max_steps=args.max_steps))
+    print(format_table(evaluations))
+    if args.json:
+        write_json(evaluations, args.json)
+        print(f"wrote {args.json}")
+    return 0

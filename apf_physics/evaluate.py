@@ -1,0 +1,93 @@
+"""Evaluate planners over worlds and starts: episodes, summaries, tables and JSON."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from apf_physics.errors import UserError
+from apf_physics.planners.base import Planner
+from apf_physics.rollout import Episode, rollout
+from apf_physics.world import World
+
+
+@dataclass
+class Evaluation:
+    """All episodes of one planner."""
+
+    planner: str
+    episodes: list[Episode]
+
+    def summary(self, episodes: Sequence[Episode] | None = None) -> dict:
+        eps = self.episodes if episodes is None else list(episodes)
+        n = len(eps)
+        ok = [e for e in eps if e.success]
+        return {
+            "episodes": n,
+            "successes": len(ok),
+            "success_rate": round(len(ok) / n, 4) if n else 0.0,
+            "collision_rate": round(sum(e.outcome == "collision" for e in eps) / n, 4) if n else 0.0,
+            "trapped_rate": round(sum(e.outcome == "trapped" for e in eps) / n, 4) if n else 0.0,
+            "mean_steps": round(float(np.mean([e.steps for e in ok])), 2) if ok else None,
+            "mean_path_length": round(float(np.mean([e.path_length for e in ok])), 3) if ok else None,
+        }
+
+    def to_dict(self) -> dict:
+        return {"planner": self.planner, "episodes": [e.to_dict() for e in self.episodes], "summary": self.summary()}
+
+
+def evaluate(planner: Planner, worlds: Sequence[World], starts: dict[str, np.ndarray] | None = None,
+             max_steps: int | None = None) -> Evaluation:
+    """Run ``planner`` from every start of every world (or from ``starts[world.name]``)."""
+    episodes: list[Episode] = []
+    for world in worlds:
+        s = world.starts if starts is None else starts[world.name]
+        episodes.extend(rollout(world, planner, s, max_steps=max_steps))
+    return Evaluation(planner.name, episodes)
+
+
+def format_table(evaluations: Sequence[Evaluation]) -> str:
+    """One row per planner and world, then a total row per planner."""
+    header = f"{'planner':<10} {'world':<28} {'eps':>5} {'success':>9} {'collide':>8} {'trapped':>8} {'steps':>7} {'length':>8}"
+    lines = [header, "-" * len(header)]
+
+    def row(planner: str, world: str, summary: dict) -> str:
+        steps = "-" if summary["mean_steps"] is None else f"{summary['mean_steps']:.1f}"
+        length = "-" if summary["mean_path_length"] is None else f"{summary['mean_path_length']:.2f}"
+        return (f"{planner:<10} {world:<28} {summary['episodes']:>5} "
+                f"{summary['successes']:>4}/{summary['episodes']:<4} {summary['collision_rate']:>8.1%} "
+                f"{summary['trapped_rate']:>8.1%} {steps:>7} {length:>8}")
+
+    for ev in evaluations:
+        names = list(dict.fromkeys(e.world for e in ev.episodes))
+        for name in names:
+            lines.append(row(ev.planner, name, ev.summary([e for e in ev.episodes if e.world == name])))
+        if len(names) > 1:
+            lines.append(row(ev.planner, "(all)", ev.summary()))
+    return "\n".join(lines)
+
+
+def write_json(evaluations: Sequence[Evaluation], path: str | Path) -> None:
+    """One planner: ``{"planner", "episodes", "summary"}``; several: a list of those."""
+    data = evaluations[0].to_dict() if len(evaluations) == 1 else [ev.to_dict() for ev in evaluations]
+    write_text_atomic(path, json.dumps(data, indent=1))
+
+
+def write_text_atomic(path: str | Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file and a rename; a clear error if it cannot."""
+    import os
+    import tempfile
+
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise UserError(f"{path}: cannot write ({exc.strerror or exc})") from None

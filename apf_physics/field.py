@@ -1,0 +1,196 @@
+"""The artificial potential field of SPEC §1, over arrays of points, and its cached raster.
+
+One small function per term, each over ``(N, 2)`` arrays of points:
+
+- :func:`attractive` ``U_att = katt/2 · d_T²`` summed over targets,
+- :func:`repulsive` ``U_rep = krep/2 · (1/d_O − 1/p0)²`` for ``d_O ≤ p0``, one capped term per obstacle,
+- :func:`black_hole` ``U_bh = −kstr/2 · (ps − d_T)²`` for ``d_T ≤ ps``, one per target,
+
+and their gradients. ``d_O`` is the distance from the point to the obstacle's boundary (a
+circle: to its rim; radius 0: to its centre). Inside an obstacle, or on its boundary, the
+repulsive term equals the cap ``u_max`` and contributes no gradient.
+
+The map's edge is not part of U: it is a hard limit that only the physics (walls) and the
+observation (points outside read as impassable) see. ``potential()`` outside the map is the
+same formula continued.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Sequence
+
+import numpy as np
+
+from apf_physics import geometry
+
+if TYPE_CHECKING:
+    from apf_physics.world import FieldParams, Obstacle
+
+
+def _target_offsets(points: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    diff = points[:, None, :] - targets[None, :, :]        # (N, T, 2)
+    return diff, np.sqrt(np.einsum("ntj,ntj->nt", diff, diff))
+
+
+def attractive(points: np.ndarray, targets: np.ndarray, katt: float) -> np.ndarray:
+    """``Σ_T katt/2 · d_T²`` (SPEC eq. 1–3)."""
+    _, d = _target_offsets(points, targets)
+    return 0.5 * katt * np.sum(d * d, axis=1)
+
+
+def attractive_gradient(points: np.ndarray, targets: np.ndarray, katt: float) -> np.ndarray:
+    """``∇U_att = katt · Σ_T (P − T)``."""
+    diff, _ = _target_offsets(points, targets)
+    return katt * diff.sum(axis=1)
+
+
+def black_hole(points: np.ndarray, targets: np.ndarray, kstr: float, ps: float) -> np.ndarray:
+    """``Σ_T −kstr/2 · (ps − d_T)²`` where ``d_T ≤ ps`` (SPEC eq. 8–10)."""
+    _, d = _target_offsets(points, targets)
+    well = np.clip(ps - d, 0.0, None)
+    return -0.5 * kstr * np.sum(well * well, axis=1)
+
+
+def black_hole_gradient(points: np.ndarray, targets: np.ndarray, kstr: float, ps: float) -> np.ndarray:
+    """``∇U_bh = Σ_T kstr · (ps − d_T) · (P − T)/d_T`` where ``d_T ≤ ps`` (0 at the target itself)."""
+    diff, d = _target_offsets(points, targets)
+    well = np.clip(ps - d, 0.0, None)
+    scale = np.where(d > 0, kstr * well / np.where(d > 0, d, 1.0), 0.0)
+    return np.einsum("nt,ntj->nj", scale, diff)
+
+
+def repulsive_term(d: np.ndarray, krep: float, p0: float, u_max: float) -> np.ndarray:
+    """One obstacle's ``min(krep/2 · (1/d − 1/p0)², u_max)`` for ``d ≤ p0``; the cap for ``d ≤ 0``."""
+    with np.errstate(divide="ignore"):
+        inv = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), np.inf)
+    u = 0.5 * krep * (inv - 1.0 / p0) ** 2
+    u = np.where(d <= p0, np.minimum(u, u_max), 0.0)
+    return np.where(d <= 0, u_max, u)
+
+
+def repulsive_term_slope(d: np.ndarray, krep: float, p0: float, u_max: float) -> np.ndarray:
+    """``dU_rep/dd`` of one obstacle's term: ``−krep (1/d − 1/p0)/d²`` where uncapped, else 0."""
+    u = repulsive_term(d, krep, p0, u_max)
+    live = (d > 0) & (d <= p0) & (u < u_max)
+    safe = np.where(live, d, 1.0)
+    return np.where(live, -krep * (1.0 / safe - 1.0 / p0) / (safe * safe), 0.0)
+
+
+def _near_obstacle(points: np.ndarray, obstacle: Obstacle, reach: float) -> np.ndarray:
+    """Indices of the points within ``reach`` of the obstacle's bounding box."""
+    lo, hi = obstacle.bounds
+    mask = np.all((points >= lo - reach) & (points <= hi + reach), axis=1)
+    return np.flatnonzero(mask)
+
+
+def repulsive(points: np.ndarray, obstacles: Sequence[Obstacle], params: FieldParams) -> np.ndarray:
+    """``Σ_O U_rep,O`` (SPEC eq. 4–7), each term capped at ``u_max``.
+
+    Only points near an obstacle's bounding box are measured against it: beyond ``p0``
+    the term is 0, which keeps rasterising large maps cheap.
+    """
+    total = np.zeros(len(points))
+    for obstacle in obstacles:
+        idx = _near_obstacle(points, obstacle, params.p0)
+        if len(idx):
+            d, _ = obstacle.signed_distance(points[idx])
+            total[idx] += repulsive_term(d, params.krep, params.p0, params.u_max)
+    return total
+
+
+def repulsive_gradient(points: np.ndarray, obstacles: Sequence[Obstacle], params: FieldParams) -> np.ndarray:
+    """``Σ_O dU_rep/dd · ∇d``, with ``∇d = (P − Q)/d`` for the nearest boundary point Q."""
+    grad = np.zeros((len(points), 2))
+    for obstacle in obstacles:
+        idx = _near_obstacle(points, obstacle, params.p0)
+        if len(idx):
+            p = points[idx]
+            d, nearest = obstacle.signed_distance(p)
+            slope = repulsive_term_slope(d, params.krep, params.p0, params.u_max)
+            safe = np.where(d > 0, d, 1.0)
+            grad[idx] += (slope / safe)[:, None] * (p - nearest)
+    return grad
+
+
+def potential(points: np.ndarray, targets: np.ndarray, obstacles: Sequence[Obstacle], params: FieldParams) -> np.ndarray:
+    """Total ``U = U_att + U_rep + U_bh`` (SPEC eq. 11) at each point."""
+    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    return (attractive(points, targets, params.katt)
+            + repulsive(points, obstacles, params)
+            + black_hole(points, targets, params.kstr, params.ps))
+
+
+def gradient(points: np.ndarray, targets: np.ndarray, obstacles: Sequence[Obstacle], params: FieldParams) -> np.ndarray:
+    """``∇U`` at each point; the force is ``F = −∇U`` (SPEC eq. 12)."""
+    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    return (attractive_gradient(points, targets, params.katt)
+            + repulsive_gradient(points, obstacles, params)
+            + black_hole_gradient(points, targets, params.kstr, params.ps))
+
+
+@dataclass(frozen=True)
+class Grid:
+    """World ↔ grid conversion for a regular lattice of nodes.
+
+    Node ``[row, col]`` sits at ``(x0 + col/resolution, y0 + row/resolution)``: row 0 is the
+    lowest y (flip it for an image).
+
+    Attributes:
+        origin: World coordinates ``(x0, y0)`` of node ``[0, 0]``.
+        resolution: Nodes per world unit.
+        shape: ``(rows, cols)``.
+    """
+
+    origin: tuple[float, float]
+    resolution: int
+    shape: tuple[int, int]
+
+    @classmethod
+    def covering(cls, lower: Sequence[float], upper: Sequence[float], resolution: int) -> Grid:
+        """The grid whose nodes span ``[lower, upper]`` at ``resolution`` nodes per unit."""
+        cols = int(round((upper[0] - lower[0]) * resolution)) + 1
+        rows = int(round((upper[1] - lower[1]) * resolution)) + 1
+        return cls((float(lower[0]), float(lower[1])), int(resolution), (rows, cols))
+
+    def to_index(self, points: np.ndarray) -> np.ndarray:
+        """Continuous ``(col, row)`` index of each world point."""
+        return (np.asarray(points, dtype=float) - np.asarray(self.origin)) * self.resolution
+
+    def to_world(self, index: np.ndarray) -> np.ndarray:
+        """World point of each continuous ``(col, row)`` index."""
+        return np.asarray(index, dtype=float) / self.resolution + np.asarray(self.origin)
+
+    def node_points(self) -> np.ndarray:
+        """All node coordinates, row-major, ``(rows*cols, 2)``."""
+        rows, cols = self.shape
+        xs = self.origin[0] + np.arange(cols) / self.resolution
+        ys = self.origin[1] + np.arange(rows) / self.resolution
+        gx, gy = np.meshgrid(xs, ys)
+        return np.column_stack([gx.ravel(), gy.ravel()])
+
+
+@dataclass(frozen=True, eq=False)
+class Raster:
+    """Values at the nodes of a :class:`Grid`, sampled bilinearly anywhere inside it.
+
+    Attributes:
+        grid: Where the nodes are.
+        values: ``(rows, cols)`` float64 values at the nodes.
+    """
+
+    grid: Grid
+    values: np.ndarray
+
+    def sample(self, points: np.ndarray) -> np.ndarray:
+        """Bilinear interpolation at ``(N, 2)`` points; points outside are clamped to the edge."""
+        rows, cols = self.grid.shape
+        idx = self.grid.to_index(np.asarray(points, dtype=float).reshape(-1, 2))
+        cx = np.clip(idx[:, 0], 0.0, cols - 1.0)
+        cy = np.clip(idx[:, 1], 0.0, rows - 1.0)
+        c0 = np.minimum(np.floor(cx).astype(np.intp), cols - 2)
+        r0 = np.minimum(np.floor(cy).astype(np.intp), rows - 2)
+        fx, fy = cx - c0, cy - r0
+        v = self.values
+        return ((1 - fy) * ((1 - fx) * v[r0, c0] + fx * v[r0, c0 + 1])
+                + fy * ((1 - fx) * v[r0 + 1, c0] + fx * v[r0 + 1, c0 + 1]))

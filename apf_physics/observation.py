@@ -1,0 +1,112 @@
+"""The observation of SPEC §2: a k×k window of the potential around each robot.
+
+Window point ``[i, j]`` of a robot at ``(x, y)`` is ``(x + (j − k//2), y + (k//2 − i))``: row 0
+is the top (highest y), as in an image. Values come from a padded raster of U built once per
+world; nodes inside an obstacle or outside the map read ``world.u_wall``, the map's highest
+potential, so blocked points always look impassable. Because the window's spacing (1 unit)
+is a whole number of raster cells, every point of a window shares the same bilinear weights:
+sampling N windows is four gathers and a weighted sum, for robots in any mix of worlds.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from apf_physics.field import Grid, Raster
+from apf_physics.world import World
+
+
+def observation_raster(world: World, margin: int, resolution: int = 4) -> Raster:
+    """U over the map plus ``margin`` units on every side, blocked nodes set to ``world.u_wall``.
+
+    Built once per world and cached.
+    """
+    key = ("observation", int(margin), int(resolution))
+    if key not in world._cache:
+        grid = Grid.covering((-margin, -margin), (world.size[0] + margin, world.size[1] + margin), resolution)
+        nodes = grid.node_points()
+        values = world.potential(nodes)
+        blocked = (world.edge_distance(nodes) < 0) | (world.obstacle_distance(nodes) <= 0)
+        values[blocked] = world.u_wall
+        world._cache[key] = Raster(grid, values.reshape(grid.shape))
+    return world._cache[key]
+
+
+class WindowSampler:
+    """Samples k×k potential windows for batches of robots, each robot in its own world.
+
+    Args:
+        worlds: Worlds the robots may be in; more can be added with :meth:`add_world`.
+        size: Window side ``k`` (odd).
+        resolution: Raster nodes per unit.
+    """
+
+    def __init__(self, worlds: Sequence[World] = (), size: int = 11, resolution: int = 4):
+        if size < 1 or size % 2 == 0:
+            raise ValueError(f"observation size must be odd and positive, got {size}")
+        self.size = int(size)
+        self.resolution = int(resolution)
+        self.margin = self.size // 2 + 2
+        self.worlds: list[World] = []
+        self._ids: dict[int, int] = {}
+        self._values = np.zeros(0)
+        self._start: list[int] = []
+        self._cols: list[int] = []
+        self._origin: list[tuple[float, float]] = []
+        self._shape: list[tuple[int, int]] = []
+        half = self.size // 2
+        steps = np.arange(self.size) - half
+        self._dx = steps[None, :] * self.resolution           # (1, k) columns, left → right
+        self._dy = -steps[:, None] * self.resolution          # (k, 1) rows, top → bottom
+        for world in worlds:
+            self.add_world(world)
+
+    def add_world(self, world: World) -> int:
+        """Register a world (once) and return its index."""
+        key = id(world)
+        if key in self._ids and self.worlds[self._ids[key]] is world:
+            return self._ids[key]
+        raster = observation_raster(world, self.margin, self.resolution)
+        self._ids[key] = len(self.worlds)
+        self.worlds.append(world)
+        self._start.append(len(self._values))
+        self._cols.append(raster.grid.shape[1])
+        self._origin.append(raster.grid.origin)
+        self._shape.append(raster.grid.shape)
+        self._values = np.concatenate([self._values, raster.values.ravel()])
+        self._start_arr = np.asarray(self._start)
+        self._cols_arr = np.asarray(self._cols)
+        self._origin_arr = np.asarray(self._origin, dtype=float)
+        self._shape_arr = np.asarray(self._shape)
+        return self._ids[key]
+
+    def world_index(self, world: World) -> int:
+        return self.add_world(world)
+
+    def sample(self, positions: np.ndarray, world_ids: np.ndarray | int = 0) -> np.ndarray:
+        """Windows around ``positions`` (N, 2), robot n in world ``world_ids[n]``.
+
+        Returns:
+            (N, k, k) float32.
+        """
+        positions = np.asarray(positions, dtype=float).reshape(-1, 2)
+        ids = np.broadcast_to(np.asarray(world_ids, dtype=np.intp), (len(positions),))
+        res = self.resolution
+        index = (positions - self._origin_arr[ids]) * res            # continuous (col, row)
+        shape = self._shape_arr[ids]
+        # Keep every window inside its padded raster (robots never leave their map).
+        reach = self.size // 2 * res
+        col = np.clip(index[:, 0], reach, shape[:, 1] - 2 - reach)
+        row = np.clip(index[:, 1], reach, shape[:, 0] - 2 - reach)
+        c0 = np.floor(col).astype(np.intp)
+        r0 = np.floor(row).astype(np.intp)
+        fx = (col - c0)[:, None, None]
+        fy = (row - r0)[:, None, None]
+        cols = self._cols_arr[ids][:, None, None]
+        base = (self._start_arr[ids] + r0 * self._cols_arr[ids] + c0)[:, None, None]
+        idx = base + self._dy[None] * cols + self._dx[None]          # (N, k, k)
+        v = self._values
+        out = (1 - fy) * ((1 - fx) * v[idx] + fx * v[idx + 1]) + fy * ((1 - fx) * v[idx + cols] + fx * v[idx + cols + 1])
+        return out.astype(np.float32)

@@ -1,0 +1,53 @@
+"""The planner interface: a policy that turns robot positions into velocity commands.
+
+Planners know nothing of the physics. :func:`apf_physics.rollout.rollout` asks a planner
+for one displacement per robot each control step, hands it to the physics as a velocity
+command, and decides when an episode ends.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar, Literal
+
+import numpy as np
+
+from apf_physics.world import World
+
+TrapRule = Literal["descent", "oscillation"]
+
+
+class Planner:
+    """Base class of all planners.
+
+    Attributes:
+        name: Short name used on the command line and in result tables.
+        trap_rule: How the rollout decides that a robot is trapped. ``"descent"``: the
+            potential stopped decreasing or the robot oscillates over a window (gradient
+            descent). ``"oscillation"``: only when the robot stays within a small region
+            over a window (planners that may climb the potential on purpose).
+    """
+
+    name: ClassVar[str] = "planner"
+    trap_rule: ClassVar[TrapRule] = "oscillation"
+
+    def reset(self, world: World, positions: np.ndarray) -> None:
+        """Prepare for a batch of episodes in ``world`` starting at ``positions`` (N, 2)."""
+        self.world = world
+
+    def stuck(self) -> np.ndarray | None:
+        """(N,) bool: robots for which the planner itself gives up (it knows it is trapped), or None."""
+        return None
+
+    def act(self, positions: np.ndarray, active: np.ndarray) -> np.ndarray:
+        """Return the displacement each robot should make during this control step.
+
+        Args:
+            positions: (N, 2) current robot centres in world coordinates.
+            active: (N,) bool, False for robots whose episode already ended (their
+                command is ignored).
+
+        Returns:
+            (N, 2) float displacements in world units per control step; each component
+            in [-1, 1] (a unit move along an axis or a diagonal).
+        """
+        raise NotImplementedError

@@ -1,0 +1,130 @@
+"""The field against SPEC §1's formulas, the gradient against finite differences, the raster against potential()."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from apf_physics import world_from_dict
+from apf_physics.geometry import points_in_polygon
+from conftest import simple_world_dict
+
+WORLD = world_from_dict(simple_world_dict(
+    field={"katt": 2, "krep": 20, "kstr": 8, "p0": 1.5, "ps": 8, "u_max": 100},
+    obstacles=[{"polygon": [[5, 5], [8, 5], [8, 9], [6, 9]]},
+               {"polygon": [[10, 10], [14, 10], [14, 13], [13, 13], [13, 11], [10, 11]]},  # concave L
+               {"circle": {"center": [12, 4], "radius": 0.5}},
+               {"circle": {"center": [3, 12], "radius": 0}}],
+    targets=[[15, 15], [4, 16]]))
+
+
+def reference_potential(world, p):
+    """SPEC §1 written out term by term for one point, with brute-force boundary distances."""
+    f = world.field
+    u = 0.0
+    for t in world.targets:
+        d = np.hypot(*(p - t))
+        u += f.katt / 2 * d * d
+        if d <= f.ps:
+            u -= f.kstr / 2 * (f.ps - d) ** 2
+    for o in world.obstacles:
+        if hasattr(o, "vertices"):
+            v = o.vertices
+            inside = points_in_polygon(p[None], v)[0]
+            # dense sampling of the boundary
+            d = min(np.min(np.hypot(*(np.linspace(a, b, 4001) - p).T)) for a, b in zip(v, np.roll(v, -1, axis=0)))
+        else:
+            r = np.hypot(*(p - o.center))
+            inside = r < o.radius
+            d = abs(r - o.radius)
+        if inside or d <= 0:
+            u += f.u_max
+        elif d <= f.p0:
+            u += min(f.krep / 2 * (1 / d - 1 / f.p0) ** 2, f.u_max)
+    return u
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.floats(0, 20), st.floats(0, 20))
+def test_potential_matches_formula(x, y):
+    p = np.array([x, y])
+    expected = reference_potential(WORLD, p)
+    got = WORLD.potential(p[None])[0]
+    assert got == pytest.approx(expected, rel=2e-3, abs=2e-3)
+
+
+def test_potential_near_and_inside_obstacles():
+    rng = np.random.default_rng(1)
+    pts = np.vstack([rng.uniform([4.5, 4.5], [8.5, 9.5], (200, 2)), rng.uniform([9.5, 9.5], [14.5, 13.5], (200, 2)),
+                     rng.uniform([11, 3], [13, 5], (100, 2))])
+    for p in pts:
+        assert WORLD.potential(p[None])[0] == pytest.approx(reference_potential(WORLD, p), rel=2e-3, abs=2e-3)
+    from apf_physics import field as apf
+
+    inside = np.array([[6.5, 7.0], [12, 4], [13.5, 12]])
+    f = WORLD.field
+    att_bh = apf.attractive(inside, WORLD.targets, f.katt) + apf.black_hole(inside, WORLD.targets, f.kstr, f.ps)
+    np.testing.assert_allclose(WORLD.potential(inside), att_bh + f.u_max)
+    np.testing.assert_allclose(apf.repulsive_gradient(inside, WORLD.obstacles, f), 0.0)
+
+
+def test_terms_by_hand():
+    from apf_physics.field import black_hole, repulsive_term
+    from apf_physics import field as apf
+
+    t = np.array([[0.0, 0.0]])
+    p = np.array([[3.0, 4.0]])
+    assert apf.attractive(p, t, 2.0)[0] == pytest.approx(25.0)
+    assert black_hole(p, t, 8.0, 8.0)[0] == pytest.approx(-4 * 9)
+    assert black_hole(np.array([[9.0, 0.0]]), t, 8.0, 8.0)[0] == 0.0
+    assert repulsive_term(np.array([0.25]), 20, 0.5, 100)[0] == pytest.approx(10 * (4 - 2) ** 2)
+    assert repulsive_term(np.array([0.6]), 20, 0.5, 100)[0] == 0.0
+    assert repulsive_term(np.array([0.01]), 20, 0.5, 100)[0] == 100
+    assert repulsive_term(np.array([-0.3]), 20, 0.5, 100)[0] == 100
+
+
+def test_several_targets_sum():
+    one = world_from_dict(simple_world_dict(obstacles=[], targets=[[15, 15]]))
+    two = world_from_dict(simple_world_dict(obstacles=[], targets=[[15, 15], [4, 4]]))
+    three = world_from_dict(simple_world_dict(obstacles=[], targets=[[4, 4]]))
+    p = np.random.default_rng(0).uniform(0, 20, (50, 2))
+    np.testing.assert_allclose(two.potential(p), one.potential(p) + three.potential(p))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.floats(0.2, 19.8), st.floats(0.2, 19.8))
+def test_gradient_matches_finite_differences(x, y):
+    p = np.array([[x, y]])
+    h = 1e-6
+    u = WORLD.potential
+    # Skip points where a finite difference straddles a kink (the cap, p0, ps, a polygon's medial axis).
+    d = WORLD.obstacle_distance(p)[0]
+    for o in WORLD.obstacles:
+        dd, _ = o.signed_distance(p)
+        if abs(dd[0] - WORLD.field.p0) < 1e-3 or dd[0] < 0.35:
+            return
+    numeric = np.array([(u(p + [[h, 0]]) - u(p - [[h, 0]]))[0], (u(p + [[0, h]]) - u(p - [[0, h]]))[0]]) / (2 * h)
+    analytic = WORLD.gradient(p)[0]
+    assert d is not None
+    np.testing.assert_allclose(analytic, numeric, rtol=1e-4, atol=1e-3)
+
+
+def test_raster_equals_potential_at_nodes_and_interpolates():
+    raster = WORLD.raster(resolution=5)
+    nodes = raster.grid.node_points()
+    np.testing.assert_array_equal(raster.values.ravel(), WORLD.potential(nodes))
+    assert raster.grid.shape == (101, 101)
+    assert WORLD.raster(resolution=5) is raster  # cached
+    np.testing.assert_allclose(raster.sample(nodes[::37]), WORLD.potential(nodes[::37]))
+    # bilinear between nodes: exact for the quadratic attraction up to the grid's curvature error
+    mid = np.array([[10.1, 2.1], [17.3, 18.9]])
+    assert np.all(np.abs(raster.sample(mid) - WORLD.potential(mid)) < 0.5)
+
+
+def test_grid_conversion_round_trips():
+    from apf_physics.field import Grid
+
+    grid = Grid.covering((-3, -2), (10, 8), 4)
+    pts = np.random.default_rng(0).uniform(-3, 8, (20, 2))
+    np.testing.assert_allclose(grid.to_world(grid.to_index(pts)), pts)
+    assert grid.shape == (41, 53)
