@@ -5,5 +5,9 @@ from apf_physics.world import FieldParams, World, load_world, load_worlds, save_
 
 __version__ = "0.1.0"
 
+from apf_physics.envs import register_envs as _register_envs  # noqa: E402
+
+_register_envs()
+
 __all__ = ["FieldParams", "ModelError", "UserError", "World", "WorldError", "load_world", "load_worlds",
            "save_world", "world_from_dict", "__version__"]

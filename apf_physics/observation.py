@@ -89,10 +89,30 @@ class WindowSampler:
         """Windows around ``positions`` (N, 2), robot n in world ``world_ids[n]``.
 
         Returns:
-            (N, k, k) float32.
+            (N, k, k) float64.
         """
         positions = np.asarray(positions, dtype=float).reshape(-1, 2)
-        ids = np.broadcast_to(np.asarray(world_ids, dtype=np.intp), (len(positions),))
+        if len(positions) == 1:
+            return self._sample_one(positions[0], int(np.asarray(world_ids).ravel()[0]))
+        ids = np.asarray(world_ids, dtype=np.intp)
+        if ids.ndim == 0:
+            ids = np.full(len(positions), int(ids))
+        c0, r0, fx, fy = self._corner(positions, ids)
+        cols = self._cols_arr[ids][:, None, None]
+        base = (self._start_arr[ids] + r0 * self._cols_arr[ids] + c0)[:, None, None]
+        idx = base + self._dy[None] * cols + self._dx[None]          # (N, k, k)
+        v = self._values
+        fx = fx[:, None, None]
+        fy = fy[:, None, None]
+        top = v[idx + cols]
+        top += fx * (v[idx + cols + 1] - top)
+        bottom = v[idx]
+        bottom += fx * (v[idx + 1] - bottom)
+        bottom += fy * (top - bottom)
+        return bottom
+
+    def _corner(self, positions: np.ndarray, ids: np.ndarray):
+        """Lower-left raster node of each window's centre cell, and the bilinear weights."""
         res = self.resolution
         index = (positions - self._origin_arr[ids]) * res            # continuous (col, row)
         shape = self._shape_arr[ids]
@@ -100,13 +120,25 @@ class WindowSampler:
         reach = self.size // 2 * res
         col = np.clip(index[:, 0], reach, shape[:, 1] - 2 - reach)
         row = np.clip(index[:, 1], reach, shape[:, 0] - 2 - reach)
-        c0 = np.floor(col).astype(np.intp)
-        r0 = np.floor(row).astype(np.intp)
-        fx = (col - c0)[:, None, None]
-        fy = (row - r0)[:, None, None]
-        cols = self._cols_arr[ids][:, None, None]
-        base = (self._start_arr[ids] + r0 * self._cols_arr[ids] + c0)[:, None, None]
-        idx = base + self._dy[None] * cols + self._dx[None]          # (N, k, k)
-        v = self._values
-        out = (1 - fy) * ((1 - fx) * v[idx] + fx * v[idx + 1]) + fy * ((1 - fx) * v[idx + cols] + fx * v[idx + cols + 1])
-        return out.astype(np.float32)
+        c0 = col.astype(np.intp)
+        r0 = row.astype(np.intp)
+        return c0, r0, col - c0, row - r0
+
+    def _sample_one(self, position: np.ndarray, world_id: int) -> np.ndarray:
+        """One window from strided views of the raster: no index arrays at all."""
+        res, reach = self.resolution, self.size // 2 * self.resolution
+        rows, cols = self._shape[world_id]
+        ox, oy = self._origin[world_id]
+        col = min(max((position[0] - ox) * res, reach), cols - 2 - reach)
+        row = min(max((position[1] - oy) * res, reach), rows - 2 - reach)
+        c0, r0 = int(col), int(row)
+        fx, fy = col - c0, row - r0
+        start = self._start[world_id]
+        grid = self._values[start:start + rows * cols].reshape(rows, cols)
+        rs = slice(r0 - reach, r0 + reach + 1, res)
+        rs1 = slice(r0 + 1 - reach, r0 + reach + 2, res)
+        cs = slice(c0 - reach, c0 + reach + 1, res)
+        cs1 = slice(c0 + 1 - reach, c0 + reach + 2, res)
+        bottom = (1 - fx) * grid[rs, cs] + fx * grid[rs, cs1]
+        top = (1 - fx) * grid[rs1, cs] + fx * grid[rs1, cs1]
+        return ((1 - fy) * bottom + fy * top)[None, ::-1]

@@ -23,6 +23,7 @@ from typing import Sequence
 import numpy as np
 import pymunk
 import pymunk.batch
+from pymunk._chipmunk_cffi import lib as _cp
 
 from apf_physics.world import CircleObstacle, PolygonObstacle, World
 
@@ -152,6 +153,9 @@ class Physics:
         # Chipmunk tolerates 0.1 of overlap by default; a robot resting against an obstacle with
         # that much overlap would sink past its boundary on the next push. Correct overlaps fully.
         self.space.collision_slop = 0.002
+        # Forget a contact as soon as it ends: a teleported robot must not inherit the warm-start
+        # impulses of the contact it had before (runs would then depend on how a reset was timed).
+        self.space.collision_persistence = 1
         self.worlds: list[World] = list(worlds)
         self._slot_shapes: list[list[pymunk.Shape]] = [[] for _ in range(self.num_slots)]
         self._shape_label: dict[pymunk.Shape, tuple[str, int]] = {}
@@ -159,22 +163,19 @@ class Physics:
         for s, world in enumerate(self.worlds):
             self._add_static(s, world)
             for r in range(self.robots_per_slot):
-                body = pymunk.Body(1.0, math.inf)
+                body, shape = self._new_robot(world.robot_radius)
                 body.position = tuple(self.offsets[s] + 1.0 + r)  # placed properly by place()
-                shape = pymunk.Circle(body, world.robot_radius)
-                shape.collision_type = CollisionType.ROBOT
-                shape.friction = 0.0
-                shape.elasticity = 0.0
                 self.space.add(body, shape)
                 self._shape_label[shape] = ("robot", len(self.bodies))
                 self.bodies.append(body)
 
-        self._log_obstacle = np.zeros(self.num_robots, bool)
-        self._log_wall = np.zeros(self.num_robots, bool)
-        self._log_robot = np.zeros(self.num_robots, bool)
         self._contacts: set[tuple[int, str, int]] = set()
+        # Pairs touching now. Callbacks fire only when a touch begins or ends (not every
+        # substep), so a resting contact costs no Python; the log of a step is every pair
+        # that touched at some point of it.
+        self._touching: set[tuple[int, str, int]] = set()
         for other in (CollisionType.OBSTACLE, CollisionType.WALL, CollisionType.ROBOT):
-            self.space.on_collision(CollisionType.ROBOT, other, pre_solve=self._record)
+            self.space.on_collision(CollisionType.ROBOT, other, begin=self._begin, separate=self._separate)
 
         self._buffer = pymunk.batch.Buffer()
         self._index_bodies()
@@ -245,27 +246,53 @@ class Physics:
         self._velocity_buffer.set_float_buf(self._velocity_rows.reshape(-1))
 
     # -- control --------------------------------------------------------------------------
-    def _record(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
+    def _pair(self, arbiter: pymunk.Arbiter) -> tuple[int, str, int] | None:
         a, b = arbiter.shapes
+        if a not in self._shape_label or b not in self._shape_label:
+            return None  # a shape being removed
         _, robot = self._shape_label[a]
         kind, other = self._shape_label[b]
-        if kind == "obstacle":
-            self._log_obstacle[robot] = True
-        elif kind == "wall":
-            self._log_wall[robot] = True
-        else:
-            self._log_robot[robot] = True
-            self._log_robot[other] = True
-        self._contacts.add((robot, kind, other))
+        return robot, kind, other
+
+    def _begin(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
+        pair = self._pair(arbiter)
+        if pair is not None:
+            self._touching.add(pair)
+            self._contacts.add(pair)
+
+    def _separate(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
+        pair = self._pair(arbiter)
+        if pair is not None:
+            self._touching.discard(pair)
 
     def place(self, robots: Sequence[int] | np.ndarray, positions: np.ndarray) -> None:
         """Teleport robots (global indices) to world-local ``positions`` and stop them."""
         positions = np.asarray(positions, dtype=float).reshape(-1, 2)
-        for r, p in zip(np.asarray(robots).ravel(), positions):
-            body = self.bodies[int(r)]
+        robots = np.asarray(robots).ravel()
+        moved = set(int(r) for r in robots)
+        self._touching = {c for c in self._touching if c[0] not in moved and not (c[1] == "robot" and c[2] in moved)}
+        for r, p in zip(robots, positions):
+            # A fresh body: Chipmunk keeps a hidden bias velocity from the last contact, which a
+            # moved body would carry into its next step (runs would depend on when a reset came).
+            old = self.bodies[int(r)]
+            (old_shape,) = old.shapes
+            self.space.remove(old, old_shape)
+            del self._shape_label[old_shape]
+            body, shape = self._new_robot(old_shape.radius)
             body.position = (float(p[0] + self._robot_offsets[r, 0]), float(p[1] + self._robot_offsets[r, 1]))
-            body.velocity = (0.0, 0.0)
-            self.space.reindex_shapes_for_body(body)
+            self.space.add(body, shape)
+            self._shape_label[shape] = ("robot", int(r))
+            self.bodies[int(r)] = body
+        self._index_bodies()
+
+    @staticmethod
+    def _new_robot(radius: float) -> tuple[pymunk.Body, pymunk.Circle]:
+        body = pymunk.Body(1.0, math.inf)
+        shape = pymunk.Circle(body, radius)
+        shape.collision_type = CollisionType.ROBOT
+        shape.friction = 0.0
+        shape.elasticity = 0.0
+        return body, shape
 
     @property
     def positions(self) -> np.ndarray:
@@ -297,13 +324,25 @@ class Physics:
         self._velocity_rows[self._robot_rows] = v[self._robot_of_row] / self.control_dt
         pymunk.batch.set_space_bodies(self.space, pymunk.batch.BodyFields.VELOCITY, self._velocity_buffer)
 
-        self._log_obstacle[:] = False
-        self._log_wall[:] = False
-        self._log_robot[:] = False
-        self._contacts.clear()
-        step = self.space.step
-        dt = self.dt
-        for _ in range(self.substeps):
-            step(dt)
-        return ContactLog(self._log_obstacle.copy(), self._log_wall.copy(), self._log_robot.copy(),
-                          [Contact(*c) for c in sorted(self._contacts)])
+        self._contacts = set(self._touching)
+        # Substeps call Chipmunk directly: pymunk's Space.step adds Python bookkeeping (deferred
+        # adds/removes, post-step callbacks) that nothing here uses, and it cost 3x the step itself.
+        space = self.space
+        space._locked = True
+        try:
+            cp_step, handle, dt = _cp.cpSpaceStep, space._space, self.dt
+            for _ in range(self.substeps):
+                cp_step(handle, dt)
+        finally:
+            space._locked = False
+        obstacle = np.zeros(self.num_robots, bool)
+        wall = np.zeros(self.num_robots, bool)
+        robot = np.zeros(self.num_robots, bool)
+        for r, kind, other in self._contacts:
+            if kind == "obstacle":
+                obstacle[r] = True
+            elif kind == "wall":
+                wall[r] = True
+            else:
+                robot[r] = robot[other] = True
+        return ContactLog(obstacle, wall, robot, [Contact(*c) for c in sorted(self._contacts)])

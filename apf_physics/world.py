@@ -190,19 +190,29 @@ class World:
         margin = self.robot_radius if margin is None else margin
         return self.clearance(points) >= margin
 
+    def free_cells(self, margin: float | None = None, resolution: int = 4) -> np.ndarray:
+        """Centres of the grid cells (side ``1/resolution``) in which every point is free.
+
+        A cell qualifies when its centre's clearance exceeds ``margin`` plus half the cell's
+        diagonal (clearance changes no faster than distance). Built once and cached.
+        """
+        margin = self.robot_radius if margin is None else margin
+        key = ("free_cells", float(margin), int(resolution))
+        if key not in self._cache:
+            h = 1.0 / resolution
+            xs = np.arange(h / 2, self.size[0], h)
+            ys = np.arange(h / 2, self.size[1], h)
+            centres = np.column_stack([a.ravel() for a in np.meshgrid(xs, ys)])
+            self._cache[key] = centres[self.clearance(centres) > margin + h / np.sqrt(2)]
+        return self._cache[key]
+
     def random_free_positions(self, rng: np.random.Generator, count: int, margin: float | None = None) -> np.ndarray:
-        """``count`` uniformly drawn positions where a robot fits (rejection sampling)."""
-        out = np.empty((0, 2))
-        w, h = self.size
-        for _ in range(1000):
-            need = count - len(out)
-            if need <= 0:
-                break
-            candidates = rng.uniform((0, 0), (w, h), size=(max(2 * need, 16), 2))
-            out = np.vstack([out, candidates[self.is_free(candidates, margin)][:need]])
-        if len(out) < count:
+        """``count`` positions where a robot fits, drawn uniformly over the free cells of :meth:`free_cells`."""
+        cells = self.free_cells(margin)
+        if not len(cells):
             raise WorldError(f"{self.source or self.name}: no free position for a robot of radius {self.robot_radius}")
-        return out
+        half = 0.5 / 4
+        return cells[rng.integers(len(cells), size=count)] + rng.uniform(-half, half, size=(count, 2))
 
     # -- serialisation -----------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:

@@ -1,6 +1,7 @@
 """Physics: contacts are logged, robots move as commanded, and nothing tunnels through walls."""
 
 import math
+import os
 
 import numpy as np
 from hypothesis import given, settings
@@ -108,7 +109,7 @@ def make_obstacle(spec):
     return {"polygon": pts.tolist()}
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=int(os.environ.get("APF_TUNNEL_EXAMPLES", 60)), deadline=None)
 @given(st.lists(thin_obstacle, min_size=1, max_size=4), st.floats(0, 2 * math.pi), st.integers(0, 10_000),
        st.floats(0.05, 0.5))
 def test_no_tunnelling_at_full_speed(obstacles, heading, seed, radius):

@@ -1,0 +1,20 @@
+"""Gymnasium environments: ``apf_physics/Navigate-v0`` and its vectorised version."""
+
+from apf_physics.envs.navigate import ACTIONS, NavigateEnv
+from apf_physics.envs.vector import NavigateVectorEnv
+
+
+def register_envs() -> None:
+    """Register the ``apf_physics/...`` ids (safe to call more than once)."""
+    from gymnasium.envs.registration import register, registry
+
+    if "apf_physics/Navigate-v0" not in registry:
+        register(
+            id="apf_physics/Navigate-v0",
+            entry_point="apf_physics.envs.navigate:NavigateEnv",
+            vector_entry_point="apf_physics.envs.vector:NavigateVectorEnv",
+            max_episode_steps=100,  # tt, thesis Tables 3–4
+        )
+
+
+__all__ = ["ACTIONS", "NavigateEnv", "NavigateVectorEnv", "register_envs"]

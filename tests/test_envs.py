@@ -1,0 +1,201 @@
+"""Navigate-v0 and its vectorised version."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import apf_physics  # noqa: F401  (registers the ids)
+from apf_physics import load_world
+from apf_physics.actions import ACTIONS
+from apf_physics.envs import NavigateEnv, NavigateVectorEnv, register_envs
+
+
+@pytest.fixture
+def fixed20(worlds_dir):
+    return str(worlds_dir / "fixed20.yaml")
+
+
+def test_registration_is_idempotent():
+    register_envs()
+    register_envs()
+    assert "apf_physics/Navigate-v0" in gym.registry
+    assert gym.registry["apf_physics/Navigate-v0"].max_episode_steps == 100
+
+
+def test_gymnasium_env_checker(fixed20):
+    from gymnasium.utils.env_checker import check_env
+
+    check_env(gym.make("apf_physics/Navigate-v0", world=fixed20).unwrapped, skip_render_check=False)
+
+
+def test_sb3_env_checker(fixed20):
+    sb3 = pytest.importorskip("stable_baselines3.common.env_checker")
+    sb3.check_env(gym.make("apf_physics/Navigate-v0", world=fixed20).unwrapped, warn=False)
+
+
+def test_observation_is_the_potential_window(fixed20):
+    env = gym.make("apf_physics/Navigate-v0", world=fixed20)
+    obs, info = env.reset(seed=0)
+    world = env.unwrapped.world
+    assert obs.shape == (1, 11, 11) and obs.dtype == np.float32
+    x, y = info["position"]
+    # centre of the window is U at the robot; the cell above-right is U at (x+1, y+1)
+    assert obs[0, 5, 5] == pytest.approx(world.potential(np.array([[x, y]]))[0], abs=0.05)
+    assert obs[0, 4, 6] == pytest.approx(world.potential(np.array([[x + 1, y + 1]]))[0], abs=0.05)
+    # the start (1, 1) sees outside the map in its lower-left: impassable
+    assert np.all(obs[0, -1, :] == pytest.approx(world.u_wall))
+    assert np.all(obs[0, :, 0] == pytest.approx(world.u_wall))
+
+
+def test_actions_follow_table_1(fixed20):
+    env = gym.make("apf_physics/Navigate-v0", world=fixed20, starts=[[10.0, 16.0]])
+    for action, move in enumerate(ACTIONS):
+        env.reset(seed=0)
+        _, _, terminated, _, info = env.step(action)
+        np.testing.assert_allclose(info["position"], np.array([10.0, 16.0]) + move, atol=1e-9)
+
+
+def test_reward_terms_sum_and_presets(fixed20):
+    env = gym.make("apf_physics/Navigate-v0", world=fixed20, reward="thesis-general", starts=[[10.0, 16.0]])
+    env.reset(seed=0)
+    u0 = env.unwrapped.world.potential(np.array([[10.0, 16.0]]))[0]
+    _, reward, terminated, _, info = env.step(3)  # right
+    u1 = env.unwrapped.world.potential(np.array([[11.0, 16.0]]))[0]
+    terms = info["reward_terms"]
+    assert set(terms) == {"collision", "target", "step", "potential"}
+    assert reward == pytest.approx(sum(terms.values()))
+    assert terms["step"] == -0.2 and terms["collision"] == 0 and terms["target"] == 0
+    assert terms["potential"] == pytest.approx(-20 * (u1 - u0), rel=1e-3, abs=0.2)
+
+
+def test_collision_terminates_with_w1(fixed20):
+    env = gym.make("apf_physics/Navigate-v0", world=fixed20, starts=[[1.0, 10.0]])
+    env.reset(seed=0)
+    for _ in range(3):
+        _, reward, terminated, truncated, info = env.step(2)  # left, into the map's edge
+        if terminated:
+            break
+    assert terminated and info["collision"] and not info["success"]
+    assert info["reward_terms"]["collision"] == -1000
+
+
+def test_reaching_the_target_terminates_with_w2(fixed20):
+    env = gym.make("apf_physics/Navigate-v0", world=fixed20, starts=[[14.0, 14.0]])
+    env.reset(seed=0)
+    _, _, terminated, _, info = env.step(6)
+    assert not terminated
+    _, reward, terminated, _, info = env.step(6)  # right-up twice: (16, 16)
+    assert terminated and info["success"] and info["reward_terms"]["target"] == 1000
+
+
+def test_truncation_at_tt(fixed20):
+    env = gym.make("apf_physics/Navigate-v0", world=fixed20, starts=[[10.0, 16.0]])
+    env.reset(seed=0)
+    for step in range(100):
+        _, _, terminated, truncated, _ = env.step(8)  # stay
+    assert truncated and not terminated
+
+
+def test_same_seed_same_rollout(fixed20):
+    def roll(seed):
+        env = gym.make("apf_physics/Navigate-v0", world=fixed20, starts="random")
+        obs, _ = env.reset(seed=seed)
+        rng = np.random.default_rng(7)
+        out = [obs]
+        for _ in range(60):
+            obs, r, te, tr, info = env.step(int(rng.integers(9)))
+            out.append(np.concatenate([obs.ravel(), [r], info["position"]]))
+            if te or tr:
+                obs, _ = env.reset()
+                out.append(obs)
+        return out
+
+    a, b = roll(3), roll(3)
+    assert all(np.array_equal(x, y) for x, y in zip(a, b))
+    c = roll(4)
+    assert not all(np.array_equal(x, y) for x, y in zip(a, c))
+
+
+def test_world_list_draws_per_reset(worlds_dir):
+    worlds = [str(worlds_dir / "fixed20.yaml"), str(worlds_dir / "local_minimum.yaml")]
+    env = gym.make("apf_physics/Navigate-v0", world=worlds, obs_size=9)
+    names = set()
+    env.reset(seed=0)
+    for _ in range(20):
+        names.add(env.unwrapped.world.name)
+        env.reset()
+    assert names == {"fixed20", "local_minimum"}
+
+
+def test_render_rgb_array(fixed20):
+    env = gym.make("apf_physics/Navigate-v0", world=fixed20, render_mode="rgb_array")
+    env.reset(seed=0)
+    env.step(3)
+    frame = env.render()
+    assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
+    assert frame.std() > 5
+
+
+def test_bad_world_argument_is_clear(tmp_path):
+    from apf_physics import WorldError
+
+    with pytest.raises(WorldError, match="no such world file"):
+        gym.make("apf_physics/Navigate-v0", world=str(tmp_path / "missing.yaml"))
+
+
+def test_vector_matches_separate_envs(fixed20):
+    n = 6
+    vec = NavigateVectorEnv(world=fixed20, num_envs=n, starts="random", max_episode_steps=100)
+    singles = [gym.make("apf_physics/Navigate-v0", world=fixed20, starts="random") for _ in range(n)]
+    obs, info = vec.reset(seed=11)
+    single_obs = [env.reset(seed=11 + i)[0] for i, env in enumerate(singles)]
+    np.testing.assert_allclose(obs, np.stack(single_obs), atol=1e-4)
+    rng = np.random.default_rng(0)
+    pending = np.zeros(n, bool)
+    episodes_ended = 0
+    for _ in range(150):
+        actions = rng.integers(0, 9, n)
+        obs, rew, term, trunc, info = vec.step(actions)
+        for i, env in enumerate(singles):
+            if pending[i]:  # NEXT_STEP autoreset: this step is the reset
+                o, _ = env.reset()
+                assert rew[i] == 0 and not term[i] and not trunc[i]
+            else:
+                o, r, te, tr, inf = env.step(int(actions[i]))
+                assert rew[i] == pytest.approx(r, rel=1e-5, abs=1e-3)
+                assert term[i] == te and trunc[i] == tr
+                np.testing.assert_allclose(info["position"][i], inf["position"], atol=1e-9)
+            np.testing.assert_allclose(obs[i], o, atol=1e-3)
+        pending = term | trunc
+        episodes_ended += int(pending.sum())
+    assert episodes_ended > 0
+
+
+def test_make_vec_entry_point(fixed20):
+    vec = gym.make_vec("apf_physics/Navigate-v0", num_envs=3, vectorization_mode="vector_entry_point", world=fixed20)
+    obs, _ = vec.reset(seed=0)
+    assert obs.shape == (3, 1, 11, 11)
+    obs, rew, term, trunc, info = vec.step(np.array([0, 3, 8]))
+    assert rew.shape == (3,) and info["position"].shape == (3, 2)
+
+
+def test_sb3_dqn_trains_a_few_thousand_steps(fixed20):
+    sb3 = pytest.importorskip("stable_baselines3")
+    import torch
+
+    from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+
+    class Small(BaseFeaturesExtractor):
+        def __init__(self, space):
+            super().__init__(space, features_dim=32)
+            self.net = torch.nn.Sequential(torch.nn.Flatten(), torch.nn.Linear(int(np.prod(space.shape)), 32), torch.nn.ReLU())
+
+        def forward(self, x):
+            return self.net(x / 100.0)
+
+    env = gym.make("apf_physics/Navigate-v0", world=fixed20, starts="random")
+    model = sb3.DQN("MlpPolicy", env, learning_starts=200, buffer_size=2000, batch_size=32, seed=0,
+                    policy_kwargs={"features_extractor_class": Small, "net_arch": [32]}, device="cpu")
+    model.learn(total_timesteps=2000)
+    action, _ = model.predict(env.reset(seed=0)[0], deterministic=True)
+    assert 0 <= int(action) < 9
