@@ -33,6 +33,12 @@ def _target_offsets(points: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray
     return diff, np.sqrt(np.einsum("ntj,ntj->nt", diff, diff))
 
 
+def _target_distances(points: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """(N, T) distances, column by column (cheaper than a 3-D difference array)."""
+    x, y = points[:, 0], points[:, 1]
+    return np.column_stack([np.hypot(x - tx, y - ty) for tx, ty in targets])
+
+
 def attractive(points: np.ndarray, targets: np.ndarray, katt: float) -> np.ndarray:
     """``Σ_T katt/2 · d_T²`` (SPEC eq. 1–3)."""
     _, d = _target_offsets(points, targets)
@@ -77,10 +83,12 @@ def repulsive_term_slope(d: np.ndarray, krep: float, p0: float, u_max: float) ->
     return np.where(live, -krep * (1.0 / safe - 1.0 / p0) / (safe * safe), 0.0)
 
 
-def _near_obstacle(points: np.ndarray, obstacle: Obstacle, reach: float) -> np.ndarray:
-    """Indices of the points within ``reach`` of the obstacle's bounding box."""
+def _near_obstacle(xs: np.ndarray, ys: np.ndarray, obstacle: Obstacle, reach: float) -> np.ndarray:
+    """Indices of the points (given as contiguous x and y columns) within ``reach`` of the obstacle's bounding box."""
     lo, hi = obstacle.bounds
-    mask = np.all((points >= lo - reach) & (points <= hi + reach), axis=1)
+    mask = (xs >= lo[0] - reach) & (xs <= hi[0] + reach)
+    mask &= ys >= lo[1] - reach
+    mask &= ys <= hi[1] + reach
     return np.flatnonzero(mask)
 
 
@@ -91,8 +99,9 @@ def repulsive(points: np.ndarray, obstacles: Sequence[Obstacle], params: FieldPa
     the term is 0, which keeps rasterising large maps cheap.
     """
     total = np.zeros(len(points))
+    xs, ys = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])
     for obstacle in obstacles:
-        idx = _near_obstacle(points, obstacle, params.p0)
+        idx = _near_obstacle(xs, ys, obstacle, params.p0)
         if len(idx):
             d, _ = obstacle.signed_distance(points[idx])
             total[idx] += repulsive_term(d, params.krep, params.p0, params.u_max)
@@ -102,8 +111,9 @@ def repulsive(points: np.ndarray, obstacles: Sequence[Obstacle], params: FieldPa
 def repulsive_gradient(points: np.ndarray, obstacles: Sequence[Obstacle], params: FieldParams) -> np.ndarray:
     """``Σ_O dU_rep/dd · ∇d``, with ``∇d = (P − Q)/d`` for the nearest boundary point Q."""
     grad = np.zeros((len(points), 2))
+    xs, ys = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])
     for obstacle in obstacles:
-        idx = _near_obstacle(points, obstacle, params.p0)
+        idx = _near_obstacle(xs, ys, obstacle, params.p0)
         if len(idx):
             p = points[idx]
             d, nearest = obstacle.signed_distance(p)
@@ -116,9 +126,11 @@ def repulsive_gradient(points: np.ndarray, obstacles: Sequence[Obstacle], params
 def potential(points: np.ndarray, targets: np.ndarray, obstacles: Sequence[Obstacle], params: FieldParams) -> np.ndarray:
     """Total ``U = U_att + U_rep + U_bh`` (SPEC eq. 11) at each point."""
     points = np.asarray(points, dtype=float).reshape(-1, 2)
-    return (attractive(points, targets, params.katt)
-            + repulsive(points, obstacles, params)
-            + black_hole(points, targets, params.kstr, params.ps))
+    d = _target_distances(points, targets)
+    well = np.clip(params.ps - d, 0.0, None)
+    # U_att + U_bh from the same distances (see attractive() and black_hole())
+    u = 0.5 * params.katt * np.sum(d * d, axis=1) - 0.5 * params.kstr * np.sum(well * well, axis=1)
+    return u + repulsive(points, obstacles, params)
 
 
 def gradient(points: np.ndarray, targets: np.ndarray, obstacles: Sequence[Obstacle], params: FieldParams) -> np.ndarray:
