@@ -1,0 +1,62 @@
+"""The DQN planner: greedy actions of a trained Q-network on the potential window."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from apf_physics.actions import ACTIONS
+from apf_physics.errors import ModelError
+from apf_physics.observation import WindowSampler
+from apf_physics.planners.base import Planner
+from apf_physics.world import World
+
+MODELS = Path(__file__).resolve().parent.parent / "models"
+#: Shipped models, by the field they were trained for (see apf_physics/models/README.md).
+SHIPPED = {"thesis-fixed": MODELS / "fixed20.pt", "thesis-general": MODELS / "general.pt"}
+
+
+def shipped_model_for(world: World) -> Path:
+    """The shipped model whose training field equals the world's field."""
+    from apf_physics.world import FIELD_PRESETS
+
+    for preset, path in SHIPPED.items():
+        if FIELD_PRESETS[preset] == {k: v for k, v in world.field.as_dict().items()}:
+            if path.exists():
+                return path
+    raise ModelError(f"{world.source or world.name}: no shipped model for its field {world.field.as_dict()}; "
+                     f"train one with `apf-physics train` and pass --model")
+
+
+class DQNPlanner(Planner):
+    """Each control step, the move with the highest Q-value for the robot's window.
+
+    Args:
+        model: A model file; by default the shipped model trained for the world's field.
+    """
+
+    name = "dqn"
+    trap_rule = "oscillation"
+
+    def __init__(self, model: str | Path | None = None):
+        self.model_path = Path(model) if model is not None else None
+        self._policy = None
+
+    def reset(self, world: World, positions: np.ndarray) -> None:
+        from apf_physics.rl.policy import DQNPolicy
+
+        super().reset(world, positions)
+        path = self.model_path or shipped_model_for(world)
+        if self._policy is None or self._loaded != (path, id(world)):
+            self._policy = DQNPolicy.load(path, expect_field=world.field.as_dict())
+            self._loaded = (path, id(world))
+        channels, size, _ = self._policy.obs_shape
+        if channels != 1:
+            raise ModelError(f"{path}: model expects {channels} observation channels; the planner provides 1")
+        self.sampler = WindowSampler([world], size)
+
+    def act(self, positions: np.ndarray, active: np.ndarray) -> np.ndarray:
+        obs = self.sampler.sample(positions, 0).astype(np.float32)[:, None]
+        actions = self._policy.act(obs)
+        return ACTIONS[actions] * active[:, None]

@@ -1,0 +1,511 @@
+"""Drawing: a state snapshot and the field's raster to an RGB ``uint8 (H, W, 3)`` frame.
+
+Two steps, so that a video costs one background and many cheap frames:
+
+- :meth:`FieldImage.from_world` renders, once per world and image size, everything that
+  does not move: the potential as a log-scaled heatmap with level lines (thesis: purple),
+  the obstacles (thesis: white) and the targets (red dots).
+- :func:`draw_frame` copies that background and draws what a :class:`Snapshot` holds:
+  each robot's trail and disc, and lines of overlay text. It is a pure function of its two
+  arguments; no model object draws itself.
+
+Colours follow the thesis: a single robot is a blue disc with a yellow path (Fig. 1, 22,
+23); in a formation the leader is yellow, follower 1 blue and follower 2 black (§6.4);
+further followers get other distinct colours. Every disc and trail has a thin halo of a
+contrasting colour, so it stays visible on any part of the heatmap.
+
+World y is up, image rows go down: :class:`FieldImage` owns that flip and the scale
+(pixels per world unit); nothing else converts coordinates.
+"""
+
+from __future__ import annotations
+
+import re
+import weakref
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Sequence
+
+import cv2
+import numpy as np
+
+if TYPE_CHECKING:
+    from apf_physics.world import World
+
+RGB = tuple[int, int, int]
+
+BLUE: RGB = (30, 90, 235)
+YELLOW: RGB = (255, 210, 0)
+BLACK: RGB = (0, 0, 0)
+RED: RGB = (225, 25, 25)
+WHITE: RGB = (255, 255, 255)
+LEVEL_LINE: RGB = (120, 40, 150)       # thesis Fig. 22–23: level lines in purple
+OBSTACLE_FILL: RGB = (250, 250, 250)   # thesis: obstacles are white
+OBSTACLE_EDGE: RGB = (70, 70, 70)
+DARK_HALO: RGB = (25, 25, 25)
+LIGHT_HALO: RGB = (245, 245, 245)
+
+#: Followers beyond the second, in order (follower3, follower4, ...).
+EXTRA_FOLLOWER_COLOURS: tuple[RGB, ...] = (
+    (0, 160, 70),     # green
+    (215, 0, 200),    # magenta
+    (255, 120, 0),    # orange
+    (0, 185, 205),    # cyan
+    (140, 80, 30),    # brown
+    (130, 130, 130),  # grey
+)
+
+ROLES = ("single", "leader", "follower1", "follower2", "follower")
+_ROLE_PATTERN = re.compile(r"^(single|leader|follower\d*)$")
+
+_SHIFT = 4                 # fractional bits for cv2 drawing: sub-pixel positions, smooth motion
+_ONE = 1 << _SHIFT
+_FONT = cv2.FONT_HERSHEY_SIMPLEX
+
+
+def formation_roles(robots: int) -> tuple[str, ...]:
+    """Roles of a formation of ``robots`` robots: the leader, then ``follower1``, ``follower2``, ...
+
+    Args:
+        robots: Number of robots, leader included (at least 1).
+    """
+    return ("leader",) + tuple(f"follower{i}" for i in range(1, robots))
+
+
+def robot_colours(roles: Sequence[str]) -> list[tuple[RGB, RGB]]:
+    """``(disc colour, trail colour)`` of each robot, by role.
+
+    ``"single"`` is a blue disc with a yellow trail. In a formation each robot's trail has its
+    disc's colour: leader yellow, follower1 blue, follower2 black, follower3+ from
+    :data:`EXTRA_FOLLOWER_COLOURS`; plain ``"follower"`` robots take the next unused colour of
+    that palette in order.
+
+    Raises:
+        ValueError: for an unknown role.
+    """
+    out: list[tuple[RGB, RGB]] = []
+    plain = 0
+    for role in roles:
+        if not _ROLE_PATTERN.match(role):
+            raise ValueError(f"unknown robot role {role!r} (expected one of {', '.join(ROLES)}, or followerN)")
+        if role == "single":
+            out.append((BLUE, YELLOW))
+            continue
+        if role == "leader":
+            colour = YELLOW
+        elif role == "follower1":
+            colour = BLUE
+        elif role == "follower2":
+            colour = BLACK
+        elif role == "follower":
+            colour = EXTRA_FOLLOWER_COLOURS[plain % len(EXTRA_FOLLOWER_COLOURS)]
+            plain += 1
+        else:
+            number = int(role[len("follower"):])
+            if number < 1:
+                raise ValueError(f"unknown robot role {role!r} (followers are numbered from 1)")
+            colour = EXTRA_FOLLOWER_COLOURS[(number - 3) % len(EXTRA_FOLLOWER_COLOURS)]
+        out.append((colour, colour))
+    return out
+
+
+def _halo(colour: RGB) -> RGB:
+    """A contrasting outline colour: light around dark colours, dark around the rest."""
+    luminance = 0.299 * colour[0] + 0.587 * colour[1] + 0.114 * colour[2]
+    return LIGHT_HALO if luminance < 60 else DARK_HALO
+
+
+@dataclass(frozen=True, eq=False)
+class Snapshot:
+    """What one frame shows: the robots now, where they have been, and a few lines of text.
+
+    Attributes:
+        positions: ``(R, 2)`` robot centres in world coordinates.
+        roles: One role per robot: ``"single"``, ``"leader"``, ``"follower1"``,
+            ``"follower2"``, ``"followerN"`` or ``"follower"``.
+        trails: Per robot, the ``(n_i, 2)`` points it has visited (oldest first), or empty
+            for no trails at all.
+        overlay: Lines of text drawn in the top-left corner, e.g. ``"step 12/40"``,
+            ``"planner gradient"``, ``"outcome success"``.
+    """
+
+    positions: np.ndarray
+    roles: tuple[str, ...]
+    trails: tuple[np.ndarray, ...] = ()
+    overlay: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        positions = np.asarray(self.positions, dtype=float).reshape(-1, 2)
+        object.__setattr__(self, "positions", positions)
+        object.__setattr__(self, "roles", tuple(self.roles))
+        object.__setattr__(self, "trails", tuple(np.asarray(t, dtype=float).reshape(-1, 2) for t in self.trails))
+        object.__setattr__(self, "overlay", tuple(str(line) for line in self.overlay))
+        if len(self.roles) != len(positions):
+            raise ValueError(f"{len(positions)} robot positions but {len(self.roles)} roles")
+        if self.trails and len(self.trails) != len(positions):
+            raise ValueError(f"{len(positions)} robot positions but {len(self.trails)} trails")
+        robot_colours(self.roles)  # validates the roles
+
+
+@dataclass(frozen=True, eq=False)
+class FieldImage:
+    """The static part of every frame of one world at one image size, and the world↔pixel mapping.
+
+    Build it with :meth:`from_world` (or the cached :func:`field_image`), once per world and size.
+
+    Attributes:
+        background: ``(H, W, 3)`` uint8 RGB, read-only: heatmap, level lines, obstacles, targets.
+        scale: Pixels per world unit.
+        world_size: ``(width, height)`` of the world in world units.
+        robot_radius: Radius of a robot's disc in pixels (the true radius, at least ``min_radius``).
+        line_width: Width of trails and paths in pixels.
+        halo_width: Extra outline width around discs and trails in pixels.
+        font_scale: OpenCV font scale of the overlay text.
+        targets: ``(T, 2)`` target positions in world coordinates, redrawn over trails.
+        target_radius: Radius of a target's dot in pixels.
+    """
+
+    background: np.ndarray
+    scale: float
+    world_size: tuple[float, float]
+    robot_radius: float
+    line_width: int
+    halo_width: int
+    font_scale: float
+    targets: np.ndarray
+    target_radius: float
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """``(H, W, 3)`` of every frame."""
+        return self.background.shape  # type: ignore[return-value]
+
+    @classmethod
+    def from_world(
+        cls,
+        world: World,
+        long_side: int = 512,
+        *,
+        raster_resolution: int | None = None,
+        levels: int = 18,
+        scaling: str = "log",
+        min_radius: float = 3.0,
+    ) -> FieldImage:
+        """Render the world's static picture.
+
+        Args:
+            world: The world.
+            long_side: Pixels along the world's longer side; the other side keeps the aspect
+                ratio. Pixels per unit are ``long_side / max(width, height)``, so a 50×50
+                world at 512 px has about 10 px per unit.
+            raster_resolution: Nodes per unit of the potential raster (``world.raster``).
+                Default: a node every 2 pixels or so (4 to 16 per unit), fine enough that
+                the thin plateau of the capped repulsion around obstacles is not jagged.
+            levels: Number of bands the scaled potential is cut into; their edges are the
+                level lines.
+            scaling: How U maps to colour: ``"log"`` (default) or ``"rank"`` (histogram
+                equalised: shows the basins of local minima most clearly).
+            min_radius: Smallest disc radius in pixels, so robots and targets stay visible
+                on large maps.
+        """
+        if long_side < 16:
+            raise ValueError(f"long_side must be at least 16 pixels, got {long_side}")
+        width, height = (float(world.size[0]), float(world.size[1]))
+        scale = long_side / max(width, height)
+        cols, rows = max(1, round(width * scale)), max(1, round(height * scale))
+        unit = long_side / 512.0                      # line widths and text grow with the image
+        line_width = max(2, round(2 * unit))
+        halo_width = max(1, round(unit))
+        min_px = max(min_radius, 3.0 * unit)
+        if raster_resolution is None:
+            raster_resolution = int(np.clip(np.ceil(scale / 2), 4, 16))
+        raster = world.raster(raster_resolution)
+
+        shade = _shade(raster, world, scale, rows, cols, scaling)
+        image = _heatmap(shade)
+        _draw_level_lines(image, shade, levels, thickness=max(1, round(unit)))
+
+        image_cv = np.ascontiguousarray(image)
+        robot_px = max(world.robot_radius * scale, min_px)
+        targets = np.array(world.targets, dtype=float).reshape(-1, 2)
+        targets.setflags(write=False)
+        mapping = cls(image_cv, scale, (width, height), robot_px, line_width, halo_width, 0.45 * unit,
+                      targets, robot_px)
+        mapping._draw_obstacles(image_cv, world.obstacles, min_px)
+        mapping._draw_tolerance(image_cv, world.goal_tolerance)
+        mapping.draw_targets(image_cv)
+        image_cv.setflags(write=False)
+        return mapping
+
+    # -- world ↔ pixels ----------------------------------------------------------------
+    def to_pixels(self, points: np.ndarray) -> np.ndarray:
+        """Continuous image coordinates ``(x right, y down)`` of world points, ``(N, 2)`` float.
+
+        Pixel ``(col, row)`` covers ``[col, col + 1) × [row, row + 1)`` in these coordinates.
+        """
+        points = np.asarray(points, dtype=float).reshape(-1, 2)
+        return np.column_stack([points[:, 0] * self.scale, (self.world_size[1] - points[:, 1]) * self.scale])
+
+    def pixel_of(self, points: np.ndarray) -> np.ndarray:
+        """``(col, row)`` integer index of the pixel each world point falls in, ``(N, 2)``."""
+        h, w = self.background.shape[:2]
+        px = np.floor(self.to_pixels(points)).astype(np.intp)
+        return np.column_stack([np.clip(px[:, 0], 0, w - 1), np.clip(px[:, 1], 0, h - 1)])
+
+    def _fixed(self, points: np.ndarray) -> np.ndarray:
+        """cv2 fixed-point coordinates (``_SHIFT`` fractional bits) of world points, int32 ``(N, 2)``.
+
+        cv2 puts integer coordinate ``c`` at the centre of pixel ``c``, hence the half-pixel shift.
+        """
+        return np.round((self.to_pixels(points) - 0.5) * _ONE).astype(np.int32)
+
+    # -- static layers -----------------------------------------------------------------
+    def _draw_obstacles(self, image: np.ndarray, obstacles: Sequence, min_px: float) -> None:
+        edge = max(1, self.halo_width)
+        for obstacle in obstacles:
+            if hasattr(obstacle, "vertices"):
+                pts = self._fixed(obstacle.vertices)
+                cv2.fillPoly(image, [pts], OBSTACLE_FILL, cv2.LINE_AA, _SHIFT)
+                cv2.polylines(image, [pts], True, OBSTACLE_EDGE, edge, cv2.LINE_AA, _SHIFT)
+            else:
+                centre = tuple(self._fixed(obstacle.center)[0])
+                # A point obstacle (radius 0) is drawn as a small dot so that it can be seen.
+                radius = max(float(obstacle.radius) * self.scale, 0.8 * min_px)
+                r = int(round(radius * _ONE))
+                cv2.circle(image, centre, r, OBSTACLE_FILL, -1, cv2.LINE_AA, _SHIFT)
+                cv2.circle(image, centre, r, OBSTACLE_EDGE, edge, cv2.LINE_AA, _SHIFT)
+
+    def _draw_tolerance(self, image: np.ndarray, tolerance: float) -> None:
+        # A robot whose centre is inside this ring has arrived.
+        ring = tolerance * self.scale
+        if ring > self.target_radius + 1:
+            for centre in self._fixed(self.targets):
+                cv2.circle(image, (int(centre[0]), int(centre[1])), int(round(ring * _ONE)), RED, 1,
+                           cv2.LINE_AA, _SHIFT)
+
+    # -- per-frame layers --------------------------------------------------------------
+    def draw_targets(self, image: np.ndarray) -> None:
+        """Draw the targets' red dots onto ``image`` in place (again over trails that end on them)."""
+        r, halo = int(round(self.target_radius * _ONE)), int(round((self.target_radius + self.halo_width) * _ONE))
+        for centre in self._fixed(self.targets):
+            c = (int(centre[0]), int(centre[1]))
+            cv2.circle(image, c, halo, DARK_HALO, -1, cv2.LINE_AA, _SHIFT)
+            cv2.circle(image, c, r, RED, -1, cv2.LINE_AA, _SHIFT)
+
+    def draw_path(self, image: np.ndarray, path: np.ndarray, colour: RGB, width: int | None = None) -> None:
+        """Draw a polyline through world points onto ``image`` in place, with a contrasting halo."""
+        if len(path) < 2:
+            return
+        width = self.line_width if width is None else width
+        pts = self._fixed(path)
+        if len(pts) > 2:
+            # Thick anti-aliased polylines cost per vertex; dropping the vertices that lie within
+            # a quarter pixel of the simplified line is invisible and cuts the cost 2-5 times.
+            pts = cv2.approxPolyDP(pts.reshape(-1, 1, 2), _ONE // 4, False)
+        cv2.polylines(image, [pts], False, _halo(colour), width + 2 * self.halo_width, cv2.LINE_AA, _SHIFT)
+        cv2.polylines(image, [pts], False, colour, width, cv2.LINE_AA, _SHIFT)
+
+    def draw_segment(self, image: np.ndarray, segment: np.ndarray, colour: RGB,
+                     previous: np.ndarray | None = None) -> None:
+        """Draw one trail segment (2, 2) in world points onto ``image`` in place, with its halo.
+
+        The halo's round cap spills onto the end of the ``previous`` segment, so that one's
+        colour is drawn again on top: joints look like one polyline's.
+        """
+        pts = self._fixed(segment)
+        width = self.line_width
+        cv2.line(image, tuple(map(int, pts[0])), tuple(map(int, pts[1])), _halo(colour),
+                 width + 2 * self.halo_width, cv2.LINE_AA, _SHIFT)
+        if previous is not None:
+            prev = self._fixed(previous)
+            cv2.line(image, tuple(map(int, prev[0])), tuple(map(int, prev[1])), colour, width, cv2.LINE_AA, _SHIFT)
+        cv2.line(image, tuple(map(int, pts[0])), tuple(map(int, pts[1])), colour, width, cv2.LINE_AA, _SHIFT)
+
+    def draw_disc(self, image: np.ndarray, centre: np.ndarray, colour: RGB, radius: float | None = None,
+                  filled: bool = True) -> None:
+        """Draw a robot-sized disc (or ring) at a world point onto ``image`` in place, with a halo."""
+        radius = self.robot_radius if radius is None else radius
+        c = tuple(int(v) for v in self._fixed(centre)[0])
+        r = int(round(radius * _ONE))
+        if filled:
+            cv2.circle(image, c, r + self.halo_width * _ONE, _halo(colour), -1, cv2.LINE_AA, _SHIFT)
+            cv2.circle(image, c, r, colour, -1, cv2.LINE_AA, _SHIFT)
+        else:
+            ring = max(2, self.line_width)
+            cv2.circle(image, c, r, _halo(colour), ring + 2 * self.halo_width, cv2.LINE_AA, _SHIFT)
+            cv2.circle(image, c, r, colour, ring, cv2.LINE_AA, _SHIFT)
+
+    def draw_text(self, image: np.ndarray, lines: Sequence[str]) -> None:
+        """Write lines of text in the top-left corner of ``image`` in place, white on a dimmed box."""
+        if not lines:
+            return
+        thickness = max(1, round(self.font_scale / 0.45))
+        sizes = [cv2.getTextSize(line, _FONT, self.font_scale, thickness) for line in lines]
+        line_height = max(h + base for (_, h), base in sizes) + 3 * thickness
+        pad = 4 * thickness
+        box_w = min(image.shape[1], max(w for (w, _), _ in sizes) + 2 * pad)
+        box_h = min(image.shape[0], line_height * len(lines) + pad)
+        # Darken the box so the text reads on any background (cheap: a small region only).
+        region = image[:box_h, :box_w]
+        region //= 2
+        for i, line in enumerate(lines):
+            y = pad + (i + 1) * line_height - line_height // 3
+            cv2.putText(image, line, (pad, y), _FONT, self.font_scale, WHITE, thickness, cv2.LINE_AA)
+
+
+def _shade(raster, world: World, scale: float, rows: int, cols: int, scaling: str) -> np.ndarray:
+    """The potential mapped monotonically to [0, 1] at every pixel centre, ``(rows, cols)`` float32.
+
+    ``"log"``: ``log(1 + (U − U_min)/s)`` with ``s`` a fifth of the median of ``U − U_min``
+    over free space, normalised by its 99th percentile there. The log compresses the steep
+    walls of the repulsive terms and the far corners of the attractive bowl, so that the
+    black holes around the targets and the basins of local minima stay visible.
+    ``"rank"``: the fraction of free-space nodes with a lower potential (histogram
+    equalisation); every shade covers the same area. Either way, level lines of the shade
+    are level lines of U.
+    """
+    values = raster.values
+    free = ~_obstacle_mask(world, raster.grid)
+    reference = values[free] if free.any() else values.ravel()
+    if scaling == "rank":
+        ordered = np.sort(reference)
+        shade = np.searchsorted(ordered, values, side="right") / len(ordered)
+    elif scaling == "log":
+        lifted = values - values.min()
+        spread = max(float(np.median(lifted[free] if free.any() else lifted)), 1e-9)
+        logged = np.log1p(lifted / (0.2 * spread))
+        top = float(np.percentile(logged[free] if free.any() else logged, 99))
+        shade = logged / top if top > 0 else np.zeros_like(logged)
+    else:
+        raise ValueError(f"scaling must be 'log' or 'rank', got {scaling!r}")
+    shade = np.clip(shade, 0.0, 1.0).astype(np.float32)
+    # Pixel centres in world coordinates; the raster's grid turns them into node indices.
+    xs = (np.arange(cols) + 0.5) / scale
+    ys = world.size[1] - (np.arange(rows) + 0.5) / scale
+    gx, gy = np.meshgrid(xs, ys)
+    index = raster.grid.to_index(np.column_stack([gx.ravel(), gy.ravel()])).astype(np.float32)
+    map_x = np.ascontiguousarray(index[:, 0].reshape(rows, cols))
+    map_y = np.ascontiguousarray(index[:, 1].reshape(rows, cols))
+    return cv2.remap(shade, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
+def _obstacle_mask(world: World, grid) -> np.ndarray:
+    """True at the raster nodes inside an obstacle, ``(rows, cols)`` bool.
+
+    Filled with cv2 in grid-index space (exact to a node): the colour scale's statistics need
+    only the free nodes, and measuring distances at every node would cost a hundred times more.
+    """
+    mask = np.zeros(grid.shape, dtype=np.uint8)
+    for obstacle in world.obstacles:
+        if hasattr(obstacle, "vertices"):
+            pts = np.round(grid.to_index(obstacle.vertices) * _ONE).astype(np.int32)
+            cv2.fillPoly(mask, [pts], 1, cv2.LINE_8, _SHIFT)
+        elif obstacle.radius > 0:
+            centre = np.round(grid.to_index(obstacle.center[None]) * _ONE).astype(np.int32)[0]
+            radius = int(round(obstacle.radius * grid.resolution * _ONE))
+            cv2.circle(mask, (int(centre[0]), int(centre[1])), radius, 1, -1, cv2.LINE_8, _SHIFT)
+    return mask.astype(bool)
+
+
+def _heatmap(shade: np.ndarray) -> np.ndarray:
+    """RGB heatmap of a [0, 1] shade: a colour map washed towards white so robots stand out."""
+    grey = np.clip(shade * 255.0, 0, 255).astype(np.uint8)
+    bgr = cv2.applyColorMap(grey, cv2.COLORMAP_VIRIDIS)
+    rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+    # 45 % colour map, 55 % white: a pale heatmap, on which blue, yellow, black and red read.
+    return cv2.addWeighted(rgb, 0.45, np.full_like(rgb, 255), 0.55, 0.0)
+
+
+def _draw_level_lines(image: np.ndarray, shade: np.ndarray, levels: int, thickness: int) -> None:
+    """Mark the edges between bands of equal quantised shade (level lines of log U), in place.
+
+    Band edges rather than ``cv2.findContours`` per level: the same lines, without spurious
+    contours along the image border. A light blur anti-aliases them.
+    """
+    band = np.minimum((shade * levels).astype(np.int32), levels - 1)
+    edge = np.zeros(band.shape, dtype=np.uint8)
+    edge[:, 1:] |= (band[:, 1:] != band[:, :-1])
+    edge[1:, :] |= (band[1:, :] != band[:-1, :])
+    if thickness > 1:
+        edge = cv2.dilate(edge, np.ones((thickness, thickness), np.uint8))
+    alpha = cv2.GaussianBlur(edge.astype(np.float32), (3, 3), 0.6) * 0.85
+    alpha = alpha[:, :, None]
+    blended = image * (1.0 - alpha) + np.asarray(LEVEL_LINE, np.float32) * alpha
+    image[...] = np.clip(blended + 0.5, 0, 255).astype(np.uint8)
+
+
+def draw_frame(field_image: FieldImage, snapshot: Snapshot) -> np.ndarray:
+    """One frame: the field's background with the snapshot's trails, robots and overlay text.
+
+    Args:
+        field_image: The world's static picture (see :meth:`FieldImage.from_world`).
+        snapshot: The robots and text to show.
+
+    Returns:
+        A new ``(H, W, 3)`` uint8 RGB array; neither argument is modified.
+    """
+    frame = field_image.background.copy()
+    colours = robot_colours(snapshot.roles)
+    for trail, (_, trail_colour) in zip(snapshot.trails, colours):
+        field_image.draw_path(frame, trail, trail_colour)
+    _draw_robots(frame, field_image, snapshot, colours)
+    return frame
+
+
+def _draw_robots(frame: np.ndarray, field_image: FieldImage, snapshot: Snapshot, colours) -> None:
+    # Targets again on top of the trails that end on them, then the robots, then the text.
+    field_image.draw_targets(frame)
+    for position, (disc_colour, _) in zip(snapshot.positions, colours):
+        field_image.draw_disc(frame, position, disc_colour)
+    field_image.draw_text(frame, snapshot.overlay)
+
+
+class TrailLayer:
+    """The background with the trails so far, grown by one segment per robot and step (for videos).
+
+    :func:`draw_frame` redraws every trail on every frame, which costs time in proportion to
+    the trails' length; a video of a long episode instead grows this layer step by step and
+    draws only the robots and text over a copy of it, at the same cost at every step. The
+    frames look the same as :func:`draw_frame`'s up to anti-aliasing at the joints.
+
+    Args:
+        field_image: The world's static picture.
+        roles: One role per robot (they fix the trail colours).
+    """
+
+    def __init__(self, field_image: FieldImage, roles: Sequence[str]):
+        self.field_image = field_image
+        self.colours = robot_colours(roles)
+        self.canvas = field_image.background.copy()
+        self._last: np.ndarray | None = None
+        self._previous: list[np.ndarray | None] = [None] * len(self.colours)
+
+    def extend(self, positions: np.ndarray) -> None:
+        """Add the segment from each robot's previous position to ``positions`` (R, 2)."""
+        positions = np.asarray(positions, dtype=float).reshape(-1, 2)
+        if len(positions) != len(self.colours):
+            raise ValueError(f"{len(positions)} positions for {len(self.colours)} robots")
+        if self._last is not None:
+            for i, (start, end) in enumerate(zip(self._last, positions)):
+                if np.array_equal(start, end):
+                    continue
+                segment = np.stack([start, end])
+                self.field_image.draw_segment(self.canvas, segment, self.colours[i][1], self._previous[i])
+                self._previous[i] = segment
+        self._last = positions.copy()
+
+    def frame(self, snapshot: Snapshot) -> np.ndarray:
+        """A new frame: this layer's trails (not the snapshot's), the snapshot's robots and text."""
+        frame = self.canvas.copy()
+        _draw_robots(frame, self.field_image, snapshot, self.colours)
+        return frame
+
+
+_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def field_image(world: World, long_side: int = 512) -> FieldImage:
+    """The world's :class:`FieldImage` at ``long_side`` pixels, built on first use and cached per world."""
+    per_world = _CACHE.setdefault(world, {})
+    if long_side not in per_world:
+        per_world[long_side] = FieldImage.from_world(world, long_side)
+    return per_world[long_side]
