@@ -177,6 +177,11 @@ class Physics:
         for other in (CollisionType.OBSTACLE, CollisionType.WALL, CollisionType.ROBOT):
             self.space.on_collision(CollisionType.ROBOT, other, begin=self._begin, separate=self._separate)
 
+        # A spatial hash beats the default bounding-box tree for many small discs moving among
+        # tiled static shapes (tools/bench_env.py: ~1.8x faster steps at N = 256).
+        shapes = len(self.space.shapes)
+        self.space.use_spatial_hash(4.0, max(1000, 10 * shapes))
+
         self._buffer = pymunk.batch.Buffer()
         self._index_bodies()
 
@@ -272,18 +277,14 @@ class Physics:
         moved = set(int(r) for r in robots)
         self._touching = {c for c in self._touching if c[0] not in moved and not (c[1] == "robot" and c[2] in moved)}
         for r, p in zip(robots, positions):
-            # A fresh body: Chipmunk keeps a hidden bias velocity from the last contact, which a
-            # moved body would carry into its next step (runs would depend on when a reset came).
-            old = self.bodies[int(r)]
-            (old_shape,) = old.shapes
-            self.space.remove(old, old_shape)
-            del self._shape_label[old_shape]
-            body, shape = self._new_robot(old_shape.radius)
+            body = self.bodies[int(r)]
             body.position = (float(p[0] + self._robot_offsets[r, 0]), float(p[1] + self._robot_offsets[r, 1]))
-            self.space.add(body, shape)
-            self._shape_label[shape] = ("robot", int(r))
-            self.bodies[int(r)] = body
-        self._index_bodies()
+            body.velocity = (0.0, 0.0)
+            # Chipmunk keeps a hidden bias velocity from the last contact's position correction
+            # and adds it in the next step; a moved robot would carry it along (and runs would
+            # depend on when a reset came). Integrating zero time clears it and moves nothing.
+            _cp.cpBodyUpdatePosition(body._body, 0.0)
+            self.space.reindex_shapes_for_body(body)
 
     @staticmethod
     def _new_robot(radius: float) -> tuple[pymunk.Body, pymunk.Circle]:

@@ -38,6 +38,9 @@ class NavigateVectorEnv(VectorEnv):
         resolution: Raster nodes per unit for the observation.
         render_mode: ``"rgb_array"`` renders copy 0.
 
+    With a list of starts (``"world"`` or an array of S rows), copy ``i`` takes row
+    ``(i + e·N) mod S`` in its ``e``-th episode, so N copies share out the list.
+
     Also reachable as ``gymnasium.make_vec("apf_physics/Navigate-v0", num_envs=N,
     vectorization_mode="vector_entry_point", world=...)``.
     """
@@ -68,7 +71,8 @@ class NavigateVectorEnv(VectorEnv):
     def _start(self, slots: np.ndarray) -> None:
         starts = np.empty((len(slots), 2))
         for j, i in enumerate(slots):
-            w, starts[j] = self.chooser.choose(self.worlds, self._rngs[i], int(self._episode[i]))
+            # Copy i's e-th episode takes start row i + e·N: the copies share out the list.
+            w, starts[j] = self.chooser.choose(self.worlds, self._rngs[i], int(i + self._episode[i] * self.num_envs))
             self._episode[i] += 1
             self._batch.set_world(int(i), w)
         self._batch.place(slots, starts)

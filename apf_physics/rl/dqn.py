@@ -1,0 +1,669 @@
+"""Deep Q-learning for the potential-window navigation task (thesis §4, SPEC §2).
+
+Reads like cleanrl's ``dqn.py`` (a Q-network, an experience pool, an ε schedule and a
+loop whose TD target fits on one screen) but is a library: :func:`train` takes a
+:class:`DQNConfig` and returns a :class:`TrainResult`; the command line is a thin layer
+over it (:mod:`apf_physics.commands.train`).
+
+Presets (:func:`preset`):
+
+- ``thesis-fixed``: Table 3 as written (11×11 window, filters 10/10/20, m = 7, MSE,
+  no target network, raw observations, 30,000 searches from the world's starts).
+- ``thesis-general``: Table 4 (9×9 window, filters 4/4, 150 searches).
+- ``fast``: the thesis-fixed network trained the way it learns fastest here
+  (64 parallel envs, batch 128, double DQN, Huber loss, soft target τ = 0.01, rewards /
+  1000, signed-log relative observations, starts drawn over all free positions) and
+  stopped at the first evaluation where every start of the world succeeds.
+"""
+
+from __future__ import annotations
+
+import collections
+import copy
+import csv
+import dataclasses
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Optional
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from apf_physics.errors import UserError
+from apf_physics.rl.buffer import ReplayBuffer
+from apf_physics.rl.checkpoint import model_meta, read_file, save_model, write_file
+from apf_physics.rl.network import OBS_TRANSFORMS, QNetwork
+from apf_physics.rl.plot import plot_training_curve
+
+N_ACTIONS = 9
+CSV_COLUMNS = ("global_step", "episodes", "epsilon", "mean_return", "success_rate", "loss", "eval_success", "wall_time")
+"""Columns of ``train.csv``."""
+
+
+@dataclass(frozen=True)
+class DQNConfig:
+    """Everything that defines a training run. Build one with :func:`preset`."""
+
+    preset: str = "custom"
+    """Name of the preset this configuration started from (informational)."""
+
+    # --- network (saved with the model) ---
+    obs_size: int = 11
+    """k: side of the observation window [points, spacing 1 world unit]."""
+    filters: tuple[int, ...] = (10, 10, 20)
+    """Output channels of each 2×2 convolution."""
+    hidden: tuple[int, ...] = (32, 32)
+    """Widths of the hidden fully connected layers."""
+    negative_slope: float = 0.001
+    """Leaky ReLU slope λ."""
+    obs_transform: str = "raw"
+    """``"raw"`` or ``"relative-log"`` (signed log of U − U at the robot's cell); applied inside the network."""
+
+    # --- environment ---
+    reward: str = "thesis-fixed"
+    """Reward preset of the environment (W1–W4, β of SPEC §2)."""
+    max_episode_steps: int = 100
+    """tt: moves per search before it is cut off."""
+    train_starts: str = "world"
+    """Where training searches start: ``"world"`` (the world's starts in turn) or ``"random"`` (any free position)."""
+    num_envs: int = 1
+    """Environments stepped in parallel (one vector step adds this many transitions)."""
+
+    # --- learning ---
+    gamma: float = 0.95
+    """γ: discount rate."""
+    learning_rate: float = 1e-3
+    """η: Adam's learning rate."""
+    batch_size: int = 7
+    """m: transitions per update."""
+    buffer_size: int = 100_000
+    """Capacity of the experience pool [transitions]."""
+    learning_starts: int = 8
+    """Transitions in the pool before the first update (the thesis: more than m)."""
+    train_frequency: int = 1
+    """Vector steps between training rounds."""
+    gradient_steps: int = 1
+    """Updates per training round."""
+    loss: str = "mse"
+    """TD loss: ``"mse"`` (the thesis, eq. 35) or ``"huber"`` (less sensitive to outliers)."""
+    double_dqn: bool = False
+    """Choose the next action with the online network, value it with the target network."""
+    target_update: str = "none"
+    """``"none"`` (TD targets from the online network, as the thesis), ``"hard"`` (copy every
+    ``target_update_every`` updates) or ``"soft"`` (Polyak averaging with ``tau`` each update)."""
+    target_update_every: int = 1000
+    """Updates between copies of a hard target network."""
+    tau: float = 0.01
+    """Soft target update rate: target ← (1 − τ)·target + τ·online."""
+    max_grad_norm: Optional[float] = None
+    """Clip the gradient's global norm to this (None: no clipping)."""
+    reward_scale: float = 1.0
+    """Rewards are multiplied by this before learning (the logged returns are unscaled)."""
+
+    # --- exploration (SPEC eq. 34: ε_s = max(ε_i·(ts − s)/ts, ε_f) over searches s) ---
+    epsilon_initial: float = 0.95
+    """ε_i."""
+    epsilon_final: float = 0.05
+    """ε_f."""
+    exploration_episodes: int = 30_000
+    """ts: searches over which ε decays."""
+
+    # --- run ---
+    total_episodes: Optional[int] = 30_000
+    """Stop after this many searches (None: no limit)."""
+    total_steps: Optional[int] = None
+    """Stop after this many transitions (None: no limit)."""
+    time_limit: Optional[float] = None
+    """Stop after this many seconds of training, over all resumed sessions (None: no limit)."""
+    eval_every: int = 10_000
+    """Transitions between greedy evaluations on the world's starts."""
+    target_success: Optional[float] = None
+    """Stop once a greedy evaluation reaches this success rate (None: never stop early)."""
+    checkpoint_every: int = 50_000
+    """Transitions between ``last.pt`` checkpoints."""
+    log_every: int = 2_000
+    """Transitions between rows of ``train.csv``."""
+    save_buffer: bool = False
+    """Store the experience pool in ``last.pt`` (large); without it a resumed run refills it first."""
+    threads: int = 1
+    """torch intra-op threads during training. More than 1 helps only on an idle machine: on 2 busy
+    cores, 2 threads made the network's forward pass ~10× slower (threads waiting on each other)."""
+    seed: int = 0
+    """Seed of the environments, the network's initial weights, ε-greedy and minibatch sampling."""
+
+    def __post_init__(self):
+        checks = [
+            (self.obs_transform in OBS_TRANSFORMS, f"obs_transform must be one of {OBS_TRANSFORMS}"),
+            (self.loss in ("mse", "huber"), "loss must be 'mse' or 'huber'"),
+            (self.target_update in ("none", "hard", "soft"), "target_update must be 'none', 'hard' or 'soft'"),
+            (self.train_starts in ("world", "random"), "train_starts must be 'world' or 'random'"),
+            (self.obs_size >= 3 and self.obs_size % 2 == 1, "obs_size must be odd and at least 3"),
+            (min(self.num_envs, self.batch_size, self.threads) >= 1, "num_envs, batch_size and threads must be positive"),
+            (0 < self.tau <= 1, "tau must be in (0, 1]"),
+            (self.exploration_episodes >= 1, "exploration_episodes must be positive"),
+            (self.total_episodes is not None or self.total_steps is not None or self.time_limit is not None
+             or self.target_success is not None, "set total_episodes, total_steps, time_limit or target_success"),
+            (min(self.eval_every, self.checkpoint_every, self.log_every, self.train_frequency,
+                 self.gradient_steps, self.target_update_every, self.max_episode_steps) >= 1,
+             "intervals and counts must be positive"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise UserError(f"invalid training configuration: {message}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain values (tuples as lists), for JSON."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "DQNConfig":
+        """Inverse of :meth:`to_dict`; unknown keys are an error."""
+        return _replace_checked(cls(), data)
+
+    def network(self, obs_channels: int = 1) -> QNetwork:
+        """A freshly initialised Q-network for this configuration."""
+        return QNetwork(
+            obs_shape=(obs_channels, self.obs_size, self.obs_size),
+            filters=self.filters,
+            hidden=self.hidden,
+            n_actions=N_ACTIONS,
+            negative_slope=self.negative_slope,
+            obs_transform=self.obs_transform,
+        )
+
+
+PRESETS: dict[str, dict[str, Any]] = {
+    "thesis-fixed": dict(),
+    "thesis-general": dict(
+        obs_size=9, filters=(4, 4), reward="thesis-general",
+        exploration_episodes=150, total_episodes=150, eval_every=2_000, checkpoint_every=5_000, log_every=500,
+    ),
+    "fast": dict(
+        obs_transform="relative-log", train_starts="random", num_envs=64, batch_size=128,
+        learning_starts=2_000, loss="huber", double_dqn=True, target_update="soft", tau=0.01,
+        max_grad_norm=10.0, reward_scale=1e-3, exploration_episodes=3_000,
+        total_episodes=None, total_steps=3_000_000, eval_every=6_400, target_success=1.0,
+        checkpoint_every=128_000, log_every=6_400,
+    ),
+}
+"""Keyword overrides of :class:`DQNConfig`'s defaults (which are Table 3's) for each preset."""
+
+
+def _coerce(name: str, value: Any, default: Any) -> Any:
+    """Convert a value from YAML/JSON/CLI to the type of the field's default."""
+    if isinstance(default, tuple) and isinstance(value, (list, tuple)):
+        return tuple(value)
+    if isinstance(default, bool) or value is None:
+        return value
+    if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    return value
+
+
+_OPTIONAL_FLOATS = {"max_grad_norm", "target_success", "time_limit"}
+
+
+def _replace_checked(config: DQNConfig, overrides: dict[str, Any]) -> DQNConfig:
+    names = {f.name: f for f in dataclasses.fields(DQNConfig)}
+    unknown = sorted(set(overrides) - set(names))
+    if unknown:
+        raise UserError(f"unknown training option(s) {', '.join(unknown)}; valid: {', '.join(sorted(names))}")
+    values = {}
+    for key, value in overrides.items():
+        default = getattr(config, key)
+        if key in _OPTIONAL_FLOATS and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        values[key] = _coerce(key, value, default)
+    return dataclasses.replace(config, **values)
+
+
+def preset(name: str, **overrides: Any) -> DQNConfig:
+    """A named configuration with some fields changed.
+
+    Args:
+        name: One of :data:`PRESETS`.
+        **overrides: :class:`DQNConfig` fields to change.
+
+    Returns:
+        The configuration.
+
+    Raises:
+        UserError: Unknown preset or field, or an invalid value.
+    """
+    if name not in PRESETS:
+        raise UserError(f"unknown training preset {name!r}; choose one of {', '.join(PRESETS)}")
+    return _replace_checked(DQNConfig(preset=name, **PRESETS[name]), overrides)
+
+
+def epsilon_schedule(config: DQNConfig, episodes: int) -> float:
+    """ε after ``episodes`` finished searches: ``max(ε_i·(ts − s)/ts, ε_f)`` (SPEC eq. 34)."""
+    ts = config.exploration_episodes
+    return max(config.epsilon_initial * (ts - episodes) / ts, config.epsilon_final)
+
+
+# ----------------------------------------------------------------------------------------
+# Environments
+
+
+EnvFactory = Callable[..., Any]
+"""``factory(world, *, num_envs, seed, starts, config) -> gymnasium.vector.VectorEnv``.
+
+``starts`` is ``"world"``, ``"random"`` or an (num_envs, 2) array giving each env's start.
+The env must autoreset in NEXT_STEP mode and report ``info["success"]`` (bool per env).
+"""
+
+
+def navigate_env_factory(world: Any, *, num_envs: int, seed: int, starts: Any, config: DQNConfig):
+    """The package's own vector environment (:class:`apf_physics.envs.NavigateVectorEnv`).
+
+    For evaluation (``starts`` an array with one row per env) copy i begins at row i.
+    """
+    from apf_physics.envs import NavigateVectorEnv
+
+    env = NavigateVectorEnv(world=world, num_envs=num_envs, starts=starts, obs_size=config.obs_size,
+                            reward=config.reward, max_episode_steps=config.max_episode_steps)
+    return env
+
+
+@dataclass
+class EvalResult:
+    """Outcome of one greedy evaluation.
+
+    Attributes:
+        successes: Starts from which the target was reached.
+        episodes: Starts tried.
+        mean_return: Mean unscaled episode return.
+    """
+
+    successes: int
+    episodes: int
+    mean_return: float
+
+    @property
+    def success_rate(self) -> float:
+        return self.successes / max(self.episodes, 1)
+
+
+def evaluate_greedy(network: QNetwork, envs: Any, seed: int = 0, max_steps: int = 10_000) -> EvalResult:
+    """Run one greedy episode in every env of ``envs`` and count successes.
+
+    Deterministic for a deterministic env and a fixed ``seed``.
+
+    Args:
+        network: The Q-network.
+        envs: A vector env whose env i starts at the i-th evaluation start.
+        seed: Reset seed.
+        max_steps: Safety bound on vector steps.
+
+    Returns:
+        The successes, episodes and mean return.
+    """
+    obs, _ = envs.reset(seed=seed)
+    n = envs.num_envs
+    running = np.ones(n, bool)
+    returns = np.zeros(n)
+    success = np.zeros(n, bool)
+    for _ in range(max_steps):
+        with torch.inference_mode():
+            actions = network(torch.from_numpy(obs)).argmax(1).numpy()
+        obs, rewards, terminated, truncated, info = envs.step(actions)
+        returns += np.where(running, rewards, 0.0)
+        success |= running & np.asarray(info.get("success", np.zeros(n, bool)), bool)
+        running &= ~(terminated | truncated)
+        if not running.any():
+            break
+    return EvalResult(successes=int(success.sum()), episodes=n, mean_return=float(returns.mean()))
+
+
+# ----------------------------------------------------------------------------------------
+# Training
+
+
+@dataclass
+class TrainResult:
+    """What a training run did.
+
+    Attributes:
+        config: The configuration trained with.
+        global_step: Transitions collected (over all envs).
+        episodes: Searches finished.
+        updates: Gradient updates made.
+        wall_time: Seconds of training, over all resumed sessions.
+        best_eval_success: Best greedy evaluation success rate (None if never evaluated).
+        best_eval_step: Transition count at that evaluation.
+        time_to_target: Wall time when ``target_success`` was first reached (None: not reached).
+        stopped_early: Whether training stopped because ``target_success`` was reached.
+        out_dir: Directory with ``train.csv``, ``train.png``, ``best.pt``, ``last.pt`` (None: nothing written).
+        network: The online network at the end.
+        best_state: State dict of the best-evaluated network (None if never evaluated).
+        history: The rows of ``train.csv`` written in this session.
+    """
+
+    config: DQNConfig
+    global_step: int
+    episodes: int
+    updates: int
+    wall_time: float
+    best_eval_success: Optional[float]
+    best_eval_step: Optional[int]
+    time_to_target: Optional[float]
+    stopped_early: bool
+    out_dir: Optional[Path]
+    network: QNetwork
+    best_state: Optional[dict]
+    history: list = field(default_factory=list)
+
+    @property
+    def best_path(self) -> Optional[Path]:
+        return None if self.out_dir is None else self.out_dir / "best.pt"
+
+    @property
+    def last_path(self) -> Optional[Path]:
+        return None if self.out_dir is None else self.out_dir / "last.pt"
+
+
+def _world_info(world: Any) -> dict[str, Any]:
+    info = {"name": getattr(world, "name", None), "source": getattr(world, "source", None)}
+    return {k: (os.fspath(v) if isinstance(v, os.PathLike) else v) for k, v in info.items()}
+
+
+def load_checkpoint_config(path: str | os.PathLike) -> DQNConfig:
+    """The configuration stored in a training checkpoint (for ``--resume``)."""
+    meta, _ = read_file(path)
+    return DQNConfig.from_dict(meta["config"])
+
+
+def train(
+    config: DQNConfig,
+    world: Any,
+    *,
+    out_dir: str | os.PathLike | None = None,
+    resume: bool = False,
+    env_factory: EnvFactory = navigate_env_factory,
+    progress: bool = True,
+) -> TrainResult:
+    """Train a Q-network on ``world`` with deep Q-learning.
+
+    Args:
+        config: The configuration (see :func:`preset`).
+        world: The world to train in (its ``starts`` are the evaluation starts, its
+            ``field`` is recorded in the saved models).
+        out_dir: Directory for ``train.csv``, ``train.png``, ``best.pt`` (the network
+            with the best greedy evaluation) and ``last.pt`` (the full training state);
+            created if missing. None: write nothing.
+        resume: Continue from ``out_dir/last.pt`` (its configuration must equal ``config``
+            except for the stopping criteria).
+        env_factory: Builds the vector environments (see :data:`EnvFactory`).
+        progress: Show a tqdm progress bar.
+
+    Returns:
+        The result; the networks are also in the files when ``out_dir`` is given.
+
+    Raises:
+        UserError: ``resume`` without a usable checkpoint, or with a different configuration.
+    """
+    out = Path(out_dir) if out_dir is not None else None
+    if resume and out is None:
+        raise UserError("resuming needs the output directory of the run to continue")
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+    previous_threads = torch.get_num_threads()
+    torch.set_num_threads(config.threads)
+    try:
+        return _train(config, world, out, resume, env_factory, progress)
+    finally:
+        torch.set_num_threads(previous_threads)
+
+
+def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
+    rng = np.random.default_rng(config.seed)  # ε-greedy and minibatch sampling
+    torch.manual_seed(config.seed)
+
+    starts = np.asarray(world.starts, float).reshape(-1, 2)
+    eval_envs = env_factory(world, num_envs=len(starts), seed=config.seed, starts=starts, config=config)
+    obs_shape = tuple(eval_envs.single_observation_space.shape)
+    if obs_shape[1:] != (config.obs_size, config.obs_size):
+        raise UserError(f"the environment's observations are {obs_shape}, but obs_size is {config.obs_size}")
+
+    q_network = config.network(obs_channels=obs_shape[0])
+    target_network = copy.deepcopy(q_network) if config.target_update != "none" else q_network
+    for p in target_network.parameters():
+        if target_network is not q_network:
+            p.requires_grad_(False)
+    optimizer = torch.optim.Adam(q_network.parameters(), lr=config.learning_rate)
+    buffer = ReplayBuffer(config.buffer_size, obs_shape, config.batch_size)
+    online_params = list(q_network.parameters())
+    target_params = list(target_network.parameters())
+
+    # Counters and bests, restored on resume.
+    global_step = episodes = updates = vector_steps = 0
+    elapsed_before = 0.0
+    best_success: Optional[float] = None
+    best_step: Optional[int] = None
+    time_to_target: Optional[float] = None
+    best_state: Optional[dict] = None
+    csv_path = out / "train.csv" if out is not None else None
+
+    if resume:
+        last = out / "last.pt"
+        meta, tensors = read_file(last)
+        if meta.get("kind") != "checkpoint":
+            raise UserError(f"{last}: not a training checkpoint")
+        saved = DQNConfig.from_dict(meta["config"])
+        ignore = {"total_steps", "total_episodes", "time_limit", "target_success", "threads", "eval_every", "checkpoint_every", "log_every", "save_buffer"}
+        differ = [f.name for f in dataclasses.fields(DQNConfig)
+                  if f.name not in ignore and getattr(saved, f.name) != getattr(config, f.name)]
+        if differ:
+            raise UserError(f"{last}: was trained with different options ({', '.join(differ)}); "
+                            "resume with the same preset and options")
+        q_network.load_state_dict(tensors["q_network"])
+        if target_network is not q_network:
+            target_network.load_state_dict(tensors["target_network"])
+        optimizer.load_state_dict(tensors["optimizer"])
+        if "buffer" in tensors:
+            buffer.load_state_dict(tensors["buffer"])
+        counters = meta["counters"]
+        global_step, episodes, updates, vector_steps = (int(counters[k]) for k in ("global_step", "episodes", "updates", "vector_steps"))
+        elapsed_before = float(counters["wall_time"])
+        best_success, best_step, time_to_target = counters["best_eval_success"], counters["best_eval_step"], counters["time_to_target"]
+        rng.bit_generator.state = meta["numpy_rng"]
+        torch.set_rng_state(tensors["torch_rng"])
+        if "best_state" in tensors:
+            best_state = tensors["best_state"]
+        if csv_path is not None and csv_path.exists():  # drop rows logged after the checkpoint
+            with open(csv_path, newline="") as f:
+                rows = [r for r in csv.DictReader(f) if int(r["global_step"]) <= global_step]
+            with open(csv_path, "w", newline="") as f:
+                writer = csv.DictWriter(f, CSV_COLUMNS)
+                writer.writeheader()
+                writer.writerows(rows)
+    elif csv_path is not None:
+        with open(csv_path, "w", newline="") as f:
+            csv.writer(f).writerow(CSV_COLUMNS)
+
+    envs = env_factory(world, num_envs=config.num_envs, seed=config.seed + global_step,
+                       starts=config.train_starts, config=config)
+    n = config.num_envs
+    obs, _ = envs.reset(seed=config.seed + global_step)
+    prev_done = np.zeros(n, bool)
+    ep_return = np.zeros(n)
+    recent_returns: collections.deque = collections.deque(maxlen=100)
+    recent_success: collections.deque = collections.deque(maxlen=100)
+    loss_sum = torch.zeros(())
+    loss_count = 0
+    history: list[dict] = []
+    next_log = (global_step // config.log_every + 1) * config.log_every
+    next_eval = (global_step // config.eval_every + 1) * config.eval_every
+    next_checkpoint = (global_step // config.checkpoint_every + 1) * config.checkpoint_every
+    field_params = world.field
+    world_info = _world_info(world)
+    start_time = time.perf_counter()
+    stopped_early = False
+    huber = config.loss == "huber"
+
+    def wall() -> float:
+        return elapsed_before + time.perf_counter() - start_time
+
+    def training_meta() -> dict:
+        return {"world": world_info, "global_step": global_step, "episodes": episodes, "updates": updates,
+                "wall_time": wall(), "eval_success": best_success, "eval_step": best_step}
+
+    def save_checkpoint() -> None:
+        if out is None:
+            return
+        meta = model_meta(q_network, field_params, config.to_dict(), training_meta())
+        meta["kind"] = "checkpoint"
+        meta["counters"] = {"global_step": global_step, "episodes": episodes, "updates": updates,
+                            "vector_steps": vector_steps, "wall_time": wall(), "best_eval_success": best_success,
+                            "best_eval_step": best_step, "time_to_target": time_to_target}
+        meta["numpy_rng"] = rng.bit_generator.state
+        tensors = {"q_network": q_network.state_dict(), "optimizer": optimizer.state_dict(),
+                   "torch_rng": torch.get_rng_state()}
+        if target_network is not q_network:
+            tensors["target_network"] = target_network.state_dict()
+        if best_state is not None:
+            tensors["best_state"] = best_state
+        if config.save_buffer:
+            tensors["buffer"] = buffer.state_dict()
+        write_file(out / "last.pt", meta, tensors)
+
+    def update() -> None:
+        nonlocal updates, loss_sum, loss_count
+        batch = buffer.sample(rng)
+        with torch.no_grad():
+            if config.double_dqn:
+                next_actions = q_network(batch.next_observations).argmax(1, keepdim=True)
+                next_q = target_network(batch.next_observations).gather(1, next_actions).squeeze(1)
+            else:
+                next_q = target_network(batch.next_observations).amax(1)
+            # TD target (eq. 32): R + γ·max Q(O_{n+1}), nothing beyond a terminal step
+            td_target = batch.rewards + config.gamma * (1.0 - batch.dones) * next_q
+        q_taken = q_network(batch.observations).gather(1, batch.actions).squeeze(1)
+        if huber:  # Huber loss: less sensitive to outliers than the thesis's MSE
+            loss = F.smooth_l1_loss(q_taken, td_target)
+        else:
+            loss = F.mse_loss(q_taken, td_target)
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        if config.max_grad_norm is not None:
+            torch.nn.utils.clip_grad_norm_(online_params, config.max_grad_norm, foreach=True)
+        optimizer.step()
+        updates += 1
+        if config.target_update == "soft":
+            with torch.no_grad():
+                torch._foreach_lerp_(target_params, online_params, config.tau)
+        elif config.target_update == "hard" and updates % config.target_update_every == 0:
+            target_network.load_state_dict(q_network.state_dict())
+        loss_sum += loss.detach()  # summed as a tensor: no per-update synchronisation
+        loss_count += 1
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=config.total_steps, initial=global_step, unit="step", dynamic_ncols=True, smoothing=0.05)
+
+    def finished() -> bool:
+        return ((config.total_steps is not None and global_step >= config.total_steps)
+                or (config.total_episodes is not None and episodes >= config.total_episodes)
+                or (config.time_limit is not None and wall() >= config.time_limit))
+
+    try:
+        while not finished():
+            epsilon = epsilon_schedule(config, episodes)
+            # ε-greedy: a random action with probability ε, else the greedy one
+            with torch.inference_mode():
+                actions = q_network(torch.from_numpy(obs)).argmax(1).numpy()
+            explore = rng.random(n) < epsilon
+            if explore.any():
+                actions = np.where(explore, rng.integers(0, N_ACTIONS, n), actions)
+            next_obs, rewards, terminated, truncated, info = envs.step(actions)
+            # NEXT_STEP autoreset: a step right after a done only returns the reset observation
+            valid = ~prev_done
+            buffer.add(obs[valid], next_obs[valid], actions[valid],
+                       rewards[valid] * config.reward_scale, terminated[valid])
+            done = (terminated | truncated) & valid
+            ep_return += np.where(valid, rewards, 0.0)
+            if done.any():
+                success = np.asarray(info.get("success", np.zeros(n, bool)), bool)
+                recent_returns.extend(ep_return[done].tolist())
+                recent_success.extend(success[done].tolist())
+                episodes += int(done.sum())
+                ep_return[done] = 0.0
+            prev_done = terminated | truncated
+            obs = next_obs
+            added = int(valid.sum())
+            global_step += added
+            vector_steps += 1
+            if bar is not None:
+                bar.update(added)
+
+            if len(buffer) >= max(config.learning_starts, config.batch_size) and vector_steps % config.train_frequency == 0:
+                for _ in range(config.gradient_steps):
+                    update()
+
+            eval_success = None
+            if global_step >= next_eval:
+                next_eval += config.eval_every * max(1, (global_step - next_eval) // config.eval_every + 1)
+                result = evaluate_greedy(q_network, eval_envs, seed=config.seed)
+                eval_success = result.success_rate
+                if best_success is None or eval_success > best_success:
+                    best_success, best_step = eval_success, global_step
+                    best_state = {k: v.clone() for k, v in q_network.state_dict().items()}
+                    if out is not None:
+                        save_model(out / "best.pt", q_network,
+                                   model_meta(q_network, field_params, config.to_dict(), training_meta()))
+                if config.target_success is not None and eval_success >= config.target_success:
+                    if time_to_target is None:
+                        time_to_target = wall()
+                    stopped_early = True
+
+            if global_step >= next_log or eval_success is not None or stopped_early:
+                if global_step >= next_log:
+                    next_log += config.log_every * max(1, (global_step - next_log) // config.log_every + 1)
+                row = {
+                    "global_step": global_step,
+                    "episodes": episodes,
+                    "epsilon": round(epsilon, 5),
+                    "mean_return": round(float(np.mean(recent_returns)), 4) if recent_returns else "",
+                    "success_rate": round(float(np.mean(recent_success)), 4) if recent_success else "",
+                    "loss": round(float(loss_sum) / loss_count, 6) if loss_count else "",
+                    "eval_success": round(eval_success, 4) if eval_success is not None else "",
+                    "wall_time": round(wall(), 3),
+                }
+                loss_sum, loss_count = torch.zeros(()), 0
+                history.append(row)
+                if csv_path is not None:
+                    with open(csv_path, "a", newline="") as f:
+                        csv.DictWriter(f, CSV_COLUMNS).writerow(row)
+                    if eval_success is not None:
+                        plot_training_curve(csv_path, out / "train.png")
+                if bar is not None:
+                    bar.set_postfix(eps=f"{epsilon:.3f}", succ=row["success_rate"], ret=row["mean_return"],
+                                    eval=best_success if best_success is None else f"{best_success:.2f}", refresh=False)
+
+            if global_step >= next_checkpoint:
+                next_checkpoint += config.checkpoint_every * max(1, (global_step - next_checkpoint) // config.checkpoint_every + 1)
+                save_checkpoint()
+            if stopped_early:
+                break
+    except KeyboardInterrupt:
+        save_checkpoint()  # an interrupted run resumes from here
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+        envs.close()
+        eval_envs.close()
+
+    save_checkpoint()
+    if csv_path is not None:
+        plot_training_curve(csv_path, out / "train.png")
+    return TrainResult(
+        config=config, global_step=global_step, episodes=episodes, updates=updates, wall_time=wall(),
+        best_eval_success=best_success, best_eval_step=best_step, time_to_target=time_to_target,
+        stopped_early=stopped_early, out_dir=out, network=q_network, best_state=best_state, history=history,
+    )
