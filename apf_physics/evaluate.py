@@ -52,13 +52,13 @@ def evaluate(planner: Planner, worlds: Sequence[World], starts: dict[str, np.nda
 
 def format_table(evaluations: Sequence[Evaluation]) -> str:
     """One row per planner and world, then a total row per planner."""
-    header = f"{'planner':<10} {'world':<28} {'eps':>5} {'success':>9} {'collide':>8} {'trapped':>8} {'steps':>7} {'length':>8}"
+    header = f"{'planner':<20} {'world':<28} {'eps':>5} {'success':>9} {'collide':>8} {'trapped':>8} {'steps':>7} {'length':>8}"
     lines = [header, "-" * len(header)]
 
     def row(planner: str, world: str, summary: dict) -> str:
         steps = "-" if summary["mean_steps"] is None else f"{summary['mean_steps']:.1f}"
         length = "-" if summary["mean_path_length"] is None else f"{summary['mean_path_length']:.2f}"
-        return (f"{planner:<10} {world:<28} {summary['episodes']:>5} "
+        return (f"{planner:<20} {world:<28} {summary['episodes']:>5} "
                 f"{summary['successes']:>4}/{summary['episodes']:<4} {summary['collision_rate']:>8.1%} "
                 f"{summary['trapped_rate']:>8.1%} {steps:>7} {length:>8}")
 

@@ -73,8 +73,6 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--start {args.start}: {world.source or world.name} has starts 0..{len(world.starts) - 1}")
     else:
         starts = world.starts[args.start: args.start + 1]
-    if args.formation and world.formation is None:
-        raise UserError(f"{world.source or world.name}: --formation, but the world defines no formation")
 
     planner = make_planner(args.planner, model=args.model)
     if args.formation:

@@ -1,6 +1,7 @@
-"""Gymnasium environments: ``apf_physics/Navigate-v0`` and its vectorised version."""
+"""Gymnasium environments: ``apf_physics/Navigate-v0`` (and its vectorised version) and ``apf_physics/Formation-v0``."""
 
 from apf_physics.envs.navigate import ACTIONS, NavigateEnv
+from apf_physics.envs.formation import FormationEnv
 from apf_physics.envs.vector import NavigateVectorEnv
 
 
@@ -15,6 +16,12 @@ def register_envs() -> None:
             vector_entry_point="apf_physics.envs.vector:NavigateVectorEnv",
             max_episode_steps=100,  # tt, thesis Tables 3–4
         )
+    if "apf_physics/Formation-v0" not in registry:
+        register(
+            id="apf_physics/Formation-v0",
+            entry_point="apf_physics.envs.formation:FormationEnv",
+            max_episode_steps=100,
+        )
 
 
-__all__ = ["ACTIONS", "NavigateEnv", "NavigateVectorEnv", "register_envs"]
+__all__ = ["ACTIONS", "FormationEnv", "NavigateEnv", "NavigateVectorEnv", "register_envs"]

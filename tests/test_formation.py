@@ -1,0 +1,110 @@
+"""Formations: followers never collide, links stay in range, failure is reported as failure."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import apf_physics  # noqa: F401
+from apf_physics import UserError, load_world, world_from_dict
+from apf_physics.formation import rollout_formation
+from apf_physics.planners import make_planner
+from apf_physics.planners.follower import formation_offsets, initial_followers, swept_distance
+from apf_physics.world import FormationSpec
+from conftest import simple_world_dict
+
+
+@pytest.mark.parametrize("name, planner", [("fixed20", "astar"), ("fixed20", "gradient"), ("local_minimum", "escape"),
+                                           ("three_targets", "gradient")])
+def test_followers_never_collide_and_stay_in_range(worlds_dir, name, planner):
+    world = load_world(worlds_dir / f"{name}.yaml")
+    episodes = rollout_formation(world, make_planner(planner), world.starts)
+    for e in episodes:
+        assert e.robot_robot_collisions == 0 and e.robot_obstacle_collisions == 0
+        assert e.outcome != "collision"
+        assert e.min_robot_distance >= 2 * world.robot_radius
+        assert e.positions.shape == (e.steps + 1, 3, 2)
+        assert min(e.link_in_range) >= 0.8
+    # with a leader that goes around obstacles (A*), every link stays in range all the time
+    if planner == "astar":
+        assert all(min(e.link_in_range) == 1.0 for e in episodes)
+        assert all(e.success for e in episodes)
+
+
+def test_trapped_leader_is_a_failure(worlds_dir):
+    world = load_world(worlds_dir / "local_minimum.yaml")
+    (e,) = rollout_formation(world, make_planner("gradient"), world.starts)
+    assert e.outcome == "trapped"
+    assert not e.success
+    d = e.to_dict()
+    assert d["success"] is False and d["robots"][0]["success"] is False
+
+
+def test_followers_start_behind_the_leader(worlds_dir):
+    world = load_world(worlds_dir / "local_minimum.yaml")   # target to the right of the start
+    spec = FormationSpec(followers=2, comm_range=3.0, spacing=1.0)
+    followers = initial_followers(world, spec, world.starts[0])
+    assert np.all(followers[:, 0] < world.starts[0][0])
+    assert np.all(world.is_free(followers))
+    assert np.hypot(*(followers[0] - world.starts[0])) <= 3.0
+    assert np.hypot(*(followers[1] - followers[0])) <= 3.0
+
+
+def test_no_room_for_followers_is_a_clear_error():
+    # a map barely larger than one robot: nowhere to put a follower
+    world = world_from_dict(simple_world_dict(size=[1.2, 1.2], obstacles=[], starts=[[0.6, 0.6]], targets=[[0.3, 0.3]]))
+    with pytest.raises(UserError, match="no free position for follower 1"):
+        initial_followers(world, FormationSpec(), world.starts[0])
+
+
+def test_wedge_shape_and_example_world(worlds_dir):
+    world = load_world(worlds_dir / "formation_wedge.yaml")
+    assert world.formation.shape == "wedge" and world.formation.followers == 4
+    offsets = formation_offsets(world.formation)
+    np.testing.assert_allclose(offsets, [[1, 1], [1, -1], [2, 2], [2, -2]])
+    episodes = rollout_formation(world, make_planner("escape"), world.starts)
+    assert all(e.robot_robot_collisions == 0 and e.robot_obstacle_collisions == 0 for e in episodes)
+    assert all(e.positions.shape[1] == 5 for e in episodes)
+    assert sum(e.success for e in episodes) >= 4
+
+
+def test_offsets_shape_from_world_file():
+    data = simple_world_dict(formation={"followers": 2, "shape": "offsets", "offsets": [[1, 0.5], [1, -0.5]],
+                                        "comm_range": 3})
+    world = world_from_dict(data)
+    np.testing.assert_allclose(formation_offsets(world.formation), [[1, 0.5], [1, -0.5]])
+    with pytest.raises(UserError, match="formation.offsets"):
+        world_from_dict(simple_world_dict(formation={"followers": 3, "shape": "offsets", "offsets": [[1, 0]]}))
+
+
+def test_swept_distance():
+    # two robots swapping places head-on meet in the middle
+    assert swept_distance(np.array([0.0, 0.0]), np.array([1.0, 0.0]), np.array([1.0, 0.0]), np.array([-1.0, 0.0])) == 0
+    assert swept_distance(np.array([0.0, 0.0]), np.array([1.0, 0.0]), np.array([0.0, 1.0]), np.array([1.0, 0.0])) == 1
+
+
+def test_formation_env(worlds_dir):
+    from gymnasium.utils.env_checker import check_env
+
+    env = gym.make("apf_physics/Formation-v0", world=str(worlds_dir / "fixed20.yaml"))
+    check_env(env.unwrapped)
+    obs, info = env.reset(seed=0)
+    assert obs.shape == (1, 11, 11) and info["positions"].shape == (3, 2)
+    for _ in range(5):
+        obs, reward, terminated, truncated, info = env.step(6)
+        assert set(info) >= {"positions", "links", "links_in_range", "link_in_range_share", "reward_terms"}
+        if terminated:
+            break
+    assert not info["robot_robot_contact"]
+
+
+def test_eval_formation_json(worlds_dir, tmp_path):
+    import json
+
+    from apf_physics.cli import main
+
+    out = tmp_path / "f.json"
+    assert main(["eval", str(worlds_dir / "local_minimum.yaml"), "--planner", "astar", "--formation", "--json", str(out)]) == 0
+    (episode,) = json.loads(out.read_text())["episodes"]
+    assert {"robots", "min_robot_distance", "robot_robot_collisions", "robot_obstacle_collisions",
+            "link_in_range"} <= set(episode)
+    assert [r["role"] for r in episode["robots"]] == ["leader", "follower1", "follower2"]
