@@ -76,6 +76,7 @@ class WindowSampler:
         self._origin.append(raster.grid.origin)
         self._shape.append(raster.grid.shape)
         self._values = np.concatenate([self._values, raster.values.ravel()])
+        self._grids = [self._values[a:a + r * c].reshape(r, c) for a, (r, c) in zip(self._start, self._shape)]
         self._start_arr = np.asarray(self._start)
         self._cols_arr = np.asarray(self._cols)
         self._origin_arr = np.asarray(self._origin, dtype=float)
@@ -133,12 +134,13 @@ class WindowSampler:
         row = min(max((position[1] - oy) * res, reach), rows - 2 - reach)
         c0, r0 = int(col), int(row)
         fx, fy = col - c0, row - r0
-        start = self._start[world_id]
-        grid = self._values[start:start + rows * cols].reshape(rows, cols)
+        grid = self._grids[world_id]
         rs = slice(r0 - reach, r0 + reach + 1, res)
         rs1 = slice(r0 + 1 - reach, r0 + reach + 2, res)
         cs = slice(c0 - reach, c0 + reach + 1, res)
         cs1 = slice(c0 + 1 - reach, c0 + reach + 2, res)
-        bottom = (1 - fx) * grid[rs, cs] + fx * grid[rs, cs1]
-        top = (1 - fx) * grid[rs1, cs] + fx * grid[rs1, cs1]
-        return ((1 - fy) * bottom + fy * top)[None, ::-1]
+        out = grid[rs, cs] * ((1 - fx) * (1 - fy))
+        out += grid[rs, cs1] * (fx * (1 - fy))
+        out += grid[rs1, cs] * ((1 - fx) * fy)
+        out += grid[rs1, cs1] * (fx * fy)
+        return out[None, ::-1]

@@ -27,6 +27,7 @@ from pymunk._chipmunk_cffi import lib as _cp
 
 from apf_physics.world import CircleObstacle, PolygonObstacle, World
 
+_FEW = 4  # up to this many robots, per-body attribute access beats pymunk.batch's fixed cost
 WALL_THICKNESS = 1.0  # of the slabs around each map [units]
 MAX_SPEED = math.sqrt(2.0)  # a diagonal unit move (±1, ±1) per control step [units per control step]
 
@@ -298,6 +299,8 @@ class Physics:
     @property
     def positions(self) -> np.ndarray:
         """(N, 2) robot centres in each robot's own world coordinates."""
+        if self.num_robots <= _FEW:
+            return np.array([tuple(b.position) for b in self.bodies]) - self._robot_offsets
         buf = self._buffer
         buf.clear()
         pymunk.batch.get_space_bodies(self.space, pymunk.batch.BodyFields.POSITION, buf)
@@ -322,8 +325,12 @@ class Physics:
         if np.any(too_fast):
             v = v.copy()
             v[too_fast] *= (self.max_speed / speed[too_fast])[:, None]
-        self._velocity_rows[self._robot_rows] = v[self._robot_of_row] / self.control_dt
-        pymunk.batch.set_space_bodies(self.space, pymunk.batch.BodyFields.VELOCITY, self._velocity_buffer)
+        if self.num_robots <= _FEW:
+            for body, velocity in zip(self.bodies, (v / self.control_dt).tolist()):
+                body.velocity = velocity
+        else:
+            self._velocity_rows[self._robot_rows] = v[self._robot_of_row] / self.control_dt
+            pymunk.batch.set_space_bodies(self.space, pymunk.batch.BodyFields.VELOCITY, self._velocity_buffer)
 
         self._contacts = set(self._touching)
         # Substeps call Chipmunk directly: pymunk's Space.step adds Python bookkeeping (deferred
@@ -339,6 +346,8 @@ class Physics:
         obstacle = np.zeros(self.num_robots, bool)
         wall = np.zeros(self.num_robots, bool)
         robot = np.zeros(self.num_robots, bool)
+        if not self._contacts:
+            return ContactLog(obstacle, wall, robot, [])
         for r, kind, other in self._contacts:
             if kind == "obstacle":
                 obstacle[r] = True

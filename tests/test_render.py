@@ -296,7 +296,7 @@ def test_formation_roles_and_colours():
 def test_render_clips_single_robots_together_and_formations_in_turn():
     from types import SimpleNamespace
 
-    from apf_physics.commands.render import _clips
+    from apf_physics.render.episodes import episode_clips as _clips
 
     def episode(path, outcome="reached"):
         path = np.asarray(path, dtype=float)

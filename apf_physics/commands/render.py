@@ -4,10 +4,6 @@ from __future__ import annotations
 
 import argparse
 from collections import Counter
-from typing import Iterator, Sequence
-
-import numpy as np
-PROGRESS_MIN_FRAMES = 300  # shorter renders take well under a second: no progress bar
 
 
 def add_parser(subparsers) -> None:
@@ -52,8 +48,8 @@ def run(args: argparse.Namespace) -> int:
     from apf_physics import load_world
     from apf_physics.errors import UserError
     from apf_physics.planners import make_planner
-    from apf_physics.render.drawing import FieldImage
-    from apf_physics.render.video import FOURCC_BY_EXTENSION, check_writable, render_trajectory, write_png, write_video
+    from apf_physics.render.episodes import write_episode_video
+    from apf_physics.render.video import FOURCC_BY_EXTENSION, check_writable
     from apf_physics.rollout import rollout
 
     out = check_writable(args.out, tuple(FOURCC_BY_EXTENSION))
@@ -85,59 +81,13 @@ def run(args: argparse.Namespace) -> int:
     else:
         episodes = rollout(world, planner, starts, max_steps=args.max_steps)
 
-    image = FieldImage.from_world(world, args.size)
-    hold = max(0, int(round(args.hold * args.fps)))
-    overlay = (f"world {world.name}", f"planner {args.planner}")
-    start_index = None if args.all_starts else args.start
-    clips = list(_clips(episodes, overlay, bool(args.formation), start_index))
-    total = sum(len(trajectory) + hold for trajectory, *_ in clips)
-
-    last: list[np.ndarray] = []
-
-    def frames() -> Iterator[np.ndarray]:
-        for trajectory, roles, lines, final in clips:
-            for frame in render_trajectory(world, trajectory, roles, overlay=lines, final_overlay=final,
-                                           hold=hold, image=image):
-                yield frame
-        last.append(frame)
-
-    written = write_video(frames(), out, args.fps, codec="h264" if args.h264 else None,
-                          progress=not args.no_progress and total >= PROGRESS_MIN_FRAMES, total=total)
-    if png is not None:
-        write_png(last[-1], png)
+    written = write_episode_video(world, episodes, out, png=png, fps=args.fps, size=args.size, hold=args.hold,
+                                  overlay=(f"world {world.name}", f"planner {args.planner}"),
+                                  formation=bool(args.formation),
+                                  start_index=None if args.all_starts else args.start,
+                                  codec="h264" if args.h264 else None, progress=not args.no_progress)
     counts = Counter(episode.outcome for episode in episodes)
     print(f"wrote {out} ({written} frames at {args.fps:g} fps; "
           + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) + ")"
           + (f" and {png}" if png is not None else ""))
     return 0
-
-
-def _clips(episodes: Sequence, overlay: tuple[str, ...], formation: bool,
-           start_index: int | None) -> Iterator[tuple[np.ndarray, tuple[str, ...], tuple[str, ...], tuple[str, ...]]]:
-    """``(trajectory (T, R, 2), roles, overlay, final overlay)`` per clip of the video.
-
-    Single robots from several starts share one clip (all move at once); each formation
-    episode is a clip of its own, one after another.
-    """
-    from apf_physics.render.drawing import formation_roles
-    from apf_physics.render.video import stack_paths
-
-    paths = [np.asarray(getattr(episode, "positions", episode.path), dtype=float) for episode in episodes]
-    if not formation and all(p.ndim == 2 for p in paths):
-        counts = Counter(episode.outcome for episode in episodes)
-        if len(episodes) == 1:
-            episode = episodes[0]
-            where = f"start {start_index} " if start_index is not None else ""
-            lines = (*overlay, f"{where}({episode.start[0]:g}, {episode.start[1]:g})")
-            final = (f"outcome {episode.outcome} after {episode.steps} steps",)
-        else:
-            lines = (*overlay, f"{len(episodes)} starts")
-            final = (", ".join(f"{k} {v}" for k, v in sorted(counts.items())),)
-        yield stack_paths(paths), ("single",) * len(paths), lines, final
-        return
-    for i, (episode, path) in enumerate(zip(episodes, paths)):
-        trajectory = path if path.ndim == 3 else path[:, None, :]
-        index = start_index if start_index is not None else i
-        lines = (*overlay, f"formation, start {index}")
-        yield (trajectory, formation_roles(trajectory.shape[1]), lines,
-               (f"outcome {episode.outcome} after {episode.steps} steps",))

@@ -10,6 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Sequence
 
+import math
+
 import numpy as np
 
 from apf_physics.actions import ACTIONS
@@ -50,6 +52,7 @@ class NavigationBatch:
                                pitch=max(max(w.size) for w in self.worlds) + 4.0)
         self.positions = np.zeros((self.num, 2))
         self.targets = [w.targets for w in self.worlds]
+        self._target_list = [w.targets.tolist() for w in self.worlds]
         self.tolerance = np.array([w.goal_tolerance for w in self.worlds])
         self._obs = np.zeros((self.num, 1, obs_size, obs_size), np.float32)
         self._u = np.zeros(self.num)
@@ -65,6 +68,7 @@ class NavigationBatch:
         self.physics.place(slots, positions)
         self.positions[slots] = positions
         self._observe(slots)
+        self.distance = self.distance_to_target()
 
     def _observe(self, slots: np.ndarray) -> None:
         window = self.sampler.sample(self.positions[slots], self.world_of[slots])
@@ -76,6 +80,9 @@ class NavigationBatch:
 
     def distance_to_target(self) -> np.ndarray:
         """(N,) distance from each robot to the nearest target of its world."""
+        if self.num == 1:  # the single environment: plain floats beat numpy's per-call overhead
+            x, y = self.positions[0]
+            return np.array([min(math.hypot(x - tx, y - ty) for tx, ty in self._target_list[self.world_of[0]])])
         out = np.empty(self.num)
         for w in np.unique(self.world_of) if len(self.worlds) > 1 else (0,):
             mine = self.world_of == w if len(self.worlds) > 1 else slice(None)
@@ -94,7 +101,8 @@ class NavigationBatch:
         self.positions = self.physics.positions
         self._observe(np.arange(self.num))
         collided = log.obstacle | log.wall
-        reached = (self.distance_to_target() <= self.tolerance[self.world_of]) & ~collided
+        self.distance = self.distance_to_target()
+        reached = (self.distance <= self.tolerance[self.world_of]) & ~collided
         terms = reward_terms(self.weights, collided, reached, u_before, self._u)
         reward = terms["collision"] + terms["target"] + terms["step"] + terms["potential"]
         return StepResult(self._obs.copy(), reward, collided | reached, terms, reached, collided)

@@ -129,7 +129,7 @@ class NavigateEnv(gym.Env):
 
     def _get_info(self) -> dict:
         return {"position": self._batch.positions[0].copy(), "world": self.world.name,
-                "distance": float(self._batch.distance_to_target()[0])}
+                "distance": float(self._batch.distance[0])}
 
     def render(self):
         if self.render_mode != "rgb_array":

@@ -1,0 +1,74 @@
+"""Videos of rollout episodes: the clips of single robots and formations, written to a file."""
+
+from __future__ import annotations
+
+from collections import Counter
+from pathlib import Path
+from typing import Iterator, Sequence
+
+import numpy as np
+
+PROGRESS_MIN_FRAMES = 300  # shorter renders take well under a second: no progress bar
+
+
+def write_episode_video(world, episodes: Sequence, out: str | Path, png: str | Path | None = None, fps: float = 10.0,
+                        size: int = 512, hold: float = 1.0, overlay: tuple[str, ...] = (), formation: bool = False,
+                        start_index: int | None = None, codec: str | None = None, progress: bool = True) -> int:
+    """Render rollout episodes of one world to a video (and the last frame to a PNG).
+
+    Single robots from several starts share one clip (all move at once); each formation
+    episode is a clip of its own. Returns the number of frames written.
+    """
+    from apf_physics.render.drawing import FieldImage
+    from apf_physics.render.video import render_trajectory, write_png, write_video
+
+    image = FieldImage.from_world(world, size)
+    hold_frames = max(0, int(round(hold * fps)))
+    clips = list(episode_clips(episodes, overlay, formation, start_index))
+    total = sum(len(trajectory) + hold_frames for trajectory, *_ in clips)
+    last: list[np.ndarray] = []
+
+    def frames() -> Iterator[np.ndarray]:
+        frame = None
+        for trajectory, roles, lines, final in clips:
+            for frame in render_trajectory(world, trajectory, roles, overlay=lines, final_overlay=final,
+                                           hold=hold_frames, image=image):
+                yield frame
+        last.append(frame)
+
+    written = write_video(frames(), out, fps, codec=codec, progress=progress and total >= PROGRESS_MIN_FRAMES,
+                          total=total)
+    if png is not None:
+        write_png(last[-1], png)
+    return written
+
+
+def episode_clips(episodes: Sequence, overlay: tuple[str, ...], formation: bool,
+           start_index: int | None) -> Iterator[tuple[np.ndarray, tuple[str, ...], tuple[str, ...], tuple[str, ...]]]:
+    """``(trajectory (T, R, 2), roles, overlay, final overlay)`` per clip of the video.
+
+    Single robots from several starts share one clip (all move at once); each formation
+    episode is a clip of its own, one after another.
+    """
+    from apf_physics.render.drawing import formation_roles
+    from apf_physics.render.video import stack_paths
+
+    paths = [np.asarray(getattr(episode, "positions", episode.path), dtype=float) for episode in episodes]
+    if not formation and all(p.ndim == 2 for p in paths):
+        counts = Counter(episode.outcome for episode in episodes)
+        if len(episodes) == 1:
+            episode = episodes[0]
+            where = f"start {start_index} " if start_index is not None else ""
+            lines = (*overlay, f"{where}({episode.start[0]:g}, {episode.start[1]:g})")
+            final = (f"outcome {episode.outcome} after {episode.steps} steps",)
+        else:
+            lines = (*overlay, f"{len(episodes)} starts")
+            final = (", ".join(f"{k} {v}" for k, v in sorted(counts.items())),)
+        yield stack_paths(paths), ("single",) * len(paths), lines, final
+        return
+    for i, (episode, path) in enumerate(zip(episodes, paths)):
+        trajectory = path if path.ndim == 3 else path[:, None, :]
+        index = start_index if start_index is not None else i
+        lines = (*overlay, f"formation, start {index}")
+        yield (trajectory, formation_roles(trajectory.shape[1]), lines,
+               (f"outcome {episode.outcome} after {episode.steps} steps",))

@@ -1,0 +1,767 @@
+"""General-field learning: curriculum with rehearsal, and domain randomisation (SPEC §2, thesis §6.3).
+
+One Q-network is trained for every world of the ``thesis-general`` field, not for one map.
+Two presets (:func:`general_preset`):
+
+- ``thesis-general``: the thesis as written (Table 4: 9×9 window, filters 4/4, m = 7, MSE,
+  no target network, γ = 0.95, raw observations, one environment, searches from the worlds'
+  own starts) trained through the curriculum file's stages, 150 searches per stage, ε decaying
+  anew over each stage's 150 searches. Stage ``i`` trains its worlds together with every
+  earlier stage's worlds, one drawn at random per search (rehearsal).
+- ``general`` (recommended): domain randomisation. A pool of worlds freshly drawn with
+  :func:`apf_physics.generate.generate_world` over all families, redrawn every
+  ``refresh_every`` transitions, plus every world of the curriculum file, learned with the
+  settings that train fastest here (signed-log relative observations, double DQN, Huber
+  loss, soft target network, scaled rewards, 64 parallel environments, starts drawn over all
+  free positions and, for a quarter of the environments, the worlds' own starts behind their
+  obstacles), a larger window (13×13) and γ = 0.99 so that climbing out of a potential well
+  pays off within the horizon.
+
+Both keep the network with the best greedy evaluation on a fixed validation set of generated
+worlds (``validation_seed``; it must differ from the held-out test seed, 100) in ``best.pt``
+and the full training state in ``last.pt`` (resumable), and log ``train.csv``.
+
+Usage::
+
+    from apf_physics.rl.general import general_preset, train_general
+
+    config = general_preset("general", seed=0, time_limit=1500)
+    result = train_general(config, curriculum="worlds/curricula/thesis.yaml", out_dir="runs/general")
+    print(result.best_validation)           # the best validation summary; the network is in best.pt
+
+    # what `apf-physics train --curriculum FILE [--preset P] --out DIR [--resume]` runs
+    run_curriculum_command("worlds/curricula/thesis.yaml", "thesis-general", "runs/thesis", seed=0)
+"""
+
+from __future__ import annotations
+
+import collections
+import copy
+import csv
+import dataclasses
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Optional, Sequence
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from apf_physics.actions import ACTIONS
+from apf_physics.curriculum import Stage, load_curriculum
+from apf_physics.errors import UserError
+from apf_physics.generate import FAMILIES, generate_world
+from apf_physics.planners.base import Planner
+from apf_physics.rl.buffer import ReplayBuffer
+from apf_physics.rl.checkpoint import model_meta, read_file, save_model, write_file
+from apf_physics.rl.dqn import DQNConfig, epsilon_schedule, preset as dqn_preset
+from apf_physics.world import World
+
+N_ACTIONS = 9
+HELDOUT_SEED = 100
+"""Seed of the project's held-out generated test set; training and validation never use it."""
+POOL_STREAM = 0x9E11
+"""Tag mixed into the seed of every training-pool draw, so no pool equals a set drawn from an integer seed."""
+CSV_COLUMNS = ("global_step", "episodes", "stage", "epsilon", "mean_return", "success_rate", "loss",
+               "val_success", "val_trap_success", "val_length_ratio", "pool_draws", "wall_time")
+"""Columns of ``train.csv``."""
+STOP_FIELDS = {"total_steps", "time_limit", "eval_every", "log_every", "checkpoint_every", "threads"}
+"""Fields that may change when resuming."""
+
+
+@dataclass(frozen=True)
+class GeneralConfig:
+    """A general training run: the learner (:class:`DQNConfig`) and what it is trained on.
+
+    The learner's own stopping and evaluation fields (``total_episodes``, ``total_steps``,
+    ``eval_every``, ...) are not used; the fields below replace them.
+    """
+
+    preset: str = "custom"
+    """Name of the preset this configuration started from (informational)."""
+    dqn: DQNConfig = field(default_factory=lambda: dqn_preset("thesis-general"))
+    """Network, environment options, learning rule and ε schedule."""
+
+    # --- curriculum (SPEC §2: stage i trains its worlds with all earlier stages' worlds) ---
+    stage_episodes: Optional[int] = None
+    """Searches per curriculum stage (the thesis: 150). None with ``stage_steps`` None: the stages are
+    not trained one by one; their worlds only join the randomised pool."""
+    stage_steps: Optional[int] = None
+    """Transitions per curriculum stage (alternative to ``stage_episodes``)."""
+    restart_exploration: bool = True
+    """Start the ε schedule again at every stage (the thesis: ε decays over each stage's searches)."""
+
+    # --- domain randomisation (after the stages) ---
+    families: tuple[str, ...] = ()
+    """Generator families of the randomised pool; empty: no randomised phase."""
+    pool_size: int = 80
+    """Generated worlds in the pool at a time."""
+    pool_starts: int = 6
+    """Starts per generated world (behind its obstacles, where gradient descent gets trapped)."""
+    refresh_every: int = 500_000
+    """Transitions between redraws of the pool."""
+    world_start_fraction: float = 0.0
+    """Share of the environments whose searches begin at the worlds' own starts; the others use
+    ``dqn.train_starts``."""
+    total_steps: Optional[int] = None
+    """Stop after this many transitions in all (None: no limit)."""
+    time_limit: Optional[float] = None
+    """Stop after this many seconds of training over all resumed sessions (None: no limit)."""
+
+    # --- validation (keeps the best network) ---
+    validation_worlds: int = 30
+    """Generated worlds of the validation set (families in turn)."""
+    validation_starts: int = 4
+    """Starts per validation world."""
+    validation_seed: int = 1
+    """Seed of the validation set; must not be :data:`HELDOUT_SEED`."""
+    eval_every: int = 100_000
+    """Transitions between greedy evaluations on the validation set."""
+    log_every: int = 20_000
+    """Transitions between rows of ``train.csv``."""
+    checkpoint_every: int = 200_000
+    """Transitions between ``last.pt`` checkpoints."""
+
+    def __post_init__(self):
+        checks = [
+            (self.validation_seed != HELDOUT_SEED, f"validation_seed must not be the held-out seed {HELDOUT_SEED}"),
+            (all(f in FAMILIES for f in self.families), f"families must be among {', '.join(FAMILIES)}"),
+            (0.0 <= self.world_start_fraction <= 1.0, "world_start_fraction must be in [0, 1]"),
+            (min(self.pool_size, self.pool_starts, self.refresh_every, self.validation_worlds,
+                 self.validation_starts, self.eval_every, self.log_every, self.checkpoint_every) >= 1,
+             "sizes and intervals must be positive"),
+            (not self.families or self.total_steps is not None or self.time_limit is not None,
+             "a randomised phase needs total_steps or time_limit"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise UserError(f"invalid general training configuration: {message}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain values (the learner's as a nested dict), for JSON."""
+        data = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "dqn"}
+        data = {k: list(v) if isinstance(v, tuple) else v for k, v in data.items()}
+        return {**data, "dqn": self.dqn.to_dict()}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "GeneralConfig":
+        """Inverse of :meth:`to_dict`."""
+        data = dict(data)
+        learner = DQNConfig.from_dict(data.pop("dqn"))
+        return _replace(cls(dqn=learner), data)
+
+
+PRESETS: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
+    # name: (learner preset, learner overrides, GeneralConfig overrides)
+    "thesis-general": ("thesis-general", dict(total_episodes=None, total_steps=None, target_success=1.0),
+                       dict(stage_episodes=150, restart_exploration=True, eval_every=5_000, log_every=2_000,
+                            checkpoint_every=20_000)),
+    "general": ("fast", dict(
+        obs_size=13, filters=(8, 16, 16), hidden=(64, 64), negative_slope=0.01, reward="thesis-general",
+        max_episode_steps=200, gamma=0.99, learning_rate=5e-4, buffer_size=300_000, learning_starts=10_000,
+        num_envs=64, batch_size=128, reward_scale=1e-3, exploration_episodes=8_000, epsilon_final=0.03,
+        total_steps=None, target_success=1.0,
+    ), dict(
+        families=FAMILIES, pool_size=80, pool_starts=6, refresh_every=500_000, world_start_fraction=0.25,
+        time_limit=1500.0, eval_every=150_000, log_every=25_000, checkpoint_every=150_000,
+    )),
+}
+"""Presets: the learner preset of :mod:`apf_physics.rl.dqn` they start from and the changes."""
+
+
+def _replace(config: GeneralConfig, overrides: dict[str, Any]) -> GeneralConfig:
+    """Apply overrides; keys of :class:`DQNConfig` go to the learner, unknown keys are an error."""
+    mine = {f.name for f in dataclasses.fields(GeneralConfig)} - {"dqn"}
+    learner_names = {f.name for f in dataclasses.fields(DQNConfig)}
+    unknown = sorted(set(overrides) - mine - learner_names)
+    if unknown:
+        raise UserError(f"unknown training option(s) {', '.join(unknown)}")
+    learner = {k: v for k, v in overrides.items() if k not in mine}
+    own = {k: (tuple(v) if isinstance(v, list) else v) for k, v in overrides.items() if k in mine}
+    for key in ("time_limit",):
+        if isinstance(own.get(key), int):
+            own[key] = float(own[key])
+    dqn = dqn_preset(config.dqn.preset, **{**config.dqn.to_dict(), **learner}) if learner else config.dqn
+    return dataclasses.replace(config, dqn=dqn, **own)
+
+
+def general_preset(name: str, **overrides: Any) -> GeneralConfig:
+    """A named general-training configuration with some fields changed.
+
+    Args:
+        name: ``"thesis-general"`` or ``"general"``.
+        **overrides: Fields of :class:`GeneralConfig` or of its learner (:class:`DQNConfig`),
+            e.g. ``seed=1``, ``time_limit=600``, ``gamma=0.95``.
+
+    Raises:
+        UserError: Unknown preset or field, or an invalid value.
+    """
+    if name not in PRESETS:
+        raise UserError(f"unknown general training preset {name!r}; choose one of {', '.join(PRESETS)}")
+    learner_preset, learner, own = PRESETS[name]
+    config = GeneralConfig(preset=name, dqn=dqn_preset(learner_preset, **learner), **own)
+    return _replace(config, overrides)
+
+
+# ----------------------------------------------------------------------------------------
+# What is trained when
+
+
+@dataclass(frozen=True)
+class Phase:
+    """One phase of training.
+
+    Attributes:
+        name: Stage name, or ``"randomised"`` for the domain-randomisation phase.
+        worlds: Fixed worlds trained in this phase (a stage's rehearsal set).
+        episodes: Searches in this phase (None: no limit of that kind).
+        steps: Transitions in this phase (None: no limit of that kind; the last phase
+            runs to the run's ``total_steps`` / ``time_limit``).
+        randomised: Whether a generated pool joins ``worlds``.
+    """
+
+    name: str
+    worlds: tuple[World, ...]
+    episodes: Optional[int]
+    steps: Optional[int]
+    randomised: bool = False
+
+
+def training_phases(stages: Sequence[Stage], config: GeneralConfig) -> list[Phase]:
+    """The phases of a run: one per curriculum stage (with rehearsal), then the randomised one.
+
+    Stage ``i``'s phase trains ``stages[i].training_worlds``: its own worlds and every
+    earlier stage's (SPEC §2). With ``config.families`` a last phase trains a generated pool
+    together with all the curriculum's worlds until the run stops.
+
+    Raises:
+        UserError: Nothing to train (no stages and no families).
+    """
+    phases: list[Phase] = []
+    staged = config.stage_episodes is not None or config.stage_steps is not None
+    if staged:
+        for stage in stages:
+            phases.append(Phase(stage.name, tuple(stage.training_worlds), config.stage_episodes, config.stage_steps))
+    if config.families:
+        everything = tuple(stages[-1].training_worlds) if stages else ()
+        phases.append(Phase("randomised", everything, None, None, randomised=True))
+    elif phases:  # the last stage runs on to the run's limit, if it has one
+        last = phases[-1]
+        if config.total_steps is not None or config.time_limit is not None:
+            phases[-1] = dataclasses.replace(last, episodes=None, steps=None)
+    if not phases:
+        raise UserError("nothing to train: give a curriculum with stage_episodes/stage_steps, or families")
+    return phases
+
+
+def draw_pool(config: GeneralConfig, draw: int, size: float = 50) -> list[World]:
+    """The ``draw``-th generated training pool (deterministic in the seed and ``draw``).
+
+    Its generator is seeded with ``[POOL_STREAM, seed, draw]``, a sequence, so it never
+    coincides with a set generated from an integer seed (the held-out or validation set).
+    """
+    rng = np.random.default_rng([POOL_STREAM, config.dqn.seed, draw])
+    fams = config.families
+    return [generate_world(fams[k % len(fams)], rng, size=size, n_starts=config.pool_starts,
+                           name=f"pool{draw}_{fams[k % len(fams)]}_{k}") for k in range(config.pool_size)]
+
+
+@dataclass(frozen=True)
+class ValidationSet:
+    """Generated worlds and per-start labels used to pick the best network.
+
+    Attributes:
+        worlds: The worlds (their starts are the evaluation starts).
+        trapped: Per world, (S,) bool: gradient descent does not reach the target from the start.
+        astar: Per world, (S,) float: A* path length from the start.
+    """
+
+    worlds: tuple[World, ...]
+    trapped: tuple[np.ndarray, ...]
+    astar: tuple[np.ndarray, ...]
+
+
+def validation_set(config: GeneralConfig) -> ValidationSet:
+    """Draw the validation worlds from ``validation_seed`` (all families in turn) and label them."""
+    from apf_physics.generate import label_starts
+
+    rng = np.random.default_rng(config.validation_seed)
+    worlds, trapped, astar = [], [], []
+    for k in range(config.validation_worlds):
+        fam = FAMILIES[k % len(FAMILIES)]
+        world = generate_world(fam, rng, n_starts=config.validation_starts, name=f"val_{fam}_{k}")
+        labels = label_starts(world)
+        worlds.append(world)
+        trapped.append(np.array([s["gradient_trapped"] for s in labels]))
+        astar.append(np.array([s["astar_length"] or np.nan for s in labels], float))
+    return ValidationSet(tuple(worlds), tuple(trapped), tuple(astar))
+
+
+class NetworkPlanner(Planner):
+    """Greedy actions of an in-memory Q-network (what :class:`~apf_physics.planners.dqn.DQNPlanner`
+    does with a model file), for evaluating a network while it trains."""
+
+    name = "dqn"
+    trap_rule = "oscillation"
+
+    def __init__(self, network: torch.nn.Module):
+        self.network = network
+        self.size = int(network.arch["obs_shape"][-1])
+
+    def reset(self, world: World, positions: np.ndarray) -> None:
+        from apf_physics.observation import WindowSampler
+
+        super().reset(world, positions)
+        self.sampler = WindowSampler([world], self.size)
+
+    def act(self, positions: np.ndarray, active: np.ndarray) -> np.ndarray:
+        obs = self.sampler.sample(positions, 0).astype(np.float32)[:, None]
+        with torch.inference_mode():
+            actions = self.network(torch.from_numpy(obs)).argmax(1).numpy()
+        return ACTIONS[actions] * active[:, None]
+
+
+def validate(network: torch.nn.Module, validation: ValidationSet) -> dict[str, float]:
+    """Greedy rollouts (through the physics, as ``apf-physics eval``) from every validation start.
+
+    Returns:
+        ``success`` (share of starts reaching the target), ``trap_success`` (the same over the
+        starts where gradient descent is trapped), ``collisions`` (count) and ``length_ratio``
+        (mean of path length / A* length over the successes; inf without successes).
+    """
+    from apf_physics.rollout import rollout
+
+    planner = NetworkPlanner(network)
+    success, trapped, ratios, collisions = [], [], [], 0
+    for world, trap, astar in zip(validation.worlds, validation.trapped, validation.astar):
+        for episode, t, a in zip(rollout(world, planner, world.starts), trap, astar):
+            success.append(episode.success)
+            trapped.append(t)
+            collisions += episode.outcome == "collision"
+            if episode.success and np.isfinite(a) and a > 0:
+                ratios.append(episode.path_length / a)
+    success, trapped = np.array(success), np.array(trapped)
+    return {
+        "success": float(success.mean()),
+        "trap_success": float(success[trapped].mean()) if trapped.any() else float("nan"),
+        "collisions": int(collisions),
+        "length_ratio": float(np.mean(ratios)) if ratios else float("inf"),
+    }
+
+
+def _score(summary: dict[str, float]) -> tuple:
+    """Order of validation summaries: more successes, then fewer collisions, then shorter paths."""
+    return (round(summary["success"], 6), -summary["collisions"], -summary["length_ratio"])
+
+
+# ----------------------------------------------------------------------------------------
+# Environments
+
+
+class _Envs:
+    """One or two :class:`~apf_physics.envs.NavigateVectorEnv` stepped as one batch: the first
+    starts as ``dqn.train_starts`` says, the second (``world_start_fraction``) at the worlds' starts."""
+
+    def __init__(self, worlds: Sequence[World], config: GeneralConfig, seed: int):
+        from apf_physics.envs import NavigateVectorEnv
+
+        d = config.dqn
+        n_world = int(round(config.world_start_fraction * d.num_envs))
+        sizes = [(d.train_starts, d.num_envs - n_world), ("world", n_world)]
+        self.envs = [NavigateVectorEnv(world=list(worlds), num_envs=n, starts=s, obs_size=d.obs_size,
+                                       reward=d.reward, max_episode_steps=d.max_episode_steps)
+                     for s, n in sizes if n > 0]
+        self.seed = seed
+        self.num_envs = d.num_envs
+
+    def reset(self) -> np.ndarray:
+        obs, offset = [], 0
+        for env in self.envs:
+            obs.append(env.reset(seed=self.seed + offset)[0])
+            offset += env.num_envs
+        return np.concatenate(obs)
+
+    def step(self, actions: np.ndarray):
+        out, offset = [], 0
+        for env in self.envs:
+            obs, reward, terminated, truncated, info = env.step(actions[offset:offset + env.num_envs])
+            out.append((obs, reward, terminated, truncated, info["success"]))
+            offset += env.num_envs
+        return tuple(np.concatenate(parts) for parts in zip(*out))
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()
+
+
+# ----------------------------------------------------------------------------------------
+# Training
+
+
+@dataclass
+class GeneralResult:
+    """What a general training run did.
+
+    Attributes:
+        config: The configuration.
+        global_step: Transitions collected.
+        episodes: Searches finished.
+        updates: Gradient updates.
+        wall_time: Seconds of training over all resumed sessions.
+        phase: Index of the phase reached (``len(phases)`` when all finished).
+        best_validation: Validation summary of the best network (None: never evaluated).
+        best_step: Transition count at that evaluation.
+        out_dir: Directory with ``best.pt``, ``last.pt``, ``train.csv`` (None: nothing written).
+        network: The online network at the end.
+        best_state: State dict of the best network (None: never evaluated).
+        history: Rows of ``train.csv`` written in this session.
+    """
+
+    config: GeneralConfig
+    global_step: int
+    episodes: int
+    updates: int
+    wall_time: float
+    phase: int
+    best_validation: Optional[dict]
+    best_step: Optional[int]
+    out_dir: Optional[Path]
+    network: torch.nn.Module
+    best_state: Optional[dict]
+    history: list = field(default_factory=list)
+
+
+def train_general(
+    config: GeneralConfig,
+    curriculum: str | os.PathLike | Sequence[Stage] | None = None,
+    out_dir: str | os.PathLike | None = None,
+    seed: Optional[int] = None,
+    resume: bool = False,
+    progress: bool = False,
+) -> GeneralResult:
+    """Train one Q-network for the general field: curriculum stages, then domain randomisation.
+
+    Args:
+        config: The configuration (see :func:`general_preset`).
+        curriculum: A curriculum file (or its loaded stages); None: only the randomised phase.
+        out_dir: Directory for ``best.pt`` (best validation), ``last.pt`` (training state)
+            and ``train.csv``; created if missing. None: write nothing.
+        seed: Overrides ``config.dqn.seed``.
+        resume: Continue from ``out_dir/last.pt`` (same configuration except the stopping
+            and logging fields).
+        progress: Print a line at every evaluation.
+
+    Returns:
+        The result.
+
+    Raises:
+        UserError: Unusable curriculum, configuration or checkpoint.
+    """
+    if seed is not None:
+        config = _replace(config, {"seed": int(seed)})
+    if curriculum is None:
+        stages: list[Stage] = []
+    elif isinstance(curriculum, (str, os.PathLike)):
+        stages = load_curriculum(curriculum)
+    else:
+        stages = list(curriculum)
+    phases = training_phases(stages, config)
+    out = Path(out_dir) if out_dir is not None else None
+    if resume and out is None:
+        raise UserError("resuming needs the output directory of the run to continue")
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+    previous_threads = torch.get_num_threads()
+    torch.set_num_threads(config.dqn.threads)
+    try:
+        return _train(config, phases, out, resume, progress)
+    finally:
+        torch.set_num_threads(previous_threads)
+
+
+def _train(config: GeneralConfig, phases: list[Phase], out: Optional[Path], resume: bool,
+           progress: bool) -> GeneralResult:
+    d = config.dqn
+    rng = np.random.default_rng(d.seed)  # ε-greedy and minibatch sampling
+    torch.manual_seed(d.seed)
+    obs_shape = (1, d.obs_size, d.obs_size)
+    q_network = d.network(obs_channels=1)
+    target_network = copy.deepcopy(q_network) if d.target_update != "none" else q_network
+    if target_network is not q_network:
+        target_network.requires_grad_(False)
+    optimizer = torch.optim.Adam(q_network.parameters(), lr=d.learning_rate)
+    buffer = ReplayBuffer(d.buffer_size, obs_shape, d.batch_size)
+    validation = validation_set(config)
+    field_params = (phases[0].worlds[0] if phases[0].worlds else validation.worlds[0]).field
+
+    # Counters, restored on resume.
+    c = dict(global_step=0, episodes=0, updates=0, phase=0, phase_steps=0, phase_episodes=0, pool_draws=0,
+             wall_time=0.0, best_step=None)
+    best_validation: Optional[dict] = None
+    best_state: Optional[dict] = None
+    csv_path = out / "train.csv" if out is not None else None
+    if resume:
+        last = out / "last.pt"
+        meta, tensors = read_file(last)
+        if meta.get("kind") != "checkpoint" or "general" not in meta:
+            raise UserError(f"{last}: not a general training checkpoint")
+        saved = GeneralConfig.from_dict(meta["config"])
+        differ = [k for k, v in saved.to_dict().items() if k not in STOP_FIELDS and v != config.to_dict()[k]]
+        differ += [f"dqn.{k}" for k, v in saved.dqn.to_dict().items()
+                   if k not in STOP_FIELDS and v != d.to_dict()[k]]
+        if differ:
+            raise UserError(f"{last}: was trained with different options ({', '.join(differ)}); "
+                            "resume with the same preset and options")
+        q_network.load_state_dict(tensors["q_network"])
+        if target_network is not q_network:
+            target_network.load_state_dict(tensors["target_network"])
+        optimizer.load_state_dict(tensors["optimizer"])
+        c.update(meta["general"]["counters"])
+        best_validation = meta["general"]["best_validation"]
+        best_state = tensors.get("best_state")
+        rng.bit_generator.state = meta["general"]["numpy_rng"]
+        torch.set_rng_state(tensors["torch_rng"])
+        if csv_path is not None and csv_path.exists():  # drop rows logged after the checkpoint
+            with open(csv_path, newline="") as f:
+                rows = [r for r in csv.DictReader(f) if int(r["global_step"]) <= c["global_step"]]
+            with open(csv_path, "w", newline="") as f:
+                writer = csv.DictWriter(f, CSV_COLUMNS)
+                writer.writeheader()
+                writer.writerows(rows)
+    elif csv_path is not None:
+        with open(csv_path, "w", newline="") as f:
+            csv.writer(f).writerow(CSV_COLUMNS)
+
+    start_time = time.perf_counter()
+    elapsed_before = float(c["wall_time"])
+    history: list[dict] = []
+    recent_returns: collections.deque = collections.deque(maxlen=200)
+    recent_success: collections.deque = collections.deque(maxlen=200)
+    loss_sum, loss_count = torch.zeros(()), 0
+    online_params, target_params = list(q_network.parameters()), list(target_network.parameters())
+    huber = d.loss == "huber"
+
+    def wall() -> float:
+        return elapsed_before + time.perf_counter() - start_time
+
+    def run_finished() -> bool:
+        return ((config.total_steps is not None and c["global_step"] >= config.total_steps)
+                or (config.time_limit is not None and wall() >= config.time_limit))
+
+    def training_meta() -> dict:
+        return {"curriculum": [p.name for p in phases], "global_step": c["global_step"], "episodes": c["episodes"],
+                "updates": c["updates"], "wall_time": wall(), "validation": best_validation,
+                "validation_step": c["best_step"], "validation_seed": config.validation_seed}
+
+    def save_checkpoint() -> None:
+        if out is None:
+            return
+        c["wall_time"] = wall()
+        meta = model_meta(q_network, field_params, config.to_dict(), training_meta())
+        meta["kind"] = "checkpoint"
+        meta["general"] = {"counters": dict(c), "best_validation": best_validation,
+                           "numpy_rng": rng.bit_generator.state}
+        tensors = {"q_network": q_network.state_dict(), "optimizer": optimizer.state_dict(),
+                   "torch_rng": torch.get_rng_state()}
+        if target_network is not q_network:
+            tensors["target_network"] = target_network.state_dict()
+        if best_state is not None:
+            tensors["best_state"] = best_state
+        write_file(out / "last.pt", meta, tensors)
+
+    def update() -> None:
+        nonlocal loss_sum, loss_count
+        batch = buffer.sample(rng)
+        with torch.no_grad():
+            if d.double_dqn:  # choose with the online network, value with the target network
+                next_actions = q_network(batch.next_observations).argmax(1, keepdim=True)
+                next_q = target_network(batch.next_observations).gather(1, next_actions).squeeze(1)
+            else:
+                next_q = target_network(batch.next_observations).amax(1)
+            # TD target (eq. 32): R + γ·max Q(O_{n+1}), nothing beyond a terminal step
+            td_target = batch.rewards + d.gamma * (1.0 - batch.dones) * next_q
+        q_taken = q_network(batch.observations).gather(1, batch.actions).squeeze(1)
+        loss = F.smooth_l1_loss(q_taken, td_target) if huber else F.mse_loss(q_taken, td_target)
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        if d.max_grad_norm is not None:
+            torch.nn.utils.clip_grad_norm_(online_params, d.max_grad_norm, foreach=True)
+        optimizer.step()
+        c["updates"] += 1
+        if d.target_update == "soft":
+            with torch.no_grad():
+                torch._foreach_lerp_(target_params, online_params, d.tau)
+        elif d.target_update == "hard" and c["updates"] % d.target_update_every == 0:
+            target_network.load_state_dict(q_network.state_dict())
+        loss_sum += loss.detach()
+        loss_count += 1
+
+    def evaluate_and_log(epsilon: float, evaluate: bool) -> None:
+        nonlocal best_validation, best_state, loss_sum, loss_count
+        summary = None
+        if evaluate:
+            summary = validate(q_network, validation)
+            if best_validation is None or _score(summary) > _score(best_validation):
+                best_validation, c["best_step"] = summary, c["global_step"]
+                best_state = {k: v.clone() for k, v in q_network.state_dict().items()}
+                if out is not None:
+                    save_model(out / "best.pt", q_network,
+                               model_meta(q_network, field_params, config.to_dict(), training_meta()))
+            if progress:
+                print(f"[{wall():7.1f} s] step {c['global_step']:>9} phase {phases[min(c['phase'], len(phases) - 1)].name}"
+                      f" eps {epsilon:.3f} train success {np.mean(recent_success) if recent_success else 0:.2f}"
+                      f" | validation {summary['success']:.3f} trap {summary['trap_success']:.3f}"
+                      f" coll {summary['collisions']} ratio {summary['length_ratio']:.3f}"
+                      f" | best {best_validation['success']:.3f}", flush=True)
+        row = {
+            "global_step": c["global_step"], "episodes": c["episodes"],
+            "stage": phases[min(c["phase"], len(phases) - 1)].name, "epsilon": round(epsilon, 5),
+            "mean_return": round(float(np.mean(recent_returns)), 4) if recent_returns else "",
+            "success_rate": round(float(np.mean(recent_success)), 4) if recent_success else "",
+            "loss": round(float(loss_sum) / loss_count, 6) if loss_count else "",
+            "val_success": round(summary["success"], 4) if summary else "",
+            "val_trap_success": round(summary["trap_success"], 4) if summary else "",
+            "val_length_ratio": round(summary["length_ratio"], 4) if summary else "",
+            "pool_draws": c["pool_draws"], "wall_time": round(wall(), 3),
+        }
+        loss_sum, loss_count = torch.zeros(()), 0
+        history.append(row)
+        if csv_path is not None:
+            with open(csv_path, "a", newline="") as f:
+                csv.DictWriter(f, CSV_COLUMNS).writerow(row)
+
+    def next_multiple(value: int, every: int) -> int:
+        return (value // every + 1) * every
+
+    next_eval = next_multiple(c["global_step"], config.eval_every)
+    next_log = next_multiple(c["global_step"], config.log_every)
+    next_checkpoint = next_multiple(c["global_step"], config.checkpoint_every)
+    n = d.num_envs
+    epsilon = d.epsilon_initial
+    try:
+        while c["phase"] < len(phases) and not run_finished():
+            phase = phases[c["phase"]]
+            worlds = list(phase.worlds)
+            next_refresh = None
+            if phase.randomised:
+                # redraw the pool where the last one would have been redrawn (also on resume)
+                worlds += draw_pool(config, c["pool_draws"])
+                next_refresh = next_multiple(c["phase_steps"], config.refresh_every)
+            envs = _Envs(worlds, config, seed=d.seed + c["global_step"])
+            obs = envs.reset()
+            prev_done = np.zeros(n, bool)
+            ep_return = np.zeros(n)
+            phase_done = redraw = False
+            while not (phase_done or redraw or run_finished()):
+                episodes_for_epsilon = c["phase_episodes"] if config.restart_exploration else c["episodes"]
+                epsilon = epsilon_schedule(d, episodes_for_epsilon)
+                # ε-greedy: a random action with probability ε, else the greedy one
+                with torch.inference_mode():
+                    actions = q_network(torch.from_numpy(obs)).argmax(1).numpy()
+                explore = rng.random(n) < epsilon
+                if explore.any():
+                    actions = np.where(explore, rng.integers(0, N_ACTIONS, n), actions)
+                next_obs, rewards, terminated, truncated, success = envs.step(actions)
+                # NEXT_STEP autoreset: a step right after a done only returns the reset observation
+                valid = ~prev_done
+                buffer.add(obs[valid], next_obs[valid], actions[valid], rewards[valid] * d.reward_scale,
+                           terminated[valid])
+                done = (terminated | truncated) & valid
+                ep_return += np.where(valid, rewards, 0.0)
+                if done.any():
+                    recent_returns.extend(ep_return[done].tolist())
+                    recent_success.extend(np.asarray(success, bool)[done].tolist())
+                    c["episodes"] += int(done.sum())
+                    c["phase_episodes"] += int(done.sum())
+                    ep_return[done] = 0.0
+                prev_done = terminated | truncated
+                obs = next_obs
+                added = int(valid.sum())
+                c["global_step"] += added
+                c["phase_steps"] += added
+
+                if len(buffer) >= max(d.learning_starts, d.batch_size):
+                    for _ in range(d.gradient_steps):
+                        update()
+
+                phase_done = ((phase.episodes is not None and c["phase_episodes"] >= phase.episodes)
+                              or (phase.steps is not None and c["phase_steps"] >= phase.steps))
+                if phase_done:
+                    c["phase"] += 1
+                    c["phase_steps"] = c["phase_episodes"] = 0
+                if next_refresh is not None and c["phase_steps"] >= next_refresh:
+                    c["pool_draws"] += 1
+                    redraw = True
+                evaluate = c["global_step"] >= next_eval
+                if evaluate:
+                    next_eval = next_multiple(c["global_step"], config.eval_every)
+                if evaluate or c["global_step"] >= next_log:
+                    next_log = next_multiple(c["global_step"], config.log_every)
+                    evaluate_and_log(epsilon, evaluate)
+                if c["global_step"] >= next_checkpoint or phase_done or redraw:
+                    next_checkpoint = next_multiple(c["global_step"], config.checkpoint_every)
+                    save_checkpoint()
+            envs.close()
+    except KeyboardInterrupt:
+        save_checkpoint()  # an interrupted run resumes from here
+        raise
+
+    # A last evaluation, so the end of the run can be the best.
+    if c["global_step"] > 0 and (not history or history[-1]["val_success"] == ""):
+        evaluate_and_log(epsilon, True)
+    save_checkpoint()
+    return GeneralResult(
+        config=config, global_step=c["global_step"], episodes=c["episodes"], updates=c["updates"],
+        wall_time=wall(), phase=c["phase"], best_validation=best_validation, best_step=c["best_step"],
+        out_dir=out, network=q_network, best_state=best_state, history=history,
+    )
+
+
+def run_curriculum_command(curriculum_path: str | os.PathLike | None, preset: Optional[str], out: str | os.PathLike,
+                           seed: Optional[int] = None, resume: bool = False,
+                           overrides: Optional[dict[str, Any]] = None, progress: bool = True) -> int:
+    """``apf-physics train --curriculum FILE --out DIR [--preset P] [--seed S] [--set K=V] [--resume]``.
+
+    Args:
+        curriculum_path: The curriculum file (None: only the randomised phase of ``general``).
+        preset: ``"general"`` (default) or ``"thesis-general"``; on resume, the saved one.
+        out: Output directory.
+        seed: Random seed (default: the preset's, 0).
+        resume: Continue the run in ``out``.
+        overrides: Option changes (``--set``), fields of :class:`GeneralConfig` or :class:`DQNConfig`.
+        progress: Print a line per evaluation.
+
+    Returns:
+        Exit status 0.
+
+    Raises:
+        UserError: Unusable arguments, files or checkpoint.
+    """
+    out = Path(out)
+    overrides = dict(overrides or {})
+    if resume:
+        last = out / "last.pt"
+        if not last.is_file():
+            raise UserError(f"{last}: nothing to resume (no checkpoint there)")
+        meta, _ = read_file(last)
+        if "general" not in meta:
+            raise UserError(f"{last}: not a general (curriculum) training checkpoint")
+        saved = GeneralConfig.from_dict(meta["config"])
+        if preset is not None and preset != saved.preset:
+            raise UserError(f"{last}: was trained with preset {saved.preset!r}, not {preset!r}")
+        config = _replace(saved, overrides)
+    else:
+        if (out / "last.pt").exists():
+            raise UserError(f"{out} already holds a training run; use --resume to continue it or another --out")
+        config = general_preset(preset or "general", **overrides)
+    result = train_general(config, curriculum=curriculum_path, out_dir=out, seed=seed, resume=resume,
+                           progress=progress)
+    best = result.best_validation
+    summary = ("never evaluated" if best is None else
+               f"{best['success']:.1%} of the validation starts ({best['trap_success']:.1%} of the trap starts), "
+               f"{best['collisions']} collisions, path {best['length_ratio']:.2f}x A*")
+    print(f"trained {result.global_step} steps, {result.episodes} episodes, {result.updates} updates "
+          f"in {result.wall_time:.1f} s; best validation: {summary}; network in {out / 'best.pt'}")
+    return 0
