@@ -181,7 +181,8 @@ class Physics:
         # A spatial hash beats the default bounding-box tree for many small discs moving among
         # tiled static shapes (tools/bench_env.py: ~1.8x faster steps at N = 256).
         shapes = len(self.space.shapes)
-        self.space.use_spatial_hash(4.0, max(1000, 10 * shapes))
+        if self.num_robots > 16:
+            self.space.use_spatial_hash(4.0, max(1000, 10 * shapes))
 
         self._buffer = pymunk.batch.Buffer()
         self._index_bodies()
