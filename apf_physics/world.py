@@ -383,7 +383,7 @@ def world_from_dict(data: Any, source: str = "<dict>") -> World:
     if not isinstance(name, str) or not name:
         raise check.fail("name", f"expected a non-empty string, got {name!r}")
     robot_radius = check.number(data.get("robot_radius", 0.25), "robot_radius", positive=True)
-    goal_tolerance = check.number(data.get("goal_tolerance", 0.5), "goal_tolerance", positive=True)
+    goal_tolerance = check.number(data.get("goal_tolerance", 0.75), "goal_tolerance", positive=True)
     params = _parse_field(check, data["field"])
 
     raw_obstacles = data.get("obstacles", [])
