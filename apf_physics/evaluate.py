@@ -41,13 +41,16 @@ class Evaluation:
 
 
 def evaluate(planner: Planner, worlds: Sequence[World], starts: dict[str, np.ndarray] | None = None,
-             max_steps: int | None = None) -> Evaluation:
-    """Run ``planner`` from every start of every world (or from ``starts[world.name]``)."""
+             max_steps: int | None = None, run=rollout, label: str | None = None) -> Evaluation:
+    """Run ``planner`` from every start of every world (or from ``starts[world.name]``).
+
+    ``run`` is the rollout function (:func:`~apf_physics.rollout.rollout`, or a formation's).
+    """
     episodes: list[Episode] = []
     for world in worlds:
         s = world.starts if starts is None else starts[world.name]
-        episodes.extend(rollout(world, planner, s, max_steps=max_steps))
-    return Evaluation(planner.name, episodes)
+        episodes.extend(run(world, planner, s, max_steps=max_steps))
+    return Evaluation(label or planner.name, episodes)
 
 
 def format_table(evaluations: Sequence[Evaluation]) -> str:

@@ -13,7 +13,7 @@ from typing import Sequence
 
 import numpy as np
 
-from apf_physics.evaluate import Evaluation
+from apf_physics.evaluate import Evaluation, evaluate
 from apf_physics.physics import Physics
 from apf_physics.planners.base import Planner
 from apf_physics.planners.follower import FollowerController, initial_followers
@@ -165,8 +165,4 @@ def rollout_formation(world: World, planner: Planner, starts: Sequence[Sequence[
 def evaluate_formation(planner: Planner, worlds: Sequence[World], starts: dict[str, np.ndarray] | None = None,
                        max_steps: int | None = None) -> Evaluation:
     """Run the formation from every start of every world."""
-    episodes: list[Episode] = []
-    for world in worlds:
-        s = world.starts if starts is None else starts[world.name]
-        episodes.extend(rollout_formation(world, planner, s, max_steps=max_steps))
-    return Evaluation(f"{planner.name}+formation", episodes)
+    return evaluate(planner, worlds, starts, max_steps, run=rollout_formation, label=f"{planner.name}+formation")
