@@ -36,7 +36,7 @@ def stub_config(**overrides) -> DQNConfig:
     """The ``fast`` recipe scaled to the 7×7 stub world."""
     options = dict(obs_size=5, filters=(8, 8), num_envs=16, batch_size=64, learning_starts=200,
                    exploration_episodes=300, total_steps=3_000, eval_every=1_000, log_every=500,
-                   checkpoint_every=1_000, max_episode_steps=30, seed=0)
+                   checkpoint_every=1_000, max_episode_steps=30, seed=0, train_starts="random")
     options.update(overrides)
     return preset("fast", **options)
 
@@ -112,7 +112,7 @@ def test_thesis_presets_stay_as_written():
     fast = preset("fast")
     assert (fast.num_envs, fast.batch_size, fast.loss, fast.double_dqn, fast.target_update, fast.tau) == (
         64, 128, "huber", True, "soft", 0.01)
-    assert (fast.reward_scale, fast.obs_transform, fast.train_starts) == (1e-3, "relative-log", "random")
+    assert (fast.reward_scale, fast.obs_transform, fast.train_starts) == (1e-3, "relative-log", "lattice")
 
 
 def test_preset_rejects_unknown_names_keys_and_values():
@@ -328,3 +328,39 @@ def test_cli_overrides_are_read_as_yaml():
         "total_steps": 5000, "double_dqn": False, "filters": [4, 4], "max_grad_norm": None, "learning_rate": 1e-4}
     with pytest.raises(UserError, match="KEY=VALUE"):
         parse_overrides(["total_steps"])
+
+
+# ---------------------------------------------------------------------------- starts
+
+
+def test_reachable_mask_is_integer_moves_within_the_tolerance(worlds_dir):
+    from apf_physics import load_world
+    from apf_physics.rl.dqn import reachable_mask
+
+    from types import SimpleNamespace
+
+    points = np.array([[1.0, 1.0], [12.5, 15.5], [3.3, 7.2], [3.4, 7.4], [16.6, 16.0]])
+    half = SimpleNamespace(targets=np.array([[16.0, 16.0]]), goal_tolerance=0.5)
+    assert reachable_mask(half, points).tolist() == [True, False, True, False, True]
+    wide = SimpleNamespace(targets=half.targets, goal_tolerance=0.75)  # > √2/2: every start can succeed
+    assert reachable_mask(wide, points).all()
+    world = load_world(worlds_dir / "fixed20.yaml")
+    assert reachable_mask(world, world.starts).all()
+
+
+def test_lattice_reachable_and_validation_starts(worlds_dir):
+    from apf_physics import load_world
+    from apf_physics.rl.dqn import reachable_mask, training_starts, validation_starts
+
+    world = load_world(worlds_dir / "fixed20.yaml")
+    lattice = training_starts(world, "lattice", seed=0)
+    assert np.array_equal(lattice, np.round(lattice)) and world.is_free(lattice).all()
+    assert {tuple(p) for p in world.starts} <= {tuple(p) for p in lattice}
+    assert not any(np.hypot(*(p - world.targets[0])) <= world.goal_tolerance for p in lattice)
+    reachable = training_starts(world, "reachable", seed=0, count=2_000)
+    assert 0 < len(reachable) <= 2_000 and reachable_mask(world, reachable).all() and world.is_free(reachable).all()
+    assert training_starts(world, "random", seed=0) == "random"
+    val = validation_starts(world, 50, seed=0)
+    assert val.shape == (50, 2) and reachable_mask(world, val).all()
+    assert np.array_equal(val, validation_starts(world, 50, seed=0))
+    assert not np.isin(val, reachable).any()  # a stream of its own

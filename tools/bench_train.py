@@ -24,11 +24,11 @@ import numpy as np
 import torch
 
 from apf_physics import load_world
-from apf_physics.rl.dqn import evaluate_greedy, navigate_env_factory, preset, train
+from apf_physics.rl.dqn import evaluate_greedy, navigate_env_factory, preset, train, training_starts
 
 
-def bench_ours(world, seeds, budget: float, **overrides) -> list[float | None]:
-    times = []
+def bench_ours(world, seeds, budget: float, **overrides) -> tuple[list[float | None], list[float]]:
+    times, rates = [], []
     for seed in seeds:
         config = preset("fast", seed=seed, total_steps=None, time_limit=budget, **overrides)
         with tempfile.TemporaryDirectory() as out:
@@ -38,10 +38,11 @@ def bench_ours(world, seeds, budget: float, **overrides) -> list[float | None]:
               f"{result.time_to_target if result.time_to_target is None else round(result.time_to_target, 1)} s, "
               f"{result.global_step} env steps, {result.updates} updates, {rate:.0f} env steps/s", flush=True)
         times.append(result.time_to_target)
-    return times
+        rates.append(rate)
+    return times, rates
 
 
-def bench_sb3(world, seconds: float, seed: int, num_envs: int = 16, eval_every: int = 12_800) -> None:
+def bench_sb3(world, seconds: float, seed: int, num_envs: int = 16, eval_every: int = 3_200) -> tuple[float, float]:
     import gymnasium as gym
     from stable_baselines3 import DQN
     from stable_baselines3.common.callbacks import BaseCallback
@@ -73,8 +74,10 @@ def bench_sb3(world, seconds: float, seed: int, num_envs: int = 16, eval_every: 
                     x = max_pool_2x2_stride1(x)
             return F.leaky_relu(self.first(x.flatten(1)), self.net.negative_slope)
 
+    starts = training_starts(world, config.train_starts, seed)  # the same training starts as ours
+
     def make():
-        env = NavigateEnv(world=world, obs_size=config.obs_size, reward=config.reward, starts="random")
+        env = NavigateEnv(world=world, obs_size=config.obs_size, reward=config.reward, starts=starts)
         env = gym.wrappers.TimeLimit(env, config.max_episode_steps)
         return gym.wrappers.TransformReward(env, lambda r: r * config.reward_scale)
 
@@ -83,7 +86,8 @@ def bench_sb3(world, seconds: float, seed: int, num_envs: int = 16, eval_every: 
     model = DQN(
         "CnnPolicy", vec, learning_rate=config.learning_rate, buffer_size=config.buffer_size,
         learning_starts=config.learning_starts, batch_size=config.batch_size, tau=config.tau, gamma=config.gamma,
-        train_freq=1, gradient_steps=1, target_update_interval=1, exploration_fraction=0.1,
+        # ε decays over the first 40,000 transitions, about where ours reaches ε_f
+        train_freq=1, gradient_steps=1, target_update_interval=1, exploration_fraction=0.02,
         exploration_initial_eps=config.epsilon_initial, exploration_final_eps=config.epsilon_final,
         max_grad_norm=config.max_grad_norm, seed=seed, device="cpu",
         policy_kwargs=dict(features_extractor_class=ThesisExtractor, net_arch=[32], normalize_images=False),
@@ -103,10 +107,11 @@ def bench_sb3(world, seconds: float, seed: int, num_envs: int = 16, eval_every: 
             return time.perf_counter() - self.start < seconds and self.best < 1.0
 
     stop = Stop()
-    model.learn(total_timesteps=10**9, callback=stop)
+    model.learn(total_timesteps=2_000_000, callback=stop)
     elapsed = time.perf_counter() - stop.start
-    print(f"SB3 DQN ({num_envs} envs, batch {config.batch_size}, same network): {elapsed:.1f} s, "
+    print(f"SB3 DQN ({num_envs} envs, batch {config.batch_size}, same network and starts): {elapsed:.1f} s, "
           f"{model.num_timesteps} env steps ({model.num_timesteps / elapsed:.0f}/s), best greedy success {stop.best:.0%}")
+    return model.num_timesteps / elapsed, stop.best
 
 
 def profile(world, steps: int = 40_000) -> None:
@@ -132,7 +137,10 @@ def main() -> None:
     if args.profile:
         profile(world)
         return
-    times = bench_ours(world, args.seeds, args.budget)
+    import os
+
+    print(f"load average at start: {os.getloadavg()[0]:.2f}; torch threads {preset('fast').threads}", flush=True)
+    times, rates = bench_ours(world, args.seeds, args.budget)
     reached = [t for t in times if t is not None]
     if not reached:
         print("no run reached 100% within the budget")
@@ -141,7 +149,11 @@ def main() -> None:
     print(f"ours: median time to 100% of the starts over {len(times)} seeds: {median:.1f} s "
           f"({len(reached)}/{len(times)} reached it; times {[None if t is None else round(t, 1) for t in times]})")
     if args.sb3:
-        bench_sb3(world, median, seed=args.seeds[0])
+        sb3_rate, sb3_best = bench_sb3(world, median, seed=args.seeds[0])
+        ours_rate = statistics.median(rates)
+        print(f"ratio: ours {ours_rate:.0f} env steps/s vs SB3 {sb3_rate:.0f} env steps/s = {ours_rate / sb3_rate:.1f}x; "
+              f"in {median:.1f} s ours reached 100% (median seed), SB3 {sb3_best:.0%}")
+    print(f"load average at end: {os.getloadavg()[0]:.2f}")
 
 
 if __name__ == "__main__":

@@ -12,8 +12,19 @@ Presets (:func:`preset`):
 - ``thesis-general``: Table 4 (9×9 window, filters 4/4, 150 searches).
 - ``fast``: the thesis-fixed network trained the way it learns fastest here
   (64 parallel envs, batch 128, double DQN, Huber loss, soft target τ = 0.01, rewards /
-  1000, signed-log relative observations, starts drawn over all free positions) and
-  stopped at the first evaluation where every start of the world succeeds.
+  1000, signed-log relative observations, training starts at every free point at an
+  integer offset from the target, greedy evaluation every 3,200 transitions) and stopped
+  at the first evaluation where every start of the world succeeds.
+
+Every action moves the robot by an integer vector, so from a start ``p`` it only ever
+stands at ``p + (i, j)`` (until a collision ends the search): with a goal tolerance below
+√2/2, a random start whose offset from the target is farther than the tolerance from an
+integer vector can never succeed (≈ 21 % of uniform random starts at tolerance 0.5, see
+:func:`reachable_mask`; fixed20's tolerance is now 0.75, where every start can). Training
+from such starts wastes those searches and teaches the network to circle the target.
+``train_starts="lattice"`` (the states reachable from the world's integer starts) learns
+the world's starts fastest; ``"reachable"`` (random starts that can succeed) generalises
+to other offsets.
 """
 
 from __future__ import annotations
@@ -39,7 +50,10 @@ from apf_physics.rl.network import OBS_TRANSFORMS, QNetwork
 from apf_physics.rl.plot import plot_training_curve
 
 N_ACTIONS = 9
-CSV_COLUMNS = ("global_step", "episodes", "epsilon", "mean_return", "success_rate", "loss", "eval_success", "wall_time")
+TRAIN_STARTS = ("world", "random", "reachable", "lattice")
+"""Values of :attr:`DQNConfig.train_starts`."""
+CSV_COLUMNS = ("global_step", "episodes", "epsilon", "mean_return", "success_rate", "loss", "eval_success", "wall_time",
+               "eval_random_success")
 """Columns of ``train.csv``."""
 
 
@@ -68,7 +82,10 @@ class DQNConfig:
     max_episode_steps: int = 100
     """tt: moves per search before it is cut off."""
     train_starts: str = "world"
-    """Where training searches start: ``"world"`` (the world's starts in turn) or ``"random"`` (any free position)."""
+    """Where training searches start: ``"world"`` (the world's starts in turn), ``"random"`` (any free
+    position), ``"reachable"`` (random free positions from which the integer moves of the action set can
+    end within the goal tolerance of a target: see :func:`reachable_mask`) or ``"lattice"`` (the free
+    points at integer offsets from a target, like the world's starts)."""
     num_envs: int = 1
     """Environments stepped in parallel (one vector step adds this many transitions)."""
 
@@ -120,6 +137,11 @@ class DQNConfig:
     """Stop after this many seconds of training, over all resumed sessions (None: no limit)."""
     eval_every: int = 10_000
     """Transitions between greedy evaluations on the world's starts."""
+    eval_random_starts: int = 0
+    """Also evaluate from this many random free starts that can reach a target (:func:`reachable_mask`),
+    drawn once per run from a generator of its own (not the training starts' stream). The best
+    checkpoint is then the one with the most successes from the world's starts, ties broken by
+    these; ``target_success`` still refers to the world's starts only. 0: world's starts only."""
     target_success: Optional[float] = None
     """Stop once a greedy evaluation reaches this success rate (None: never stop early)."""
     checkpoint_every: int = 50_000
@@ -139,8 +161,9 @@ class DQNConfig:
             (self.obs_transform in OBS_TRANSFORMS, f"obs_transform must be one of {OBS_TRANSFORMS}"),
             (self.loss in ("mse", "huber"), "loss must be 'mse' or 'huber'"),
             (self.target_update in ("none", "hard", "soft"), "target_update must be 'none', 'hard' or 'soft'"),
-            (self.train_starts in ("world", "random"), "train_starts must be 'world' or 'random'"),
+            (self.train_starts in TRAIN_STARTS, f"train_starts must be one of {TRAIN_STARTS}"),
             (self.obs_size >= 3 and self.obs_size % 2 == 1, "obs_size must be odd and at least 3"),
+            (self.eval_random_starts >= 0, "eval_random_starts must not be negative"),
             (min(self.num_envs, self.batch_size, self.threads) >= 1, "num_envs, batch_size and threads must be positive"),
             (0 < self.tau <= 1, "tau must be in (0, 1]"),
             (self.exploration_episodes >= 1, "exploration_episodes must be positive"),
@@ -182,10 +205,10 @@ PRESETS: dict[str, dict[str, Any]] = {
         exploration_episodes=150, total_episodes=150, eval_every=2_000, checkpoint_every=5_000, log_every=500,
     ),
     "fast": dict(
-        obs_transform="relative-log", train_starts="random", num_envs=64, batch_size=128,
+        obs_transform="relative-log", train_starts="lattice", num_envs=64, batch_size=128,
         learning_starts=2_000, loss="huber", double_dqn=True, target_update="soft", tau=0.01,
         max_grad_norm=10.0, reward_scale=1e-3, exploration_episodes=3_000,
-        total_episodes=None, total_steps=3_000_000, eval_every=6_400, target_success=1.0,
+        total_episodes=None, total_steps=3_000_000, eval_every=3_200, target_success=1.0,
         checkpoint_every=128_000, log_every=6_400,
     ),
 }
@@ -246,6 +269,72 @@ def epsilon_schedule(config: DQNConfig, episodes: int) -> float:
 
 # ----------------------------------------------------------------------------------------
 # Environments
+
+
+def reachable_mask(world: Any, points: np.ndarray) -> np.ndarray:
+    """Which start points can end a step within the goal tolerance of a target.
+
+    Every action moves the robot by an integer vector (SPEC Table 1) and only a collision,
+    which ends the search, moves it otherwise; so from ``p`` the robot only ever stands at
+    ``p + (i, j)``. It can succeed only if one of those points is within the goal tolerance
+    of a target, i.e. if ``p − t`` is within the tolerance of an integer vector. For
+    uniformly random starts that holds for π·0.5² ≈ 79 % of them at tolerance 0.5, and for
+    all of them at a tolerance of √2/2 or more.
+
+    Args:
+        world: The world (its ``targets`` and ``goal_tolerance``).
+        points: (N, 2) start points.
+
+    Returns:
+        (N,) bool.
+    """
+    d = np.asarray(points, float)[:, None, :] - np.asarray(world.targets, float)[None]
+    offset = d - np.round(d)
+    return (np.linalg.norm(offset, axis=2) <= world.goal_tolerance).any(axis=1)
+
+
+def validation_starts(world: Any, count: int, seed: int) -> np.ndarray:
+    """``count`` random free starts that can reach a target, for :attr:`DQNConfig.eval_random_starts`.
+
+    Drawn like ``"random"`` training starts but from a generator of their own (seeded with
+    ``[seed, 13]``), farther than the goal tolerance from every target and kept by
+    :func:`reachable_mask`.
+    """
+    rng = np.random.default_rng([seed, 13])
+    targets = np.asarray(world.targets, float)
+    out = np.empty((0, 2))
+    while len(out) < count:
+        points = world.random_free_positions(rng, 4 * count)
+        far = np.min(np.linalg.norm(points[:, None] - targets[None], axis=2), axis=1) > world.goal_tolerance
+        out = np.vstack([out, points[far & reachable_mask(world, points)]])
+    return out[:count]
+
+
+def training_starts(world: Any, kind: str, seed: int, count: int = 50_000) -> Any:
+    """What to pass as the environments' ``starts`` for :attr:`DQNConfig.train_starts`.
+
+    ``"world"`` and ``"random"`` are passed through; ``"reachable"`` gives up to ``count``
+    random free positions (drawn like ``"random"``, with ``seed``) kept by
+    :func:`reachable_mask` and farther than the goal tolerance from every target;
+    ``"lattice"`` gives the free points at integer offsets from the targets, shuffled.
+    """
+    if kind in ("world", "random"):
+        return kind
+    rng = np.random.default_rng([seed, 7])
+    targets = np.asarray(world.targets, float)
+    if kind == "reachable":
+        points = world.random_free_positions(rng, count)
+        points = points[reachable_mask(world, points)]
+    else:
+        w, h = world.size
+        xs = [t[0] + np.arange(np.floor(-t[0]), np.ceil(w - t[0]) + 1) for t in targets]
+        ys = [t[1] + np.arange(np.floor(-t[1]), np.ceil(h - t[1]) + 1) for t in targets]
+        points = np.concatenate([np.stack(np.meshgrid(x, y), -1).reshape(-1, 2) for x, y in zip(xs, ys)])
+        points = points[world.is_free(points)]
+        points = rng.permutation(np.unique(points, axis=0))
+    far = np.min(np.linalg.norm(points[:, None] - targets[None], axis=2), axis=1) > world.goal_tolerance
+    return points[far]
+
 
 
 EnvFactory = Callable[..., Any]
@@ -334,6 +423,8 @@ class TrainResult:
         wall_time: Seconds of training, over all resumed sessions.
         best_eval_success: Best greedy evaluation success rate (None if never evaluated).
         best_eval_step: Transition count at that evaluation.
+        best_eval_random: Success rate from the validation starts at that evaluation (None without
+            ``eval_random_starts``).
         time_to_target: Wall time when ``target_success`` was first reached (None: not reached).
         stopped_early: Whether training stopped because ``target_success`` was reached.
         out_dir: Directory with ``train.csv``, ``train.png``, ``best.pt``, ``last.pt`` (None: nothing written).
@@ -349,6 +440,7 @@ class TrainResult:
     wall_time: float
     best_eval_success: Optional[float]
     best_eval_step: Optional[int]
+    best_eval_random: Optional[float]
     time_to_target: Optional[float]
     stopped_early: bool
     out_dir: Optional[Path]
@@ -424,6 +516,10 @@ def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
 
     starts = np.asarray(world.starts, float).reshape(-1, 2)
     eval_envs = env_factory(world, num_envs=len(starts), seed=config.seed, starts=starts, config=config)
+    random_envs = None
+    if config.eval_random_starts:
+        validation = validation_starts(world, config.eval_random_starts, config.seed)
+        random_envs = env_factory(world, num_envs=len(validation), seed=config.seed, starts=validation, config=config)
     obs_shape = tuple(eval_envs.single_observation_space.shape)
     if obs_shape[1:] != (config.obs_size, config.obs_size):
         raise UserError(f"the environment's observations are {obs_shape}, but obs_size is {config.obs_size}")
@@ -433,7 +529,7 @@ def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
     for p in target_network.parameters():
         if target_network is not q_network:
             p.requires_grad_(False)
-    optimizer = torch.optim.Adam(q_network.parameters(), lr=config.learning_rate)
+    optimizer = torch.optim.Adam(q_network.parameters(), lr=config.learning_rate, fused=True)
     buffer = ReplayBuffer(config.buffer_size, obs_shape, config.batch_size)
     online_params = list(q_network.parameters())
     target_params = list(target_network.parameters())
@@ -442,6 +538,7 @@ def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
     global_step = episodes = updates = vector_steps = 0
     elapsed_before = 0.0
     best_success: Optional[float] = None
+    best_random: Optional[float] = None
     best_step: Optional[int] = None
     time_to_target: Optional[float] = None
     best_state: Optional[dict] = None
@@ -469,6 +566,7 @@ def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
         global_step, episodes, updates, vector_steps = (int(counters[k]) for k in ("global_step", "episodes", "updates", "vector_steps"))
         elapsed_before = float(counters["wall_time"])
         best_success, best_step, time_to_target = counters["best_eval_success"], counters["best_eval_step"], counters["time_to_target"]
+        best_random = counters.get("best_eval_random")
         rng.bit_generator.state = meta["numpy_rng"]
         torch.set_rng_state(tensors["torch_rng"])
         if "best_state" in tensors:
@@ -485,7 +583,7 @@ def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
             csv.writer(f).writerow(CSV_COLUMNS)
 
     envs = env_factory(world, num_envs=config.num_envs, seed=config.seed + global_step,
-                       starts=config.train_starts, config=config)
+                       starts=training_starts(world, config.train_starts, config.seed), config=config)
     n = config.num_envs
     obs, _ = envs.reset(seed=config.seed + global_step)
     prev_done = np.zeros(n, bool)
@@ -509,7 +607,8 @@ def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
 
     def training_meta() -> dict:
         return {"world": world_info, "global_step": global_step, "episodes": episodes, "updates": updates,
-                "wall_time": wall(), "eval_success": best_success, "eval_step": best_step}
+                "wall_time": wall(), "eval_success": best_success, "eval_step": best_step,
+                "eval_random_success": best_random, "eval_random_starts": config.eval_random_starts}
 
     def save_checkpoint() -> None:
         if out is None:
@@ -518,7 +617,8 @@ def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
         meta["kind"] = "checkpoint"
         meta["counters"] = {"global_step": global_step, "episodes": episodes, "updates": updates,
                             "vector_steps": vector_steps, "wall_time": wall(), "best_eval_success": best_success,
-                            "best_eval_step": best_step, "time_to_target": time_to_target}
+                            "best_eval_step": best_step, "time_to_target": time_to_target,
+                            "best_eval_random": best_random}
         meta["numpy_rng"] = rng.bit_generator.state
         tensors = {"q_network": q_network.state_dict(), "optimizer": optimizer.state_dict(),
                    "torch_rng": torch.get_rng_state()}
@@ -605,13 +705,15 @@ def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
                 for _ in range(config.gradient_steps):
                     update()
 
-            eval_success = None
+            eval_success = eval_random = None
             if global_step >= next_eval:
                 next_eval += config.eval_every * max(1, (global_step - next_eval) // config.eval_every + 1)
                 result = evaluate_greedy(q_network, eval_envs, seed=config.seed)
                 eval_success = result.success_rate
-                if best_success is None or eval_success > best_success:
-                    best_success, best_step = eval_success, global_step
+                if random_envs is not None:
+                    eval_random = evaluate_greedy(q_network, random_envs, seed=config.seed).success_rate
+                if best_success is None or (eval_success, eval_random or 0.0) > (best_success, best_random or 0.0):
+                    best_success, best_step, best_random = eval_success, global_step, eval_random
                     best_state = {k: v.clone() for k, v in q_network.state_dict().items()}
                     if out is not None:
                         save_model(out / "best.pt", q_network,
@@ -633,6 +735,7 @@ def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
                     "loss": round(float(loss_sum) / loss_count, 6) if loss_count else "",
                     "eval_success": round(eval_success, 4) if eval_success is not None else "",
                     "wall_time": round(wall(), 3),
+                    "eval_random_success": round(eval_random, 4) if eval_random is not None else "",
                 }
                 loss_sum, loss_count = torch.zeros(()), 0
                 history.append(row)
@@ -658,12 +761,14 @@ def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
             bar.close()
         envs.close()
         eval_envs.close()
+        if random_envs is not None:
+            random_envs.close()
 
     save_checkpoint()
     if csv_path is not None:
         plot_training_curve(csv_path, out / "train.png")
     return TrainResult(
         config=config, global_step=global_step, episodes=episodes, updates=updates, wall_time=wall(),
-        best_eval_success=best_success, best_eval_step=best_step, time_to_target=time_to_target,
+        best_eval_success=best_success, best_eval_step=best_step, best_eval_random=best_random, time_to_target=time_to_target,
         stopped_early=stopped_early, out_dir=out, network=q_network, best_state=best_state, history=history,
     )
