@@ -11,11 +11,16 @@ Two presets (:func:`general_preset`):
 - ``general`` (recommended): domain randomisation. A pool of worlds freshly drawn with
   :func:`apf_physics.generate.generate_world` over all families, redrawn every
   ``refresh_every`` transitions, plus every world of the curriculum file, learned with the
-  settings that train fastest here (signed-log relative observations, double DQN, Huber
-  loss, soft target network, scaled rewards, 64 parallel environments, starts drawn over all
-  free positions and, for a quarter of the environments, the worlds' own starts behind their
-  obstacles), a larger window (13×13) and γ = 0.99 so that climbing out of a potential well
-  pays off within the horizon.
+  ``fast`` recipe of :mod:`apf_physics.rl.dqn` (the thesis-fixed network on an 11×11 window,
+  signed-log relative observations, double DQN, Huber loss, soft target network, rewards
+  scaled by 1/1000, starts drawn over all free positions) with 32 parallel environments, a
+  quarter of them starting at the worlds' own starts behind their obstacles, and searches of
+  up to 200 moves. Its rewards are Table 3's weights (W1 = −1000, W2 = 1000, W3 = −1,
+  β = −4): with Table 4's (β = −20, W2 = 10) the potential term is hundreds of times the
+  target reward in a 50×50 field, and because W4 = β·(U' − U) is not discounted like a
+  potential-based shaping term (β·(γU' − U)), stepping down and back up again can pay more
+  than reaching the target; a run with Table 4's weights reached no validation target in
+  700,000 transitions (and one with γ = 0.99 and a 13×13 window diverged).
 
 Both keep the network with the best greedy evaluation on a fixed validation set of generated
 worlds (``validation_seed``; it must differ from the held-out test seed, 100) in ``best.pt``
@@ -159,9 +164,9 @@ PRESETS: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
                        dict(stage_episodes=150, restart_exploration=True, eval_every=5_000, log_every=2_000,
                             checkpoint_every=20_000)),
     "general": ("fast", dict(
-        obs_size=13, filters=(8, 16, 16), hidden=(64, 64), negative_slope=0.01, reward="thesis-general",
-        max_episode_steps=200, gamma=0.99, learning_rate=5e-4, buffer_size=300_000, learning_starts=10_000,
-        num_envs=64, batch_size=128, reward_scale=1e-3, exploration_episodes=8_000, epsilon_final=0.03,
+        train_starts="random", obs_size=11, reward="thesis-fixed", max_episode_steps=200, gamma=0.95,
+        learning_rate=1e-3, buffer_size=300_000, learning_starts=10_000,
+        num_envs=32, batch_size=128, reward_scale=1e-3, exploration_episodes=12_000, epsilon_final=0.03,
         total_steps=None, target_success=1.0,
     ), dict(
         families=FAMILIES, pool_size=80, pool_starts=6, refresh_every=500_000, world_start_fraction=0.25,

@@ -1,0 +1,150 @@
+"""Compare planners on general-field worlds, overall and on the starts where gradient descent is trapped.
+
+For each planner (and each DQN model given): success over all starts, success over the
+trap starts (gradient descent does not reach the target from them), collisions, the mean
+path length on the successes divided by A*'s mean over the same starts, and success over the
+starts from which unit moves can end within the goal tolerance at all (the DQN planner's
+moves are integer vectors: with a tolerance below √2/2 some starts can never succeed). Episodes run
+through the physics exactly as ``apf-physics eval`` runs them.
+
+Trap labels and A* lengths come from the directory's ``manifest.json`` (written by
+``apf-physics generate``); for world files without one they are computed here
+(:func:`apf_physics.generate.label_starts`).
+
+Usage::
+
+    PYTHONPATH=. python tools/eval_general.py /tmp/heldout \\
+        --planners gradient,escape,astar,dqn \\
+        --model general=apf_physics/models/general.pt --model thesis=runs/thesis/best.pt \\
+        [--json OUT] [--per-world]
+    PYTHONPATH=. python tools/eval_general.py worlds/thesis/test1.yaml ... --planners dqn --per-world
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from apf_physics.evaluate import evaluate  # noqa: E402
+from apf_physics.generate import label_starts  # noqa: E402
+from apf_physics.planners import make_planner  # noqa: E402
+from apf_physics.world import load_world  # noqa: E402
+
+
+def lattice_reachable(world, start) -> bool:
+    """Whether unit moves (axis or diagonal) from ``start`` can end within the goal tolerance of a target."""
+    d = np.asarray(world.targets) - np.asarray(start)
+    return bool(np.min(np.hypot(*(d - np.round(d)).T)) <= world.goal_tolerance)
+
+
+def load_labelled(paths: list[str]):
+    """Worlds and per-start labels ``(trapped, astar_length)``, from manifests where there are any."""
+    worlds, labels = [], {}
+    for p in map(Path, paths):
+        if p.is_dir():
+            manifest = json.loads((p / "manifest.json").read_text())
+            for record in manifest["worlds"]:
+                world = load_world(p / record["file"])
+                worlds.append(world)
+                labels[world.name] = [(s["gradient_trapped"], s["astar_length"], lattice_reachable(world, s["start"]))
+                                      for s in record["starts"]]
+        else:
+            world = load_world(p)
+            worlds.append(world)
+            labels[world.name] = [(s["gradient_trapped"], s["astar_length"], lattice_reachable(world, s["start"]))
+                                  for s in label_starts(world)]
+    return worlds, labels
+
+
+def summarise(episodes, labels) -> dict:
+    """Overall and trap-start figures for one planner's episodes."""
+    rows = []
+    index: dict[str, int] = {}
+    for e in episodes:
+        k = index.get(e.world, 0)
+        index[e.world] = k + 1
+        trapped, astar, lattice = labels[e.world][k]
+        rows.append((e.success, e.outcome == "collision", trapped, e.path_length, astar, lattice))
+    success = np.array([r[0] for r in rows])
+    collision = np.array([r[1] for r in rows])
+    trapped = np.array([r[2] for r in rows])
+    lattice = np.array([r[5] for r in rows])
+    ok = [r for r in rows if r[0] and r[4]]
+    ratio = (np.mean([r[3] for r in ok]) / np.mean([r[4] for r in ok])) if ok else float("nan")
+    return {
+        "starts": len(rows),
+        "successes": int(success.sum()),
+        "success_rate": float(success.mean()),
+        "trap_starts": int(trapped.sum()),
+        "trap_successes": int(success[trapped].sum()),
+        "trap_success_rate": float(success[trapped].mean()) if trapped.any() else float("nan"),
+        "collisions": int(collision.sum()),
+        "lattice_starts": int(lattice.sum()),
+        "lattice_successes": int(success[lattice].sum()),
+        "length_ratio_vs_astar": float(ratio),
+        "mean_path_length": float(np.mean([r[3] for r in ok])) if ok else float("nan"),
+        "mean_astar_length": float(np.mean([r[4] for r in ok])) if ok else float("nan"),
+    }
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("worlds", nargs="+", help="a generated set's directory (with manifest.json) or world files")
+    parser.add_argument("--planners", default="gradient,escape,astar,dqn")
+    parser.add_argument("--model", action="append", default=[], metavar="NAME=PATH",
+                        help="a DQN model to evaluate as planner dqn:NAME (default: the shipped model)")
+    parser.add_argument("--max-steps", type=int, default=None, help="as apf-physics eval (default 4 x (w + h))")
+    parser.add_argument("--per-world", action="store_true", help="also print successes per world")
+    parser.add_argument("--json", help="write the figures as JSON")
+    args = parser.parse_args(argv)
+
+    worlds, labels = load_labelled(args.worlds)
+    runs = []
+    for name in [n.strip() for n in args.planners.split(",") if n.strip()]:
+        if name == "dqn" and args.model:
+            for spec in args.model:
+                label, _, path = spec.partition("=")
+                runs.append((f"dqn:{label}", make_planner("dqn", model=path)))
+        else:
+            runs.append((name, make_planner(name)))
+
+    n_starts = sum(len(v) for v in labels.values())
+    n_trap = sum(t for v in labels.values() for t, _, _ in v)
+    n_lattice = sum(q for v in labels.values() for _, _, q in v)
+    print(f"{len(worlds)} worlds, {n_starts} starts, {n_trap} trap starts ({n_trap / n_starts:.0%}); "
+          f"{n_lattice} starts ({n_lattice / n_starts:.0%}) can end within the goal tolerance with unit moves")
+    header = (f"{'planner':<22} {'success':>13} {'trap-start success':>19} {'collisions':>10} {'length/A*':>10}"
+              f" {'unit-move-reachable':>20}")
+    print(header)
+    print("-" * len(header))
+    results = {}
+    for label, planner in runs:
+        ev = evaluate(planner, worlds, max_steps=args.max_steps)
+        s = summarise(ev.episodes, labels)
+        results[label] = s
+        print(f"{label:<22} {s['successes']:>4}/{s['starts']:<4}{s['success_rate']:>5.1%} "
+              f"{s['trap_successes']:>6}/{s['trap_starts']:<4}{s['trap_success_rate']:>7.1%} "
+              f"{s['collisions']:>10} {s['length_ratio_vs_astar']:>10.3f}"
+              f" {s['lattice_successes']:>14}/{s['lattice_starts']:<4}")
+        if args.per_world:
+            per = {}
+            for e in ev.episodes:
+                per.setdefault(e.world, []).append(e.success)
+            worlds_ok = sum(any(v) for v in per.values())
+            detail = ", ".join(f"{w} {sum(v)}/{len(v)}" for w, v in per.items())
+            print(f"{'':<22} worlds with a success: {worlds_ok}/{len(per)} ({detail})")
+            s["per_world"] = {w: [bool(x) for x in v] for w, v in per.items()}
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=1))
+        print(f"wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
