@@ -1,4 +1,4 @@
-"""``apf-physics train --world W --out DIR [--preset P] [--seed S] [--set KEY=VALUE ...] [--resume]``."""
+"""``apf-physics train (--world W | --curriculum FILE) --out DIR [--preset P] [--seed S] [--set KEY=VALUE ...] [--resume]``."""
 
 from __future__ import annotations
 
@@ -14,7 +14,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description="Train the thesis's Q-network with deep Q-learning on one world. Writes OUT/best.pt (the "
                     "network with the best greedy evaluation on the world's starts: the one to use), OUT/last.pt "
                     "(the full training state, for --resume), OUT/train.csv and OUT/train.png (the training curve).")
-    p.add_argument("--world", required=True, help="world file (.yaml) to train in; its starts are the evaluation starts")
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--world", help="world file (.yaml) to train in; its starts are the evaluation starts")
+    where.add_argument("--curriculum", metavar="FILE",
+                       help="general training: a curriculum file of stages (e.g. worlds/curricula/thesis.yaml); "
+                            "stage i trains its worlds with every earlier stage's (rehearsal); presets general "
+                            "(default) or thesis-general")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing)")
     p.add_argument("--preset", default=None,
                    help="fast (default: learns fastest), thesis-fixed (Table 3 as written) or thesis-general (Table 4)")
@@ -55,8 +60,13 @@ def run(args: argparse.Namespace) -> int:
     from apf_physics.rl.dqn import load_checkpoint_config, preset, train
     from apf_physics.world import load_world
 
-    world = load_world(args.world)
     overrides = parse_overrides(args.set)
+    if args.curriculum:
+        from apf_physics.rl.general import run_curriculum_command
+
+        return run_curriculum_command(args.curriculum, args.preset, args.out, seed=args.seed, resume=args.resume,
+                                      overrides=overrides, progress=not args.no_progress)
+    world = load_world(args.world)
     if args.seed is not None:
         overrides["seed"] = args.seed
     out = Path(args.out)
