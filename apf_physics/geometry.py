@@ -25,16 +25,24 @@ def segments_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple
     Returns:
         ``(distance (N,), nearest (N, 2))``.
     """
-    ab = b - a                                            # (E, 2)
-    length2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300)
-    ap = points[:, None, :] - a[None, :, :]               # (N, E, 2)
-    t = np.clip(np.einsum("nej,ej->ne", ap, ab) / length2, 0.0, 1.0)
-    nearest = a[None] + t[..., None] * ab[None]           # (N, E, 2)
-    diff = points[:, None, :] - nearest
-    d2 = np.einsum("nej,nej->ne", diff, diff)
-    k = np.argmin(d2, axis=1)
-    rows = np.arange(len(points))
-    return np.sqrt(d2[rows, k]), nearest[rows, k]
+    # One pass per segment over contiguous x and y columns: segments are few, points many.
+    px, py = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])
+    best = np.full(len(points), np.inf)
+    nx = np.zeros(len(points))
+    ny = np.zeros(len(points))
+    for (ax, ay), (bx, by) in zip(a.tolist(), b.tolist()):
+        dx, dy = bx - ax, by - ay
+        length2 = max(dx * dx + dy * dy, 1e-300)
+        t = ((px - ax) * dx + (py - ay) * dy) / length2
+        np.clip(t, 0.0, 1.0, out=t)
+        qx = ax + t * dx
+        qy = ay + t * dy
+        d2 = (px - qx) ** 2 + (py - qy) ** 2
+        closer = d2 < best
+        best = np.where(closer, d2, best)
+        nx = np.where(closer, qx, nx)
+        ny = np.where(closer, qy, ny)
+    return np.sqrt(best), np.column_stack([nx, ny])
 
 
 def points_in_polygon(points: np.ndarray, vertices: np.ndarray) -> np.ndarray:
