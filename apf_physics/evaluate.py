@@ -26,6 +26,16 @@ class Evaluation:
         eps = self.episodes if episodes is None else list(episodes)
         n = len(eps)
         ok = [e for e in eps if e.success]
+        extra = {}
+        if eps and hasattr(eps[0], "link_in_range"):  # formations: link and robot–robot figures
+            steps = np.array([max(e.steps, 1) for e in eps], float)
+            shares = np.array([e.link_in_range for e in eps], float).reshape(n, -1)
+            extra = {
+                "link_in_range": [round(float(v), 4) for v in (shares * steps[:, None]).sum(0) / steps.sum()],
+                "episodes_all_links_99": int(np.sum(shares.min(axis=1) >= 0.99)) if shares.size else n,
+                "robot_robot_collisions": int(sum(e.robot_robot_collisions for e in eps)),
+                "min_robot_distance": round(float(min(e.min_robot_distance for e in eps)), 4),
+            }
         return {
             "episodes": n,
             "successes": len(ok),
@@ -34,6 +44,7 @@ class Evaluation:
             "trapped_rate": round(sum(e.outcome == "trapped" for e in eps) / n, 4) if n else 0.0,
             "mean_steps": round(float(np.mean([e.steps for e in ok])), 2) if ok else None,
             "mean_path_length": round(float(np.mean([e.path_length for e in ok])), 3) if ok else None,
+            **extra,
         }
 
     def to_dict(self) -> dict:
@@ -65,13 +76,20 @@ def format_table(evaluations: Sequence[Evaluation]) -> str:
                 f"{summary['successes']:>4}/{summary['episodes']:<4} {summary['collision_rate']:>8.1%} "
                 f"{summary['trapped_rate']:>8.1%} {steps:>7} {length:>8}")
 
+    notes = []
     for ev in evaluations:
         names = list(dict.fromkeys(e.world for e in ev.episodes))
         for name in names:
             lines.append(row(ev.planner, name, ev.summary([e for e in ev.episodes if e.world == name])))
         if len(names) > 1:
             lines.append(row(ev.planner, "(all)", ev.summary()))
-    return "\n".join(lines)
+        summary = ev.summary()
+        if "link_in_range" in summary:
+            shares = ", ".join(f"{v:.1%}" for v in summary["link_in_range"])
+            notes.append(f"{ev.planner}: steps each link in range {shares}; episodes with every link >= 99%: "
+                         f"{summary['episodes_all_links_99']}/{summary['episodes']}; robot-robot collisions "
+                         f"{summary['robot_robot_collisions']}; closest robots {summary['min_robot_distance']:.2f}")
+    return "\n".join(lines + notes)
 
 
 def write_json(evaluations: Sequence[Evaluation], path: str | Path) -> None:
@@ -91,6 +109,9 @@ def write_text_atomic(path: str | Path, text: str) -> None:
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
         with os.fdopen(fd, "w", encoding="utf-8") as f:
             f.write(text)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes files private; results are ordinary files
         os.replace(tmp, path)
     except OSError as exc:
         raise UserError(f"{path}: cannot write ({exc.strerror or exc})") from None

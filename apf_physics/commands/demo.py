@@ -52,6 +52,9 @@ def run(args: argparse.Namespace) -> int:
         evaluate_formation(make_planner("dqn"), [fixed]),
         evaluate(make_planner("gradient"), general),
         evaluate(make_planner("dqn"), general),
+        # what a hand-made escape and the grid-search oracle do on the same worlds
+        evaluate(make_planner("escape"), general),
+        evaluate(make_planner("astar"), general),
     ]
     table = format_table(evaluations)
     print(table)

@@ -68,7 +68,7 @@ def episode_clips(episodes: Sequence, overlay: tuple[str, ...], formation: bool,
         return
     for i, (episode, path) in enumerate(zip(episodes, paths)):
         trajectory = path if path.ndim == 3 else path[:, None, :]
-        index = start_index if start_index is not None else i
-        lines = (*overlay, f"formation, start {index}")
+        where = f"start {start_index} " if start_index is not None else ""
+        lines = (*overlay, f"formation, {where}({episode.start[0]:g}, {episode.start[1]:g})")
         yield (trajectory, formation_roles(trajectory.shape[1]), lines,
                (f"outcome {episode.outcome} after {episode.steps} steps",))
