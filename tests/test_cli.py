@@ -27,3 +27,18 @@ def test_model_for_another_field_is_refused(worlds_dir, capsys):
     assert main(["eval", str(worlds_dir / "local_minimum.yaml"), "--planner", "dqn",
                  "--model", str(SHIPPED["thesis-fixed"])]) == 2
     assert "trained in another field" in capsys.readouterr().err
+
+
+def test_plot_curve_from_a_training_log(tmp_path, capsys):
+    import cv2
+
+    log = tmp_path / "train.csv"
+    log.write_text("global_step,episodes,stage,epsilon,mean_return,success_rate,loss,eval_success,wall_time\n"
+                   "100,3,basic,0.9,-5.0,0.1,0.5,0.2,1.0\n200,7,basic,0.8,-2.0,0.4,0.4,,2.0\n"
+                   "300,12,line,0.7,1.0,0.6,0.3,0.7,3.0\n")
+    out = tmp_path / "curve.png"
+    assert main(["plot-curve", str(log), "--out", str(out)]) == 0
+    image = cv2.imread(str(out))
+    assert image is not None and image.std() > 5
+    assert main(["plot-curve", str(tmp_path / "missing.csv"), "--out", str(out)]) == 2
+    assert "no such training log" in capsys.readouterr().err

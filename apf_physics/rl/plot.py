@@ -16,7 +16,13 @@ def _read_columns(csv_path: str | os.PathLike) -> dict[str, np.ndarray]:
     with open(csv_path, newline="") as f:
         rows = list(csv.DictReader(f))
     names = rows[0].keys() if rows else []
-    return {name: np.array([float(r[name]) if r[name] not in ("", None) else np.nan for r in rows]) for name in names}
+    columns = {}
+    for name in names:
+        try:
+            columns[name] = np.array([float(r[name]) if r[name] not in ("", None) else np.nan for r in rows])
+        except ValueError:
+            continue  # a text column (e.g. the curriculum stage): not plotted
+    return columns
 
 
 def _panel(image: np.ndarray, top: int, height: int, x: np.ndarray, series: Sequence, title: str,
@@ -62,7 +68,7 @@ def plot_training_curve(csv_path: str | os.PathLike, png_path: str | os.PathLike
     _panel(
         image, 30, 190, x,
         [(columns.get("success_rate", empty), _BLUE, "training success", False),
-         (columns.get("eval_success", empty), _RED, "greedy eval success", True)],
+         (columns.get("eval_success", columns.get("val_success", empty)), _RED, "greedy eval success", True)],
         "success rate", y_range=(0.0, 1.0),
     )
     _panel(image, 260, 190, x, [(columns.get("mean_return", empty), _GREEN, "mean return", False)], "mean episode return")
