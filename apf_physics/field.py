@@ -22,7 +22,6 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
-from apf_physics import geometry
 
 if TYPE_CHECKING:
     from apf_physics.world import FieldParams, Obstacle

@@ -5,9 +5,8 @@ import numpy as np
 import pytest
 
 import apf_physics  # noqa: F401  (registers the ids)
-from apf_physics import load_world
 from apf_physics.actions import ACTIONS
-from apf_physics.envs import NavigateEnv, NavigateVectorEnv, register_envs
+from apf_physics.envs import NavigateVectorEnv, register_envs
 
 
 @pytest.fixture

@@ -20,7 +20,6 @@ import statistics
 import tempfile
 import time
 
-import numpy as np
 import torch
 
 from apf_physics import load_world

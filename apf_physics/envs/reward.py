@@ -49,6 +49,14 @@ def reward_weights(spec: str | RewardWeights | dict) -> RewardWeights:
 def reward_terms(weights: RewardWeights, collided: np.ndarray, reached: np.ndarray,
                  u_before: np.ndarray, u_after: np.ndarray) -> dict[str, np.ndarray]:
     """The four terms for a batch of steps; their sum is the reward."""
+    if len(collided) == 1:  # one robot: plain floats, numpy's per-call cost would dominate
+        c, r = bool(collided[0]), bool(reached[0])
+        return {
+            "collision": np.array([weights.w1 if c else 0.0]),
+            "target": np.array([weights.w2 if r and not c else 0.0]),
+            "step": np.array([weights.w3]),
+            "potential": np.array([weights.beta * (float(u_after[0]) - float(u_before[0]))]),
+        }
     return {
         "collision": np.where(collided, weights.w1, 0.0),
         "target": np.where(reached & ~collided, weights.w2, 0.0),
