@@ -144,3 +144,76 @@ class WindowSampler:
         out += grid[rs1, cs] * ((1 - fx) * fy)
         out += grid[rs1, cs1] * (fx * fy)
         return out[None, ::-1]
+
+
+class VisitMemory:
+    """Per-robot visit counts over the 1×1 cells of each robot's world: the memory channel.
+
+    Cell ``(c, r)`` of a world covers ``[c, c + 1) × [r, r + 1)`` of its map. :meth:`reset`
+    clears a robot's counts and counts its start cell; :meth:`visit` counts the cells the
+    robots are in (call it after every step). :meth:`window` reads the counts at the same
+    points as :class:`WindowSampler` (point ``[i, j]`` is ``(x + j − k//2, y + k//2 − i)``)
+    as ``min(count, cap) / cap``; points outside the map read 1, like a cell visited often.
+
+    Args:
+        num: Number of robots.
+        size: Window side ``k`` (odd).
+        cap: Count at which a cell reads 1.
+    """
+
+    def __init__(self, num: int, size: int = 11, cap: int = 4):
+        if size < 1 or size % 2 == 0:
+            raise ValueError(f"window size must be odd and positive, got {size}")
+        self.num = int(num)
+        self.size = int(size)
+        self.cap = int(cap)
+        self.dims = np.ones((self.num, 2), dtype=np.intp)          # cells per robot's map: (columns, rows)
+        self.counts = np.zeros((self.num, 1, 1), dtype=np.int32)   # (N, columns, rows), grown as needed
+        half = self.size // 2
+        steps = np.arange(self.size) - half
+        self._dc = np.broadcast_to(steps[None, :], (self.size, self.size))   # column offset of [i, j]: j − k//2
+        self._dr = np.broadcast_to(-steps[:, None], (self.size, self.size))  # row offset of [i, j]: k//2 − i
+
+    @staticmethod
+    def cells_of(world: World) -> tuple[int, int]:
+        """(columns, rows) of 1×1 cells covering a world's map."""
+        return max(1, int(np.ceil(world.size[0]))), max(1, int(np.ceil(world.size[1])))
+
+    def _cell(self, positions: np.ndarray, slots: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        cell = np.floor(np.asarray(positions, dtype=float).reshape(-1, 2)).astype(np.intp)
+        dims = self.dims[slots]
+        return np.clip(cell[:, 0], 0, dims[:, 0] - 1), np.clip(cell[:, 1], 0, dims[:, 1] - 1)
+
+    def reset(self, slots: np.ndarray, positions: np.ndarray, worlds: Sequence[World]) -> None:
+        """Start new episodes for ``slots``: robot ``slots[m]`` in ``worlds[m]`` at ``positions[m]``."""
+        slots = np.asarray(slots, dtype=np.intp).reshape(-1)
+        for m, slot in enumerate(slots):
+            self.dims[slot] = self.cells_of(worlds[m])
+        need = self.dims.max(axis=0)
+        if need[0] > self.counts.shape[1] or need[1] > self.counts.shape[2]:
+            grown = np.zeros((self.num, max(need[0], self.counts.shape[1]), max(need[1], self.counts.shape[2])),
+                             dtype=np.int32)
+            grown[:, :self.counts.shape[1], :self.counts.shape[2]] = self.counts
+            self.counts = grown
+        self.counts[slots] = 0
+        self.visit(positions, slots)
+
+    def visit(self, positions: np.ndarray, slots: np.ndarray | None = None) -> None:
+        """Count the cell each robot is in (``slots``: which robots ``positions`` are; default all)."""
+        slots = np.arange(self.num) if slots is None else np.asarray(slots, dtype=np.intp).reshape(-1)
+        c, r = self._cell(positions, slots)
+        self.counts[slots, c, r] += 1
+
+    def window(self, positions: np.ndarray, slots: np.ndarray | None = None) -> np.ndarray:
+        """(N, k, k) float32 memory windows around ``positions`` (robots ``slots``, default all)."""
+        slots = np.arange(self.num) if slots is None else np.asarray(slots, dtype=np.intp).reshape(-1)
+        c0, r0 = self._cell(positions, slots)
+        dims = self.dims[slots]
+        c = c0[:, None, None] + self._dc[None]
+        r = r0[:, None, None] + self._dr[None]
+        cols, rows = dims[:, 0, None, None], dims[:, 1, None, None]
+        outside = (c < 0) | (c >= cols) | (r < 0) | (r >= rows)
+        counts = self.counts[slots[:, None, None], np.clip(c, 0, cols - 1), np.clip(r, 0, rows - 1)]
+        values = np.minimum(counts, self.cap).astype(np.float32) / np.float32(self.cap)
+        values[outside] = 1.0
+        return values

@@ -6,7 +6,6 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from apf_physics.curriculum import load_curriculum
@@ -132,17 +131,17 @@ def test_shipped_general_model_loads_and_runs_the_test_worlds_without_collisions
     from apf_physics.rl.checkpoint import load_model
     from apf_physics.world import FIELD_PRESETS
 
-    model = load_model(SHIPPED, expect_obs_shape=(1, 11, 11), expect_field=FIELD_PRESETS["thesis-general"])
-    assert model.meta["config"]["preset"] == "general"
+    model = load_model(SHIPPED, expect_obs_shape=(2, 11, 11), expect_field=FIELD_PRESETS["thesis-general"])
+    assert model.meta["config"]["preset"] == "general-memory"
     episodes, per_world = _shipped_on_test_worlds()
     assert len(episodes) == 20
-    # measured: no collision from any of the 20 starts (it is trapped from all of them)
+    # measured: no collision from any of the 20 starts
     assert not any(e.outcome == "collision" for e in episodes)
 
 
-@pytest.mark.xfail(strict=True, reason="the shipped general model reaches the target from 0 of the 20 starts "
-                                       "of test1-4 (measured); the target is at least one start in each world")
 @pytest.mark.skipif(not SHIPPED.is_file(), reason="no shipped general model")
 def test_shipped_general_model_reaches_targets_of_the_four_test_worlds():
-    _, per_world = _shipped_on_test_worlds()
+    episodes, per_world = _shipped_on_test_worlds()
+    # the thesis's measure: the target reached in each of its four test worlds (measured: 16 of 20 starts)
     assert all(any(v) for v in per_world.values()), per_world
+    assert sum(e.success for e in episodes) >= 15

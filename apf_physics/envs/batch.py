@@ -16,7 +16,7 @@ import numpy as np
 
 from apf_physics.actions import ACTIONS
 from apf_physics.envs.reward import RewardWeights, reward_terms
-from apf_physics.observation import WindowSampler
+from apf_physics.observation import VisitMemory, WindowSampler
 from apf_physics.physics import Physics
 from apf_physics.world import World
 
@@ -40,9 +40,11 @@ class NavigationBatch:
         obs_size: Window side k.
         weights: Reward weights.
         resolution: Raster nodes per unit for the observation.
+        memory: Add channel 1, the robot's visit memory (:class:`~apf_physics.observation.VisitMemory`).
     """
 
-    def __init__(self, worlds: Sequence[World], num: int, obs_size: int, weights: RewardWeights, resolution: int = 4):
+    def __init__(self, worlds: Sequence[World], num: int, obs_size: int, weights: RewardWeights, resolution: int = 4,
+                 memory: bool = False):
         self.worlds = list(worlds)
         self.num = int(num)
         self.weights = weights
@@ -54,7 +56,8 @@ class NavigationBatch:
         self.targets = [w.targets for w in self.worlds]
         self._target_list = [w.targets.tolist() for w in self.worlds]
         self.tolerance = np.array([w.goal_tolerance for w in self.worlds])
-        self._obs = np.zeros((self.num, 1, obs_size, obs_size), np.float32)
+        self.memory = VisitMemory(self.num, obs_size) if memory else None
+        self._obs = np.zeros((self.num, 2 if memory else 1, obs_size, obs_size), np.float32)
         self._u = np.zeros(self.num)
         self._center = obs_size // 2
 
@@ -67,6 +70,8 @@ class NavigationBatch:
         slots = np.asarray(slots, dtype=np.intp)
         self.physics.place(slots, positions)
         self.positions[slots] = positions
+        if self.memory is not None:
+            self.memory.reset(slots, self.positions[slots], [self.worlds[w] for w in self.world_of[slots]])
         self._observe(slots)
         self.distance = self.distance_to_target()
 
@@ -74,6 +79,8 @@ class NavigationBatch:
         window = self.sampler.sample(self.positions[slots], self.world_of[slots])
         self._obs[slots, 0] = window
         self._u[slots] = window[:, self._center, self._center]
+        if self.memory is not None:
+            self._obs[slots, 1] = self.memory.window(self.positions[slots], slots)
 
     def observation(self, slots: np.ndarray | None = None) -> np.ndarray:
         return self._obs.copy() if slots is None else self._obs[slots].copy()
@@ -99,6 +106,8 @@ class NavigationBatch:
         u_before = self._u.copy()
         log = self.physics.step(command)
         self.positions = self.physics.positions
+        if self.memory is not None:
+            self.memory.visit(self.positions)
         self._observe(np.arange(self.num))
         collided = log.obstacle | log.wall
         self.distance = self.distance_to_target()

@@ -40,6 +40,13 @@ class NavigateEnv(gym.Env):
     outside the map read ``world.u_wall``, the map's highest potential. Raw values, not
     normalised (learners scale them).
 
+    With ``memory=True`` the space is ``Box(-inf, inf, (2, k, k), float32)``: channel 0 is
+    the potential window above and channel 1 the robot's visit memory over the same points,
+    ``min(n, 4) / 4`` where ``n`` counts the control steps (and the reset) that ended with the
+    robot's centre in the point's 1×1 cell of the map; points outside the map read 1. The
+    counts are cleared at every reset (:class:`~apf_physics.observation.VisitMemory`). A
+    reactive policy sees where it has been and can learn to leave a potential well.
+
     ## Rewards
 
     ``R = W1 + W2 + W3 + W4`` (SPEC eq. 15–16), returned by name in ``info["reward_terms"]``:
@@ -74,12 +81,14 @@ class NavigateEnv(gym.Env):
     - ``starts``: see Starting State.
     - ``resolution``: raster nodes per unit for the observation (default 4).
     - ``render_mode``: ``"rgb_array"`` for OpenCV-drawn frames.
+    - ``memory``: add the visit-memory channel (see Observation Space; default False).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
     def __init__(self, world: WorldSpec | None = None, obs_size: int = 11, reward: Any = "thesis-fixed",
-                 starts: Any = "world", resolution: int = 4, render_mode: str | None = None):
+                 starts: Any = "world", resolution: int = 4, render_mode: str | None = None,
+                 memory: bool = False):
         self.worlds = resolve_worlds(world)
         self.obs_size = int(obs_size)
         self.weights = reward_weights(reward)
@@ -88,8 +97,10 @@ class NavigateEnv(gym.Env):
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         self.render_mode = render_mode
         self.action_space = spaces.Discrete(len(ACTIONS))
-        self.observation_space = spaces.Box(-np.inf, np.inf, (1, self.obs_size, self.obs_size), np.float32)
-        self._batch = NavigationBatch(self.worlds, 1, self.obs_size, self.weights, resolution)
+        self.memory = bool(memory)
+        channels = 2 if self.memory else 1
+        self.observation_space = spaces.Box(-np.inf, np.inf, (channels, self.obs_size, self.obs_size), np.float32)
+        self._batch = NavigationBatch(self.worlds, 1, self.obs_size, self.weights, resolution, memory=self.memory)
         self._episode = 0
         self._trail: list[np.ndarray] = []
         self._steps = 0

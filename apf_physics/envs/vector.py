@@ -12,7 +12,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
@@ -22,7 +21,7 @@ from gymnasium.vector.utils import batch_space
 from apf_physics.actions import ACTIONS
 from apf_physics.envs.batch import NavigationBatch
 from apf_physics.envs.options import StartChooser, WorldSpec, check_starts, resolve_worlds
-from apf_physics.envs.reward import TERMS, reward_weights
+from apf_physics.envs.reward import reward_weights
 
 
 class NavigateVectorEnv(VectorEnv):
@@ -37,6 +36,8 @@ class NavigateVectorEnv(VectorEnv):
         max_episode_steps: Truncation limit ``tt`` (100 in the thesis).
         resolution: Raster nodes per unit for the observation.
         render_mode: ``"rgb_array"`` renders copy 0.
+        memory: Add a second observation channel, the copy's visit memory (see
+            ``NavigateEnv``); observations are then ``(N, 2, k, k)``.
 
     With a list of starts (``"world"`` or an array of S rows), copy ``i`` takes row
     ``(i + e·N) mod S`` in its ``e``-th episode, so N copies share out the list.
@@ -49,7 +50,7 @@ class NavigateVectorEnv(VectorEnv):
 
     def __init__(self, world: WorldSpec | None = None, num_envs: int = 8, obs_size: int = 11,
                  reward: Any = "thesis-fixed", starts: Any = "world", max_episode_steps: int = 100,
-                 resolution: int = 4, render_mode: str | None = None):
+                 resolution: int = 4, render_mode: str | None = None, memory: bool = False):
         self.worlds = resolve_worlds(world)
         self.num_envs = int(num_envs)
         self.obs_size = int(obs_size)
@@ -58,10 +59,13 @@ class NavigateVectorEnv(VectorEnv):
         self.max_episode_steps = int(max_episode_steps)
         self.render_mode = render_mode
         self.single_action_space = spaces.Discrete(len(ACTIONS))
-        self.single_observation_space = spaces.Box(-np.inf, np.inf, (1, self.obs_size, self.obs_size), np.float32)
+        self.memory = bool(memory)
+        channels = 2 if self.memory else 1
+        self.single_observation_space = spaces.Box(-np.inf, np.inf, (channels, self.obs_size, self.obs_size), np.float32)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self._batch = NavigationBatch(self.worlds, self.num_envs, self.obs_size, self.weights, resolution)
+        self._batch = NavigationBatch(self.worlds, self.num_envs, self.obs_size, self.weights, resolution,
+                                        memory=self.memory)
         self._rngs = [seeding.np_random(None)[0] for _ in range(self.num_envs)]
         self._episode = np.zeros(self.num_envs, int)
         self._steps = np.zeros(self.num_envs, int)

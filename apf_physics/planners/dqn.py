@@ -8,7 +8,7 @@ import numpy as np
 
 from apf_physics.actions import ACTIONS
 from apf_physics.errors import ModelError
-from apf_physics.observation import WindowSampler
+from apf_physics.observation import VisitMemory, WindowSampler
 from apf_physics.planners.base import Planner
 from apf_physics.world import World
 
@@ -34,6 +34,10 @@ class DQNPlanner(Planner):
 
     Args:
         model: A model file; by default the shipped model trained for the world's field.
+
+    A model with two observation channels (trained with ``memory=True``) also gets each
+    robot's visit memory (:class:`~apf_physics.observation.VisitMemory`), kept over the
+    rollout and cleared in :meth:`reset`, exactly as the environment builds it.
     """
 
     name = "dqn"
@@ -52,11 +56,32 @@ class DQNPlanner(Planner):
             self._policy = DQNPolicy.load(path, expect_field=world.field.as_dict())
             self._loaded = (path, id(world))
         channels, size, _ = self._policy.obs_shape
-        if channels != 1:
-            raise ModelError(f"{path}: model expects {channels} observation channels; the planner provides 1")
+        if channels not in (1, 2):
+            raise ModelError(f"{path}: model expects {channels} observation channels; the planner provides 1 or 2")
         self.sampler = WindowSampler([world], size)
+        self.memory = None
+        if channels == 2:
+            positions = np.asarray(positions, dtype=float).reshape(-1, 2)
+            self.memory = VisitMemory(len(positions), size)
+            self.memory.reset(np.arange(len(positions)), positions, [world] * len(positions))
+        self._started = False
 
     def act(self, positions: np.ndarray, active: np.ndarray) -> np.ndarray:
-        obs = self.sampler.sample(positions, 0).astype(np.float32)[:, None]
+        obs = observe(self.sampler, self.memory, positions, self._started)
+        self._started = True
         actions = self._policy.act(obs)
         return ACTIONS[actions] * active[:, None]
+
+
+def observe(sampler: WindowSampler, memory: VisitMemory | None, positions: np.ndarray, moved: bool) -> np.ndarray:
+    """(N, C, k, k) float32 observations of robots at ``positions``, as the environment gives them.
+
+    With a memory, the robots' cells are counted first unless this is the first control step
+    (``moved`` False: :meth:`VisitMemory.reset` counted the start cells already).
+    """
+    window = sampler.sample(positions, 0).astype(np.float32)[:, None]
+    if memory is None:
+        return window
+    if moved:
+        memory.visit(positions)
+    return np.concatenate([window, memory.window(positions)[:, None]], axis=1)

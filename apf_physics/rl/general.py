@@ -21,6 +21,12 @@ Two presets (:func:`general_preset`):
   potential-based shaping term (β·(γU' − U)), stepping down and back up again can pay more
   than reaching the target; a run with Table 4's weights reached no validation target in
   700,000 transitions (and one with γ = 0.99 and a 13×13 window diverged).
+- ``general-memory``: ``general`` with a second observation channel, the robot's visit memory
+  (``NavigateVectorEnv(memory=True)``, :class:`~apf_physics.observation.VisitMemory`), passed
+  through the network untransformed (``obs_transform="relative-log-memory"``), and half of
+  the environments (not a quarter) starting at the worlds' own starts, behind their
+  obstacles where gradient descent gets trapped. A reactive policy on the potential alone
+  cannot tell a well it has just left from one it has not tried; the memory can.
 
 Both keep the network with the best greedy evaluation on a fixed validation set of generated
 worlds (``validation_seed``; it must differ from the held-out test seed, 100) in ``best.pt``
@@ -110,6 +116,10 @@ class GeneralConfig:
     world_start_fraction: float = 0.0
     """Share of the environments whose searches begin at the worlds' own starts; the others use
     ``dqn.train_starts``."""
+    memory: bool = False
+    """Give the network a second observation channel, the robot's visit memory
+    (``NavigateVectorEnv(memory=True)``); needs ``dqn.obs_transform`` ``"relative-log-memory"``
+    or ``"raw"``."""
     total_steps: Optional[int] = None
     """Stop after this many transitions in all (None: no limit)."""
     time_limit: Optional[float] = None
@@ -137,6 +147,8 @@ class GeneralConfig:
             (min(self.pool_size, self.pool_starts, self.refresh_every, self.validation_worlds,
                  self.validation_starts, self.eval_every, self.log_every, self.checkpoint_every) >= 1,
              "sizes and intervals must be positive"),
+            (not self.memory or self.dqn.obs_transform in ("raw", "relative-log-memory"),
+             "memory needs obs_transform 'relative-log-memory' (or 'raw')"),
             (not self.families or self.total_steps is not None or self.time_limit is not None,
              "a randomised phase needs total_steps or time_limit"),
         ]
@@ -173,6 +185,8 @@ PRESETS: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
         time_limit=1500.0, eval_every=150_000, log_every=25_000, checkpoint_every=150_000,
     )),
 }
+PRESETS["general-memory"] = (PRESETS["general"][0], {**PRESETS["general"][1], "obs_transform": "relative-log-memory"},
+                             {**PRESETS["general"][2], "memory": True, "world_start_fraction": 0.5})
 """Presets: the learner preset of :mod:`apf_physics.rl.dqn` they start from and the changes."""
 
 
@@ -196,7 +210,7 @@ def general_preset(name: str, **overrides: Any) -> GeneralConfig:
     """A named general-training configuration with some fields changed.
 
     Args:
-        name: ``"thesis-general"`` or ``"general"``.
+        name: ``"thesis-general"``, ``"general"`` or ``"general-memory"``.
         **overrides: Fields of :class:`GeneralConfig` or of its learner (:class:`DQNConfig`),
             e.g. ``seed=1``, ``time_limit=600``, ``gamma=0.95``.
 
@@ -318,11 +332,22 @@ class NetworkPlanner(Planner):
     def reset(self, world: World, positions: np.ndarray) -> None:
         from apf_physics.observation import WindowSampler
 
+        from apf_physics.observation import VisitMemory
+
         super().reset(world, positions)
         self.sampler = WindowSampler([world], self.size)
+        self.memory = None
+        if int(self.network.arch["obs_shape"][0]) == 2:
+            positions = np.asarray(positions, dtype=float).reshape(-1, 2)
+            self.memory = VisitMemory(len(positions), self.size)
+            self.memory.reset(np.arange(len(positions)), positions, [world] * len(positions))
+        self._started = False
 
     def act(self, positions: np.ndarray, active: np.ndarray) -> np.ndarray:
-        obs = self.sampler.sample(positions, 0).astype(np.float32)[:, None]
+        from apf_physics.planners.dqn import observe
+
+        obs = observe(self.sampler, self.memory, positions, self._started)
+        self._started = True
         with torch.inference_mode():
             actions = self.network(torch.from_numpy(obs)).argmax(1).numpy()
         return ACTIONS[actions] * active[:, None]
@@ -376,7 +401,8 @@ class _Envs:
         n_world = int(round(config.world_start_fraction * d.num_envs))
         sizes = [(d.train_starts, d.num_envs - n_world), ("world", n_world)]
         self.envs = [NavigateVectorEnv(world=list(worlds), num_envs=n, starts=s, obs_size=d.obs_size,
-                                       reward=d.reward, max_episode_steps=d.max_episode_steps)
+                                       reward=d.reward, max_episode_steps=d.max_episode_steps,
+                                       memory=config.memory)
                      for s, n in sizes if n > 0]
         self.seed = seed
         self.num_envs = d.num_envs
@@ -491,8 +517,9 @@ def _train(config: GeneralConfig, phases: list[Phase], out: Optional[Path], resu
     d = config.dqn
     rng = np.random.default_rng(d.seed)  # ε-greedy and minibatch sampling
     torch.manual_seed(d.seed)
-    obs_shape = (1, d.obs_size, d.obs_size)
-    q_network = d.network(obs_channels=1)
+    channels = 2 if config.memory else 1
+    obs_shape = (channels, d.obs_size, d.obs_size)
+    q_network = d.network(obs_channels=channels)
     target_network = copy.deepcopy(q_network) if d.target_update != "none" else q_network
     if target_network is not q_network:
         target_network.requires_grad_(False)

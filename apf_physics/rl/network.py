@@ -17,7 +17,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-OBS_TRANSFORMS = ("raw", "relative-log")
+OBS_TRANSFORMS = ("raw", "relative-log", "relative-log-memory")
 """Names accepted by :class:`QNetwork`'s ``obs_transform``."""
 
 
@@ -109,8 +109,10 @@ class QNetwork(nn.Module):
         negative_slope: Leaky ReLU slope λ.
         pooled_convs: How many of the leading convolutions are followed by a max-pool
             (the thesis: 2).
-        obs_transform: ``"raw"`` (the observation as it comes) or ``"relative-log"``
-            (:func:`relative_log`).
+        obs_transform: ``"raw"`` (the observation as it comes), ``"relative-log"``
+            (:func:`relative_log` on every channel) or ``"relative-log-memory"``
+            (:func:`relative_log` on channel 0, the potential; the other channels, e.g. the
+            visit memory of ``NavigateEnv(memory=True)``, pass through unchanged).
 
     Raises:
         ValueError: A window too small for the layers, or an unknown transform.
@@ -166,7 +168,12 @@ class QNetwork(nn.Module):
         Returns:
             (N, n_actions) action values.
         """
-        x = relative_log(obs) if self.obs_transform == "relative-log" else obs
+        if self.obs_transform == "relative-log":
+            x = relative_log(obs)
+        elif self.obs_transform == "relative-log-memory":
+            x = torch.cat([relative_log(obs[:, :1]), obs[:, 1:]], dim=1)
+        else:
+            x = obs
         for i, conv in enumerate(self.convs):
             x = F.leaky_relu(conv(x), self.negative_slope)
             if i < self.pooled_convs:
