@@ -345,6 +345,29 @@ The env must autoreset in NEXT_STEP mode and report ``info["success"]`` (bool pe
 """
 
 
+
+def epsilon_greedy(q_network: torch.nn.Module, obs: np.ndarray, epsilon: float,
+                   rng: np.random.Generator) -> np.ndarray:
+    """ε-greedy actions for a batch: a random action with probability ε, else the greedy one."""
+    with torch.inference_mode():
+        actions = q_network(torch.from_numpy(obs)).argmax(1).numpy()
+    explore = rng.random(len(actions)) < epsilon
+    if explore.any():
+        actions = np.where(explore, rng.integers(0, N_ACTIONS, len(actions)), actions)
+    return actions
+
+
+def store_transitions(buffer: ReplayBuffer, obs: np.ndarray, next_obs: np.ndarray, actions: np.ndarray,
+                      rewards: np.ndarray, terminated: np.ndarray, prev_done: np.ndarray) -> np.ndarray:
+    """Add a vector step's transitions to the buffer and return which were real.
+
+    With NEXT_STEP autoreset, the step right after a done only returns the reset observation:
+    that transition is not learned from.
+    """
+    valid = ~prev_done
+    buffer.add(obs[valid], next_obs[valid], actions[valid], rewards[valid], terminated[valid])
+    return valid
+
 def navigate_env_factory(world: Any, *, num_envs: int, seed: int, starts: Any, config: DQNConfig):
     """The package's own vector environment (:class:`apf_physics.envs.NavigateVectorEnv`).
 
@@ -674,17 +697,10 @@ def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
     try:
         while not finished():
             epsilon = epsilon_schedule(config, episodes)
-            # ε-greedy: a random action with probability ε, else the greedy one
-            with torch.inference_mode():
-                actions = q_network(torch.from_numpy(obs)).argmax(1).numpy()
-            explore = rng.random(n) < epsilon
-            if explore.any():
-                actions = np.where(explore, rng.integers(0, N_ACTIONS, n), actions)
+            actions = epsilon_greedy(q_network, obs, epsilon, rng)
             next_obs, rewards, terminated, truncated, info = envs.step(actions)
-            # NEXT_STEP autoreset: a step right after a done only returns the reset observation
-            valid = ~prev_done
-            buffer.add(obs[valid], next_obs[valid], actions[valid],
-                       rewards[valid] * config.reward_scale, terminated[valid])
+            valid = store_transitions(buffer, obs, next_obs, actions, rewards * config.reward_scale, terminated,
+                                      prev_done)
             done = (terminated | truncated) & valid
             ep_return += np.where(valid, rewards, 0.0)
             if done.any():

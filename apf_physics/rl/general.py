@@ -67,7 +67,8 @@ from apf_physics.generate import FAMILIES, generate_world
 from apf_physics.planners.base import Planner
 from apf_physics.rl.buffer import ReplayBuffer
 from apf_physics.rl.checkpoint import model_meta, read_file, save_model, write_file
-from apf_physics.rl.dqn import DQNConfig, epsilon_schedule, preset as dqn_preset
+from apf_physics.rl.dqn import DQNConfig, epsilon_greedy, epsilon_schedule, store_transitions
+from apf_physics.rl.dqn import preset as dqn_preset
 from apf_physics.world import World
 
 N_ACTIONS = 9
@@ -689,17 +690,10 @@ def _train(config: GeneralConfig, phases: list[Phase], out: Optional[Path], resu
             while not (phase_done or redraw or run_finished()):
                 episodes_for_epsilon = c["phase_episodes"] if config.restart_exploration else c["episodes"]
                 epsilon = epsilon_schedule(d, episodes_for_epsilon)
-                # ε-greedy: a random action with probability ε, else the greedy one
-                with torch.inference_mode():
-                    actions = q_network(torch.from_numpy(obs)).argmax(1).numpy()
-                explore = rng.random(n) < epsilon
-                if explore.any():
-                    actions = np.where(explore, rng.integers(0, N_ACTIONS, n), actions)
+                actions = epsilon_greedy(q_network, obs, epsilon, rng)
                 next_obs, rewards, terminated, truncated, success = envs.step(actions)
-                # NEXT_STEP autoreset: a step right after a done only returns the reset observation
-                valid = ~prev_done
-                buffer.add(obs[valid], next_obs[valid], actions[valid], rewards[valid] * d.reward_scale,
-                           terminated[valid])
+                valid = store_transitions(buffer, obs, next_obs, actions, rewards * d.reward_scale, terminated,
+                                          prev_done)
                 done = (terminated | truncated) & valid
                 ep_return += np.where(valid, rewards, 0.0)
                 if done.any():
