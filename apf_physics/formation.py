@@ -101,7 +101,7 @@ def rollout_formation(world: World, planner: Planner, starts: Sequence[Sequence[
     planner.reset(world, starts.copy())
 
     history = [initial.copy()]
-    potentials = [world.potential(starts)]
+    watch = trap.watch(planner.trap_rule, starts, world.potential(starts))
     outcome: list[str | None] = [None] * n
     contacts: list[list[str]] = [[] for _ in range(n)]
     rr = np.zeros(n, int)
@@ -127,7 +127,7 @@ def rollout_formation(world: World, planner: Planner, starts: Sequence[Sequence[
         new = physics.positions.reshape(n, m, 2)
         positions = np.where(active[:, None, None], new, positions)
         history.append(positions.copy())
-        potentials.append(world.potential(positions[:, 0]))
+        leader_u = world.potential(positions[:, 0])
         touched_robot = log.robot.reshape(n, m).any(axis=1)
         touched_obstacle = (log.obstacle | log.wall).reshape(n, m).any(axis=1)
         dist = np.min(np.linalg.norm(positions[:, 0, None, :] - world.targets[None], axis=2), axis=1)
@@ -144,9 +144,7 @@ def rollout_formation(world: World, planner: Planner, starts: Sequence[Sequence[
             elif dist[i] <= world.goal_tolerance:
                 outcome[i] = "reached"
             else:
-                leader_path = np.array([h[i, 0] for h in history])
-                leader_u = np.array([p[i] for p in potentials])
-                if trap.trapped(planner.trap_rule, leader_path, leader_u):
+                if watch.step(i, positions[i, 0], leader_u[i]):
                     outcome[i] = "trapped"
             if outcome[i] is not None:
                 active[i] = False

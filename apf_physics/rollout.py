@@ -6,6 +6,7 @@ substep for all of them.
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Sequence
 
@@ -75,15 +76,37 @@ class TrapDetector:
     radius: float = 1.5
     min_drop: float = 1e-3
 
-    def trapped(self, rule: str, path: np.ndarray, potentials: np.ndarray) -> bool:
-        if len(path) <= self.window:
+    def watch(self, rule: str, starts: np.ndarray, potentials: np.ndarray) -> TrapWatch:
+        """Follow a batch of robots from their starts (and the potential there)."""
+        return TrapWatch(self, rule, starts, potentials)
+
+
+class TrapWatch:
+    """Per-robot recent history for :class:`TrapDetector`: constant work per step, however long the episode."""
+
+    def __init__(self, detector: TrapDetector, rule: str, starts: np.ndarray, potentials: np.ndarray):
+        self.detector, self.rule = detector, rule
+        w = detector.window
+        self.recent = [deque([np.asarray(p, float)], maxlen=w) for p in starts]
+        self.recent_u = [deque([float(u)], maxlen=w) for u in potentials]
+        self.earlier_min_u = [np.inf] * len(starts)   # lowest potential before the window
+        self.length = [1] * len(starts)
+
+    def step(self, i: int, position: np.ndarray, potential: float) -> bool:
+        """Record robot ``i``'s new position; True when it is trapped."""
+        d = self.detector
+        if len(self.recent_u[i]) == d.window:  # the oldest entry leaves the window
+            self.earlier_min_u[i] = min(self.earlier_min_u[i], self.recent_u[i][0])
+        self.recent[i].append(np.asarray(position, float))
+        self.recent_u[i].append(float(potential))
+        self.length[i] += 1
+        if self.length[i] <= d.window:
             return False
-        recent = path[-self.window:]
-        spread = np.max(np.hypot(*(recent - recent.mean(axis=0)).T))
-        if spread < self.radius:
+        recent = np.array(self.recent[i])
+        if np.max(np.hypot(*(recent - recent.mean(axis=0)).T)) < d.radius:
             return True
-        if rule == "descent":
-            return bool(potentials[-self.window:].min() > potentials[:-self.window].min() - self.min_drop)
+        if self.rule == "descent":
+            return min(self.recent_u[i]) > self.earlier_min_u[i] - d.min_drop
         return False
 
 
@@ -110,7 +133,7 @@ def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | 
     planner.reset(world, starts.copy())
 
     paths = [[s.copy()] for s in starts]
-    potentials = [[u] for u in world.potential(starts)]
+    watch = trap.watch(planner.trap_rule, starts, world.potential(starts))
     outcome: list[str | None] = [None] * n
     contacts: list[list[str]] = [[] for _ in range(n)]
     steps = np.zeros(n, int)
@@ -139,13 +162,12 @@ def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | 
         for i in np.flatnonzero(active):
             steps[i] += 1
             paths[i].append(positions[i].copy())
-            potentials[i].append(u[i])
             if log.any[i]:
                 outcome[i] = "collision"
                 contacts[i] = sorted({c.kind for c in log.contacts if c.robot == i})
             elif dist[i] <= world.goal_tolerance:
                 outcome[i] = "reached"
-            elif trap.trapped(planner.trap_rule, np.asarray(paths[i]), np.asarray(potentials[i])):
+            elif watch.step(i, positions[i], u[i]):
                 outcome[i] = "trapped"
             if outcome[i] is not None:
                 active[i] = False
