@@ -21,10 +21,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
-import yaml
 
 from apf_physics.errors import UserError
-from apf_physics.world import World, load_world
+from apf_physics.world import World, load_world, read_yaml_file
 
 
 @dataclass(frozen=True)
@@ -68,18 +67,7 @@ def load_curriculum(path: str | Path) -> list[Stage]:
     def fail(key: str, problem: str) -> UserError:
         return UserError(f"{source}: {key}: {problem}" if key else f"{source}: {problem}")
 
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise UserError(f"{source}: no such curriculum file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UserError(f"{source}: cannot read the curriculum file ({exc})") from None
-    try:
-        data: Any = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        raise UserError(f"{source}: not valid YAML{where}: {getattr(exc, 'problem', exc)}") from None
+    data: Any = read_yaml_file(path, "curriculum")
     if not isinstance(data, dict):
         raise fail("", f"a curriculum file must be a mapping with a 'stages' list, got {type(data).__name__}")
     unknown = sorted(set(map(str, data)) - {"stages"})

@@ -17,7 +17,7 @@ import yaml
 
 from apf_physics import field as apf
 from apf_physics import geometry
-from apf_physics.errors import WorldError
+from apf_physics.errors import UserError, WorldError
 
 FIELD_PRESETS: dict[str, dict[str, float]] = {
     # SPEC §1, thesis Tables 2–4. u_max is the cap used in place of infinity (thesis Fig. 11).
@@ -417,27 +417,36 @@ def world_from_dict(data: Any, source: str = "<dict>") -> World:
     return world
 
 
+def read_yaml_file(path: str | Path, kind: str, error: type[UserError] = UserError) -> Any:
+    """Read a YAML file, turning every failure into one ``error`` naming the file.
+
+    Args:
+        path: The file.
+        kind: What the file is, for messages (``"world"``, ``"curriculum"``).
+        error: The exception class to raise.
+    """
+    source = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise error(f"{source}: no such {kind} file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise error(f"{source}: cannot read the {kind} file ({exc})") from None
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        raise error(f"{source}: not valid YAML{where}: {getattr(exc, 'problem', exc)}") from None
+
+
 def load_world(path: str | Path) -> World:
     """Read and validate a world file (YAML, or JSON being YAML).
 
     Raises:
         WorldError: the file is missing, unreadable, not YAML, or breaks the contract.
     """
-    path = Path(path)
-    source = str(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise WorldError(f"{source}: no such world file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise WorldError(f"{source}: cannot read the world file ({exc})") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        raise WorldError(f"{source}: not valid YAML{where}: {getattr(exc, 'problem', exc)}") from None
-    return world_from_dict(data, source)
+    return world_from_dict(read_yaml_file(path, "world", WorldError), str(path))
 
 
 class _WorldDumper(yaml.SafeDumper):
@@ -483,7 +492,6 @@ def save_world(world: World, path: str | Path) -> None:
     try:
         path.write_text(dump_world_yaml(world), encoding="utf-8")
     except OSError as exc:
-        from apf_physics.errors import UserError
         raise UserError(f"{path}: cannot write the world file ({exc.strerror})") from None
 
 
