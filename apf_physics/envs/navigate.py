@@ -131,7 +131,8 @@ class NavigateEnv(gym.Env):
     def step(self, action):
         result = self._batch.step(np.array([int(action)]))
         self._steps += 1
-        self._trail.append(self._batch.positions[0].copy())
+        if self.render_mode is not None:  # the trail is only drawn
+            self._trail.append(self._batch.positions[0].copy())
         info = self._get_info()
         info["reward_terms"] = {name: float(result.terms[name][0]) for name in TERMS}
         info["success"] = bool(result.reached[0])

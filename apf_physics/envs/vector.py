@@ -110,7 +110,7 @@ class NavigateVectorEnv(VectorEnv):
         info["collision"] = result.collided & moving
         if len(restarting):
             self._start(restarting)
-        if moving[0]:
+        if moving[0] and self.render_mode is not None:  # the trail is only drawn
             self._trail.append(self._batch.positions[0].copy())
         self._needs_reset = terminated | truncated
         return self._batch.observation(), reward, terminated, truncated, info
