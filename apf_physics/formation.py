@@ -101,7 +101,7 @@ def rollout_formation(world: World, planner: Planner, starts: Sequence[Sequence[
     planner.reset(world, starts.copy())
 
     history = [initial.copy()]
-    watch = trap.watch(planner.trap_rule, starts, world.potential(starts))
+    watch = trap.watch(planner.trap_rule, starts, world.potential(starts), planner.trap_window)
     outcome: list[str | None] = [None] * n
     contacts: list[list[str]] = [[] for _ in range(n)]
     rr = np.zeros(n, int)

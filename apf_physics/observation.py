@@ -204,6 +204,12 @@ class VisitMemory:
         c, r = self._cell(positions, slots)
         self.counts[slots, c, r] += 1
 
+    def count(self, positions: np.ndarray, slots: np.ndarray | None = None) -> np.ndarray:
+        """(N,) visits so far of the cell each robot is in, at most ``cap`` (robots ``slots``, default all)."""
+        slots = np.arange(self.num) if slots is None else np.asarray(slots, dtype=np.intp).reshape(-1)
+        c, r = self._cell(positions, slots)
+        return np.minimum(self.counts[slots, c, r], self.cap)
+
     def window(self, positions: np.ndarray, slots: np.ndarray | None = None) -> np.ndarray:
         """(N, k, k) float32 memory windows around ``positions`` (robots ``slots``, default all)."""
         slots = np.arange(self.num) if slots is None else np.asarray(slots, dtype=np.intp).reshape(-1)

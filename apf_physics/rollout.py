@@ -6,6 +6,7 @@ substep for all of them.
 
 from __future__ import annotations
 
+import dataclasses
 from collections import deque
 from dataclasses import dataclass, field
 from typing import Sequence
@@ -76,9 +77,13 @@ class TrapDetector:
     radius: float = 1.5
     min_drop: float = 1e-3
 
-    def watch(self, rule: str, starts: np.ndarray, potentials: np.ndarray) -> TrapWatch:
-        """Follow a batch of robots from their starts (and the potential there)."""
-        return TrapWatch(self, rule, starts, potentials)
+    def watch(self, rule: str, starts: np.ndarray, potentials: np.ndarray, window: int | None = None) -> TrapWatch:
+        """Follow a batch of robots from their starts (and the potential there).
+
+        ``window`` replaces :attr:`window` when given (a planner's own, :attr:`Planner.trap_window`).
+        """
+        detector = self if window is None else dataclasses.replace(self, window=int(window))
+        return TrapWatch(detector, rule, starts, potentials)
 
 
 class TrapWatch:
@@ -133,7 +138,7 @@ def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | 
     planner.reset(world, starts.copy())
 
     paths = [[s.copy()] for s in starts]
-    watch = trap.watch(planner.trap_rule, starts, world.potential(starts))
+    watch = trap.watch(planner.trap_rule, starts, world.potential(starts), planner.trap_window)
     outcome: list[str | None] = [None] * n
     contacts: list[list[str]] = [[] for _ in range(n)]
     steps = np.zeros(n, int)

@@ -61,7 +61,8 @@ def test_reward_terms_sum_and_presets(fixed20):
     _, reward, terminated, _, info = env.step(3)  # right
     u1 = env.unwrapped.world.potential(np.array([[11.0, 16.0]]))[0]
     terms = info["reward_terms"]
-    assert set(terms) == {"collision", "target", "step", "potential"}
+    assert set(terms) == {"collision", "target", "step", "potential", "revisit", "length"}
+    assert terms["revisit"] == 0 and terms["length"] == 0
     assert reward == pytest.approx(sum(terms.values()))
     assert terms["step"] == -0.2 and terms["collision"] == 0 and terms["target"] == 0
     assert terms["potential"] == pytest.approx(-20 * (u1 - u0), rel=1e-3, abs=0.2)

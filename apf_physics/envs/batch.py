@@ -41,6 +41,8 @@ class NavigationBatch:
         weights: Reward weights.
         resolution: Raster nodes per unit for the observation.
         memory: Add channel 1, the robot's visit memory (:class:`~apf_physics.observation.VisitMemory`).
+
+    The visit counts are kept when ``memory`` is set or the weights have a revisit term (W5).
     """
 
     def __init__(self, worlds: Sequence[World], num: int, obs_size: int, weights: RewardWeights, resolution: int = 4,
@@ -56,7 +58,8 @@ class NavigationBatch:
         self.targets = [w.targets for w in self.worlds]
         self._target_list = [w.targets.tolist() for w in self.worlds]
         self.tolerance = np.array([w.goal_tolerance for w in self.worlds])
-        self.memory = VisitMemory(self.num, obs_size) if memory else None
+        self.show_memory = bool(memory)
+        self.memory = VisitMemory(self.num, obs_size) if memory or weights.revisit else None
         self._obs = np.zeros((self.num, 2 if memory else 1, obs_size, obs_size), np.float32)
         self._u = np.zeros(self.num)
         self._center = obs_size // 2
@@ -79,7 +82,7 @@ class NavigationBatch:
         window = self.sampler.sample(self.positions[slots], self.world_of[slots])
         self._obs[slots, 0] = window
         self._u[slots] = window[:, self._center, self._center]
-        if self.memory is not None:
+        if self.show_memory:
             self._obs[slots, 1] = self.memory.window(self.positions[slots], slots)
 
     def observation(self, slots: np.ndarray | None = None) -> np.ndarray:
@@ -104,14 +107,19 @@ class NavigationBatch:
         if moving is not None:
             command = np.where(moving[:, None], command, 0.0)
         u_before = self._u.copy()
+        before = self.positions
         log = self.physics.step(command)
         self.positions = self.physics.positions
+        moved = np.hypot(*(self.positions - before).T) if self.weights.length else None
+        revisits = None
         if self.memory is not None:
+            if self.weights.revisit:
+                revisits = self.memory.count(self.positions).astype(float)
             self.memory.visit(self.positions)
         self._observe(np.arange(self.num))
         collided = log.obstacle | log.wall
         self.distance = self.distance_to_target()
         reached = (self.distance <= self.tolerance[self.world_of]) & ~collided
-        terms = reward_terms(self.weights, collided, reached, u_before, self._u)
-        reward = terms["collision"] + terms["target"] + terms["step"] + terms["potential"]
+        terms = reward_terms(self.weights, collided, reached, u_before, self._u, revisits, moved)
+        reward = sum(terms.values())
         return StepResult(self._obs.copy(), reward, collided | reached, terms, reached, collided)

@@ -75,6 +75,8 @@ class FormationEnv(gym.Env):
         self.formation = spec
         self.obs_size = int(obs_size)
         self.weights = reward_weights(reward)
+        if self.weights.revisit:
+            raise ValueError("the formation environment keeps no visit memory: use reward weights with revisit 0")
         self.chooser = StartChooser(check_starts(starts))
         self.render_mode = render_mode
         self.action_space = spaces.Discrete(len(ACTIONS))

@@ -9,19 +9,38 @@ import numpy as np
 
 @dataclass(frozen=True)
 class RewardWeights:
-    """Weights of ``R = W1 + W2 + W3 + W4``.
+    """Weights of ``R = W1 + W2 + W3 + W4`` (SPEC eq. 15–16), and of two terms of ours, ``W5``, ``W6``.
 
     Attributes:
         w1: On hitting an obstacle or the map's edge (negative).
         w2: On reaching the target (positive).
         w3: Every step (negative).
         beta: ``W4 = beta · (U(P_{n+1}) − U(P_n))``; negative, so going down the field pays.
+        revisit: Not in the thesis. ``W5 = revisit · n``, where ``n`` is how often the robot
+            had already been in the 1×1 cell it enters (at most the visit memory's cap, 4);
+            zero or negative. W4 alone makes circling in a well nearly free (each step down
+            is paid back by the step up), while climbing out costs at once; W5 makes the
+            circling cost. The robot's visit counts are the memory channel's
+            (:class:`~apf_physics.observation.VisitMemory`), so with ``memory=True`` the
+            term is a function of what the network sees.
+        length: Not in the thesis. ``W6 = length · |P_{n+1} − P_n|``, per unit of distance
+            moved; zero or negative. W3 charges a diagonal move no more than an axis move, so a
+            path zigzagging on diagonals (√2 per unit of progress) costs as many steps as a
+            straight one; W6 prefers the shorter.
+        potential_discount: Not in the thesis. ``W4 = beta · (potential_discount · U(P_{n+1}) − U(P_n))``;
+            1 in the thesis. Set to the learner's γ, W4 is a potential-based shaping term
+            (Ng, Harada & Russell 1999): it no longer pays ``−beta·(1 − γ)·U`` each step for
+            standing low in the field, which rewards lingering in a well and keeping far
+            from obstacles, and the best policy is the one without W4.
     """
 
     w1: float
     w2: float
     w3: float
     beta: float
+    revisit: float = 0.0
+    length: float = 0.0
+    potential_discount: float = 1.0
 
     def as_dict(self) -> dict[str, float]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -30,9 +49,11 @@ class RewardWeights:
 REWARD_PRESETS: dict[str, RewardWeights] = {
     "thesis-fixed": RewardWeights(w1=-1000.0, w2=1000.0, w3=-1.0, beta=-4.0),      # Table 3
     "thesis-general": RewardWeights(w1=-10.0, w2=10.0, w3=-0.2, beta=-20.0),       # Table 4
+    # Table 3 with a revisit penalty about the size of a median step's W4 in a 50×50 general field
+    "thesis-fixed-revisit": RewardWeights(w1=-1000.0, w2=1000.0, w3=-1.0, beta=-4.0, revisit=-50.0),
 }
 
-TERMS = ("collision", "target", "step", "potential")  # W1, W2, W3, W4
+TERMS = ("collision", "target", "step", "potential", "revisit", "length")  # W1 ... W6
 
 
 def reward_weights(spec: str | RewardWeights | dict) -> RewardWeights:
@@ -47,19 +68,29 @@ def reward_weights(spec: str | RewardWeights | dict) -> RewardWeights:
 
 
 def reward_terms(weights: RewardWeights, collided: np.ndarray, reached: np.ndarray,
-                 u_before: np.ndarray, u_after: np.ndarray) -> dict[str, np.ndarray]:
-    """The four terms for a batch of steps; their sum is the reward."""
+                 u_before: np.ndarray, u_after: np.ndarray, revisits: np.ndarray | None = None,
+                 moved: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """The terms (:data:`TERMS`) for a batch of steps; their sum is the reward.
+
+    ``revisits``: earlier visits of the cell each robot entered (None: no W5); ``moved``:
+    distance each robot moved (None: no W6).
+    """
+    k = weights.potential_discount
     if len(collided) == 1:  # one robot: plain floats, numpy's per-call cost would dominate
         c, r = bool(collided[0]), bool(reached[0])
         return {
             "collision": np.array([weights.w1 if c else 0.0]),
             "target": np.array([weights.w2 if r and not c else 0.0]),
             "step": np.array([weights.w3]),
-            "potential": np.array([weights.beta * (float(u_after[0]) - float(u_before[0]))]),
+            "potential": np.array([weights.beta * (k * float(u_after[0]) - float(u_before[0]))]),
+            "revisit": np.array([0.0 if revisits is None else weights.revisit * float(revisits[0])]),
+            "length": np.array([0.0 if moved is None else weights.length * float(moved[0])]),
         }
     return {
         "collision": np.where(collided, weights.w1, 0.0),
         "target": np.where(reached & ~collided, weights.w2, 0.0),
         "step": np.full(len(collided), weights.w3),
-        "potential": weights.beta * (u_after - u_before),
+        "potential": weights.beta * (k * u_after - u_before),
+        "revisit": np.zeros(len(collided)) if revisits is None else weights.revisit * revisits,
+        "length": np.zeros(len(collided)) if moved is None else weights.length * moved,
     }

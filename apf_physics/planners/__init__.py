@@ -5,7 +5,7 @@ from __future__ import annotations
 from apf_physics.planners.base import Planner
 from apf_physics.planners.gradient import GradientPlanner
 
-PLANNERS = ("gradient", "dqn", "astar", "escape")
+PLANNERS = ("gradient", "dqn", "dqn-unshielded", "astar", "escape")
 
 
 def make_planner(name: str, model: str | None = None) -> Planner:
@@ -13,15 +13,18 @@ def make_planner(name: str, model: str | None = None) -> Planner:
 
     Args:
         name: One of :data:`PLANNERS`.
-        model: For ``dqn``: a model file; the shipped model for the world's field is used when None.
+        model: For ``dqn`` and ``dqn-unshielded``: a model file; the shipped model for the
+            world's field is used when None. ``dqn`` never picks a move that would touch an
+            obstacle (:class:`~apf_physics.planners.dqn.DQNPlanner`'s shield);
+            ``dqn-unshielded`` takes the network's choice as it is.
     """
     from apf_physics.errors import UserError
 
     if name == "gradient":
         return GradientPlanner()
-    if name == "dqn":
+    if name in ("dqn", "dqn-unshielded"):
         from apf_physics.planners.dqn import DQNPlanner
-        return DQNPlanner(model)
+        return DQNPlanner(model, shield=name == "dqn")
     if name == "astar":
         from apf_physics.planners.astar import AStarPlanner
         return AStarPlanner()

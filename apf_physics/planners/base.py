@@ -25,10 +25,15 @@ class Planner:
             potential stopped decreasing or the robot oscillates over a window (gradient
             descent). ``"oscillation"``: only when the robot stays within a small region
             over a window (planners that may climb the potential on purpose).
+        trap_window: Control steps the trap rule looks back over; None: the rollout's
+            detector's own (:class:`~apf_physics.rollout.TrapDetector`, 10). A planner that
+            remembers where it has been sets a longer one: for it, circling one spot for a
+            while is part of getting out, not proof of being stuck.
     """
 
     name: ClassVar[str] = "planner"
     trap_rule: ClassVar[TrapRule] = "oscillation"
+    trap_window: int | None = None
 
     def reset(self, world: World, positions: np.ndarray) -> None:
         """Prepare for a batch of episodes in ``world`` starting at ``positions`` (N, 2)."""

@@ -18,10 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from apf_physics.actions import ACTIONS
+from apf_physics.actions import ACTIONS, SAFETY
 from apf_physics.world import FormationSpec, World
-
-SAFETY = 0.05  # extra clearance kept by followers beyond touching [units]
 
 
 def formation_offsets(spec: FormationSpec) -> np.ndarray | None:

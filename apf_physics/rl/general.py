@@ -60,11 +60,9 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from apf_physics.actions import ACTIONS
 from apf_physics.curriculum import Stage, load_curriculum
 from apf_physics.errors import UserError
 from apf_physics.generate import FAMILIES, generate_world
-from apf_physics.planners.base import Planner
 from apf_physics.rl.buffer import ReplayBuffer
 from apf_physics.rl.checkpoint import model_meta, read_file, save_model, write_file
 from apf_physics.rl.dqn import DQNConfig, epsilon_greedy, epsilon_schedule, store_transitions
@@ -77,7 +75,7 @@ HELDOUT_SEED = 100
 POOL_STREAM = 0x9E11
 """Tag mixed into the seed of every training-pool draw, so no pool equals a set drawn from an integer seed."""
 CSV_COLUMNS = ("global_step", "episodes", "stage", "epsilon", "mean_return", "success_rate", "loss",
-               "val_success", "val_trap_success", "val_length_ratio", "pool_draws", "wall_time")
+               "val_success", "val_trap_success", "val_length_ratio", "val_spl", "pool_draws", "wall_time")
 """Columns of ``train.csv``."""
 STOP_FIELDS = {"total_steps", "time_limit", "eval_every", "log_every", "checkpoint_every", "threads"}
 """Fields that may change when resuming."""
@@ -319,72 +317,50 @@ def validation_set(config: GeneralConfig) -> ValidationSet:
     return ValidationSet(tuple(worlds), tuple(trapped), tuple(astar))
 
 
-class NetworkPlanner(Planner):
-    """Greedy actions of an in-memory Q-network (what :class:`~apf_physics.planners.dqn.DQNPlanner`
-    does with a model file), for evaluating a network while it trains."""
-
-    name = "dqn"
-    trap_rule = "oscillation"
-
-    def __init__(self, network: torch.nn.Module):
-        self.network = network
-        self.size = int(network.arch["obs_shape"][-1])
-
-    def reset(self, world: World, positions: np.ndarray) -> None:
-        from apf_physics.observation import WindowSampler
-
-        from apf_physics.observation import VisitMemory
-
-        super().reset(world, positions)
-        self.sampler = WindowSampler([world], self.size)
-        self.memory = None
-        if int(self.network.arch["obs_shape"][0]) == 2:
-            positions = np.asarray(positions, dtype=float).reshape(-1, 2)
-            self.memory = VisitMemory(len(positions), self.size)
-            self.memory.reset(np.arange(len(positions)), positions, [world] * len(positions))
-        self._started = False
-
-    def act(self, positions: np.ndarray, active: np.ndarray) -> np.ndarray:
-        from apf_physics.planners.dqn import observe
-
-        obs = observe(self.sampler, self.memory, positions, self._started)
-        self._started = True
-        with torch.inference_mode():
-            actions = self.network(torch.from_numpy(obs)).argmax(1).numpy()
-        return ACTIONS[actions] * active[:, None]
-
-
 def validate(network: torch.nn.Module, validation: ValidationSet) -> dict[str, float]:
     """Greedy rollouts (through the physics, as ``apf-physics eval``) from every validation start.
 
     Returns:
         ``success`` (share of starts reaching the target), ``trap_success`` (the same over the
         starts where gradient descent is trapped), ``collisions`` (count) and ``length_ratio``
-        (mean of path length / A* length over the successes; inf without successes).
+        (mean path length over the mean A* length, both on the successes, as
+        ``tools/eval_general.py`` reports it; inf without successes) and ``spl``, success
+        weighted by path length (Anderson et al. 2018: the mean over all starts of
+        ``A* length / max(path length, A* length)`` for a success and 0 otherwise), one
+        figure for reaching the target by short paths.
     """
+    from apf_physics.planners.dqn import DQNPlanner
+    from apf_physics.rl.policy import DQNPolicy
     from apf_physics.rollout import rollout
 
-    planner = NetworkPlanner(network)
-    success, trapped, ratios, collisions = [], [], [], 0
-    for world, trap, astar in zip(validation.worlds, validation.trapped, validation.astar):
-        for episode, t, a in zip(rollout(world, planner, world.starts), trap, astar):
-            success.append(episode.success)
-            trapped.append(t)
-            collisions += episode.outcome == "collision"
-            if episode.success and np.isfinite(a) and a > 0:
-                ratios.append(episode.path_length / a)
+    was_training = network.training
+    planner = DQNPlanner(policy=DQNPolicy(network))  # as `apf-physics eval --planner dqn` runs it
+    success, trapped, lengths, spl, collisions = [], [], [], [], 0
+    try:
+        for world, trap, astar in zip(validation.worlds, validation.trapped, validation.astar):
+            for episode, t, a in zip(rollout(world, planner, world.starts), trap, astar):
+                success.append(episode.success)
+                trapped.append(t)
+                collisions += episode.outcome == "collision"
+                efficient = episode.success and np.isfinite(a) and a > 0
+                if efficient:
+                    lengths.append((episode.path_length, a))
+                spl.append(a / max(episode.path_length, a) if efficient else float(episode.success))
+    finally:
+        network.train(was_training)
     success, trapped = np.array(success), np.array(trapped)
     return {
         "success": float(success.mean()),
         "trap_success": float(success[trapped].mean()) if trapped.any() else float("nan"),
         "collisions": int(collisions),
-        "length_ratio": float(np.mean(ratios)) if ratios else float("inf"),
+        "length_ratio": float(np.divide(*np.sum(lengths, axis=0))) if lengths else float("inf"),
+        "spl": float(np.mean(spl)),
     }
 
 
 def _score(summary: dict[str, float]) -> tuple:
-    """Order of validation summaries: more successes, then fewer collisions, then shorter paths."""
-    return (round(summary["success"], 6), -summary["collisions"], -summary["length_ratio"])
+    """Order of validation summaries: fewer collisions, then higher SPL (success weighted by path length)."""
+    return (-summary["collisions"], round(summary.get("spl", summary["success"]), 6), summary["success"])
 
 
 # ----------------------------------------------------------------------------------------
@@ -646,8 +622,8 @@ def _train(config: GeneralConfig, phases: list[Phase], out: Optional[Path], resu
                 print(f"[{wall():7.1f} s] step {c['global_step']:>9} phase {phases[min(c['phase'], len(phases) - 1)].name}"
                       f" eps {epsilon:.3f} train success {np.mean(recent_success) if recent_success else 0:.2f}"
                       f" | validation {summary['success']:.3f} trap {summary['trap_success']:.3f}"
-                      f" coll {summary['collisions']} ratio {summary['length_ratio']:.3f}"
-                      f" | best {best_validation['success']:.3f}", flush=True)
+                      f" coll {summary['collisions']} ratio {summary['length_ratio']:.3f} spl {summary['spl']:.3f}"
+                      f" | best spl {best_validation.get('spl', float('nan')):.3f}", flush=True)
         row = {
             "global_step": c["global_step"], "episodes": c["episodes"],
             "stage": phases[min(c["phase"], len(phases) - 1)].name, "epsilon": round(epsilon, 5),
@@ -657,6 +633,7 @@ def _train(config: GeneralConfig, phases: list[Phase], out: Optional[Path], resu
             "val_success": round(summary["success"], 4) if summary else "",
             "val_trap_success": round(summary["trap_success"], 4) if summary else "",
             "val_length_ratio": round(summary["length_ratio"], 4) if summary else "",
+            "val_spl": round(summary["spl"], 4) if summary else "",
             "pool_draws": c["pool_draws"], "wall_time": round(wall(), 3),
         }
         loss_sum, loss_count = torch.zeros(()), 0
@@ -787,7 +764,7 @@ def run_curriculum_command(curriculum_path: str | os.PathLike | None, preset: Op
     best = result.best_validation
     summary = ("never evaluated" if best is None else
                f"{best['success']:.1%} of the validation starts ({best['trap_success']:.1%} of the trap starts), "
-               f"{best['collisions']} collisions, path {best['length_ratio']:.2f}x A*")
+               f"{best['collisions']} collisions, path {best['length_ratio']:.2f}x A*, SPL {best['spl']:.3f}")
     print(f"trained {result.global_step} steps, {result.episodes} episodes, {result.updates} updates "
           f"in {result.wall_time:.1f} s; best validation: {summary}; network in {out / 'best.pt'}")
     return 0

@@ -1,0 +1,173 @@
+"""Checked moves and stateful planners: move_clearance, the DQN planner's shield, planners'
+own trap windows, and the revisit reward term (W5)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from apf_physics import load_world
+from apf_physics.actions import ACTIONS, SAFETY, move_clearance
+from apf_physics.envs import NavigateVectorEnv
+from apf_physics.envs.reward import REWARD_PRESETS, RewardWeights
+from apf_physics.planners import make_planner
+from apf_physics.planners.base import Planner
+from apf_physics.planners.dqn import DQNPlanner, shielded_argmax
+from apf_physics.rollout import TrapDetector, rollout
+from apf_physics.world import world_from_dict
+
+from conftest import simple_world_dict
+
+
+class ConstantPolicy:
+    """A stand-in for :class:`~apf_physics.rl.policy.DQNPolicy` that always ranks the moves the same way."""
+
+    def __init__(self, preference: np.ndarray, channels: int = 1, size: int = 5):
+        self.preference = np.asarray(preference, np.float32)
+        self.obs_shape = (channels, size, size)
+
+    def q_values(self, obs: np.ndarray) -> np.ndarray:
+        return np.tile(self.preference, (len(obs), 1))
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        return self.q_values(obs).argmax(1)
+
+
+@pytest.fixture(scope="module")
+def world():
+    return world_from_dict(simple_world_dict())
+
+
+@settings(max_examples=60, deadline=None)
+@given(x=st.floats(0.3, 19.7), y=st.floats(0.3, 19.7))
+def test_move_clearance_is_a_lower_bound_along_the_whole_move(world, x, y):
+    bound = move_clearance(world, np.array([[x, y]]))[0]
+    t = np.linspace(0.0, 1.0, 401)
+    for k, move in enumerate(ACTIONS):
+        dense = world.clearance(np.array([x, y]) + t[:, None] * move).min()
+        assert bound[k] <= dense + 1e-9
+        assert bound[k] >= dense - 0.5 * np.hypot(*move) / 8 - 0.1   # and not far below it
+
+
+def test_move_clearance_shape_and_stay(world):
+    positions = np.array([[2.0, 2.0], [7.0, 4.0], [10.0, 15.0]])
+    room = move_clearance(world, positions)
+    assert room.shape == (3, 9)
+    np.testing.assert_allclose(room[:, 8], world.clearance(positions))   # "stay" is the point itself
+    # from (7, 4) the polygon's bottom edge (y = 5) is 1 above: moving up ends inside it
+    assert room[1, 0] < 0 < room[1, 1]
+
+
+def test_shielded_argmax_prefers_safe_moves_and_falls_back_to_the_most_room():
+    q = np.array([[5.0, 4.0, 3.0], [1.0, 2.0, 3.0], [1.0, 2.0, 3.0]])
+    room = np.array([[-0.1, 0.2, 0.3], [0.1, 0.1, 0.1], [-0.3, -0.1, -0.2]])
+    np.testing.assert_array_equal(shielded_argmax(q, room), [1, 2, 1])
+
+
+def test_shield_keeps_a_wall_seeking_policy_from_colliding(world):
+    starts = np.array([[6.5, 3.2], [2.0, 1.5], [12.0, 2.5]])   # below the polygon, near the edge, below the circle
+    wants_up_then_down = np.array([9, 8, 0, 0, 0, 0, 0, 0, 0], float)   # "up" first, "down" second
+    raw = rollout(world, DQNPlanner(shield=False, policy=ConstantPolicy(wants_up_then_down)), starts, max_steps=30)
+    assert raw[0].outcome == "collision" and raw[2].outcome == "collision"
+    shielded = DQNPlanner(policy=ConstantPolicy(wants_up_then_down))
+    episodes = rollout(world, shielded, starts, max_steps=30)
+    assert all(e.outcome != "collision" for e in episodes)
+    for e in episodes:   # every position it passed through keeps the robot clear
+        assert world.clearance(e.path).min() >= world.robot_radius + SAFETY - 1e-6
+
+
+def test_planner_names_for_the_shield():
+    assert make_planner("dqn").name == "dqn" and make_planner("dqn").shield
+    unshielded = make_planner("dqn-unshielded")
+    assert unshielded.name == "dqn-unshielded" and not unshielded.shield
+
+
+class Pacing(Planner):
+    """Steps right and left forever."""
+
+    def __init__(self, window: int | None):
+        self.trap_window = window
+        self.t = 0
+
+    def act(self, positions, active):
+        self.t += 1
+        move = ACTIONS[3] if self.t % 2 else ACTIONS[2]
+        return np.tile(move, (len(positions), 1)) * active[:, None]
+
+
+@pytest.mark.parametrize("window", [None, 25])
+def test_rollout_uses_the_planners_trap_window(world, window):
+    (episode,) = rollout(world, Pacing(window), np.array([[2.0, 15.0]]), max_steps=100)
+    assert episode.outcome == "trapped"
+    assert episode.steps == (window or TrapDetector().window)
+
+
+def test_a_memory_model_gets_the_long_trap_window(world):
+    planner = DQNPlanner(policy=ConstantPolicy(np.zeros(9), channels=2))
+    planner.reset(world, np.array([[2.0, 2.0]]))
+    assert planner.trap_window == DQNPlanner.MEMORY_TRAP_WINDOW
+    planner = DQNPlanner(policy=ConstantPolicy(np.zeros(9), channels=1))
+    planner.reset(world, np.array([[2.0, 2.0]]))
+    assert planner.trap_window is None
+
+
+def test_revisit_term_counts_earlier_visits_up_to_the_cap(worlds_dir):
+    weights = RewardWeights(w1=-1000, w2=1000, w3=-1, beta=-4, revisit=-10)
+    env = NavigateVectorEnv(world=str(worlds_dir / "fixed20.yaml"), num_envs=2, reward=weights, starts="random",
+                            max_episode_steps=50)
+    assert env.single_observation_space.shape[0] == 1   # counted without showing the memory channel
+    env.reset(seed=4)
+    seen = []
+    for t in range(8):   # robot 0 stays; robot 1 paces between two cells
+        _, reward, terminated, truncated, info = env.step(np.array([8, 3 if t % 2 == 0 else 2]))
+        assert not (terminated.any() or truncated.any())
+        terms = info["reward_terms"]
+        np.testing.assert_allclose(reward, sum(terms.values()), rtol=1e-5)
+        seen.append(terms["revisit"])
+    seen = np.array(seen)
+    # the start cell was counted at reset: staying there has been seen 1, 2, 3, then 4 (the cap) times
+    np.testing.assert_array_equal(seen[:, 0], [-10, -20, -30, -40, -40, -40, -40, -40])
+    # pacing enters a new cell first, then cells seen 1, 1, 2, 2, 3, 3, 4 times
+    np.testing.assert_array_equal(seen[:, 1], [0, -10, -10, -20, -20, -30, -30, -40])
+
+
+def test_thesis_rewards_have_no_revisit_term(worlds_dir):
+    assert REWARD_PRESETS["thesis-fixed"].revisit == 0 and REWARD_PRESETS["thesis-general"].revisit == 0
+    env = NavigateVectorEnv(world=str(worlds_dir / "fixed20.yaml"), num_envs=2, starts="random")
+    env.reset(seed=0)
+    for _ in range(3):
+        *_, info = env.step(np.array([8, 8]))
+    np.testing.assert_array_equal(info["reward_terms"]["revisit"], 0.0)
+
+
+def test_formation_env_refuses_a_revisit_term(worlds_dir):
+    import gymnasium as gym
+
+    import apf_physics  # noqa: F401
+
+    with pytest.raises(ValueError, match="visit memory"):
+        gym.make("apf_physics/Formation-v0", world=str(worlds_dir / "fixed20.yaml"),
+                 reward=dict(w1=-1, w2=1, w3=-1, beta=-1, revisit=-1))
+
+
+def test_shielded_shipped_model_is_no_worse_on_fixed20(worlds_dir):
+    world = load_world(worlds_dir / "fixed20.yaml")
+    shielded = rollout(world, make_planner("dqn"), world.starts)
+    assert sum(e.success for e in shielded) == len(world.starts)
+
+
+def test_length_term_charges_the_distance_moved_and_shaping_discounts_the_next_potential(worlds_dir):
+    weights = RewardWeights(w1=-1000, w2=1000, w3=-1, beta=-4, length=-20, potential_discount=0.9)
+    env = NavigateVectorEnv(world=str(worlds_dir / "fixed20.yaml"), num_envs=3, reward=weights,
+                            starts=[[10.0, 16.0], [10.0, 16.0], [10.0, 16.0]])
+    env.reset(seed=0)
+    world = env.worlds[0]
+    before = world.potential(np.array([[10.0, 16.0]]))[0]
+    _, reward, *_, info = env.step(np.array([3, 6, 8]))   # right, right-up, stay
+    terms = info["reward_terms"]
+    np.testing.assert_allclose(terms["length"], [-20, -20 * np.sqrt(2), 0], atol=0.05)
+    after = world.potential(np.array([[11.0, 16.0], [11.0, 17.0], [10.0, 16.0]]))
+    np.testing.assert_allclose(terms["potential"], -4 * (0.9 * after - before), rtol=1e-3, atol=0.5)
+    np.testing.assert_allclose(reward, sum(terms.values()), rtol=1e-5)
