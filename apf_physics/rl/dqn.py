@@ -37,7 +37,7 @@ import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 import torch
@@ -368,6 +368,155 @@ def store_transitions(buffer: ReplayBuffer, obs: np.ndarray, next_obs: np.ndarra
     buffer.add(obs[valid], next_obs[valid], actions[valid], rewards[valid], terminated[valid])
     return valid
 
+class Learner:
+    """The Q-network, its target network, optimiser and replay buffer, and the TD update (SPEC eq. 32).
+
+    What both trainers (:func:`train` and :func:`apf_physics.rl.general.train_general`) share;
+    they collect the transitions, decide when to update, evaluate and log.
+
+    Args:
+        config: Network, buffer and learning-rule fields are used.
+        obs_shape: (C, k, k) observations.
+    """
+
+    def __init__(self, config: "DQNConfig", obs_shape: tuple[int, int, int]):
+        self.config = config
+        self.q_network = config.network(obs_channels=obs_shape[0])
+        self.target_network = copy.deepcopy(self.q_network) if config.target_update != "none" else self.q_network
+        if self.target_network is not self.q_network:
+            self.target_network.requires_grad_(False)
+        self.optimizer = torch.optim.Adam(self.q_network.parameters(), lr=config.learning_rate, fused=True)
+        self.buffer = ReplayBuffer(config.buffer_size, obs_shape, config.batch_size)
+        self.updates = 0
+        self._online = list(self.q_network.parameters())
+        self._target = list(self.target_network.parameters())
+        self._loss_sum, self._loss_count = torch.zeros(()), 0
+
+    @property
+    def ready(self) -> bool:
+        """Whether the buffer holds enough transitions to learn from."""
+        return len(self.buffer) >= max(self.config.learning_starts, self.config.batch_size)
+
+    def update(self, rng: np.random.Generator) -> None:
+        """One gradient step on a minibatch drawn with ``rng``, then the target network's update."""
+        c = self.config
+        batch = self.buffer.sample(rng)
+        with torch.no_grad():
+            if c.double_dqn:  # choose with the online network, value with the target network
+                next_actions = self.q_network(batch.next_observations).argmax(1, keepdim=True)
+                next_q = self.target_network(batch.next_observations).gather(1, next_actions).squeeze(1)
+            else:
+                next_q = self.target_network(batch.next_observations).amax(1)
+            # TD target (eq. 32): R + γ·max Q(O_{n+1}), nothing beyond a terminal step
+            td_target = batch.rewards + c.gamma * (1.0 - batch.dones) * next_q
+        q_taken = self.q_network(batch.observations).gather(1, batch.actions).squeeze(1)
+        if c.loss == "huber":  # Huber loss: less sensitive to outliers than the thesis's MSE
+            loss = F.smooth_l1_loss(q_taken, td_target)
+        else:
+            loss = F.mse_loss(q_taken, td_target)
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        if c.max_grad_norm is not None:
+            torch.nn.utils.clip_grad_norm_(self._online, c.max_grad_norm, foreach=True)
+        self.optimizer.step()
+        self.updates += 1
+        if c.target_update == "soft":
+            with torch.no_grad():
+                torch._foreach_lerp_(self._target, self._online, c.tau)
+        elif c.target_update == "hard" and self.updates % c.target_update_every == 0:
+            self.target_network.load_state_dict(self.q_network.state_dict())
+        self._loss_sum += loss.detach()  # summed as a tensor: no per-update synchronisation
+        self._loss_count += 1
+
+    def mean_loss(self) -> Optional[float]:
+        """Mean loss of the updates since the last call (None: there were none)."""
+        mean = float(self._loss_sum) / self._loss_count if self._loss_count else None
+        self._loss_sum, self._loss_count = torch.zeros(()), 0
+        return mean
+
+    def tensors(self, buffer: bool = False) -> dict[str, Any]:
+        """What a checkpoint keeps of the learner (``buffer``: also the replay buffer)."""
+        out = {"q_network": self.q_network.state_dict(), "optimizer": self.optimizer.state_dict()}
+        if self.target_network is not self.q_network:
+            out["target_network"] = self.target_network.state_dict()
+        if buffer:
+            out["buffer"] = self.buffer.state_dict()
+        return out
+
+    def load(self, tensors: dict[str, Any], updates: int) -> None:
+        """Restore from :meth:`tensors` of a checkpoint, and the update count."""
+        self.q_network.load_state_dict(tensors["q_network"])
+        if self.target_network is not self.q_network:
+            self.target_network.load_state_dict(tensors["target_network"])
+        self.optimizer.load_state_dict(tensors["optimizer"])
+        if "buffer" in tensors:
+            self.buffer.load_state_dict(tensors["buffer"])
+        self.updates = int(updates)
+
+
+class Collector:
+    """Acts ε-greedily in a vector environment, stores the transitions in the learner's buffer,
+    and keeps the returns and successes of the episodes that end.
+
+    Args:
+        learner: Whose network acts and whose buffer fills.
+        reward_scale: Rewards are stored multiplied by it (returns are kept unscaled).
+        window: Recent episodes kept in :attr:`recent_returns` and :attr:`recent_success`.
+    """
+
+    def __init__(self, learner: Learner, reward_scale: float = 1.0, window: int = 100):
+        self.learner = learner
+        self.reward_scale = reward_scale
+        self.recent_returns: collections.deque = collections.deque(maxlen=window)
+        self.recent_success: collections.deque = collections.deque(maxlen=window)
+
+    def begin(self, obs: np.ndarray) -> None:
+        """Start from freshly reset environments' observations."""
+        self.obs = obs
+        self.prev_done = np.zeros(len(obs), bool)
+        self.ep_return = np.zeros(len(obs))
+
+    def step(self, step: Callable[[np.ndarray], tuple], epsilon: float, rng: np.random.Generator) -> tuple[int, int]:
+        """One vector step: ``step(actions)`` returns ``(obs, rewards, terminated, truncated, success)``.
+
+        Returns:
+            Transitions stored and episodes that ended.
+        """
+        actions = epsilon_greedy(self.learner.q_network, self.obs, epsilon, rng)
+        next_obs, rewards, terminated, truncated, success = step(actions)
+        valid = store_transitions(self.learner.buffer, self.obs, next_obs, actions, rewards * self.reward_scale,
+                                  terminated, self.prev_done)
+        done = (terminated | truncated) & valid
+        self.ep_return += np.where(valid, rewards, 0.0)
+        if done.any():
+            self.recent_returns.extend(self.ep_return[done].tolist())
+            self.recent_success.extend(np.asarray(success, bool)[done].tolist())
+            self.ep_return[done] = 0.0
+        self.prev_done = terminated | truncated
+        self.obs = next_obs
+        return int(valid.sum()), int(done.sum())
+
+    def means(self) -> tuple[str | float, str | float]:
+        """Mean return and success rate of the recent episodes, rounded for ``train.csv`` (``""``: none yet)."""
+        if not self.recent_returns:
+            return "", ""
+        return round(float(np.mean(self.recent_returns)), 4), round(float(np.mean(self.recent_success)), 4)
+
+
+def start_csv(path: Optional[Path], columns: Sequence[str], resume_step: Optional[int] = None) -> None:
+    """Begin ``train.csv``: a header for a new run; on resume, drop the rows logged after ``resume_step``."""
+    if path is None:
+        return
+    rows: list[dict] = []
+    if resume_step is not None and path.exists():
+        with open(path, newline="") as f:
+            rows = [r for r in csv.DictReader(f) if int(r["global_step"]) <= resume_step]
+    with open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, columns)
+        writer.writeheader()
+        writer.writerows(rows)
+
+
 def navigate_env_factory(world: Any, *, num_envs: int, seed: int, starts: Any, config: DQNConfig):
     """The package's own vector environment (:class:`apf_physics.envs.NavigateVectorEnv`).
 
@@ -547,18 +696,11 @@ def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
     if obs_shape[1:] != (config.obs_size, config.obs_size):
         raise UserError(f"the environment's observations are {obs_shape}, but obs_size is {config.obs_size}")
 
-    q_network = config.network(obs_channels=obs_shape[0])
-    target_network = copy.deepcopy(q_network) if config.target_update != "none" else q_network
-    for p in target_network.parameters():
-        if target_network is not q_network:
-            p.requires_grad_(False)
-    optimizer = torch.optim.Adam(q_network.parameters(), lr=config.learning_rate, fused=True)
-    buffer = ReplayBuffer(config.buffer_size, obs_shape, config.batch_size)
-    online_params = list(q_network.parameters())
-    target_params = list(target_network.parameters())
+    learner = Learner(config, obs_shape)
+    q_network = learner.q_network
 
     # Counters and bests, restored on resume.
-    global_step = episodes = updates = vector_steps = 0
+    global_step = episodes = vector_steps = 0
     elapsed_before = 0.0
     best_success: Optional[float] = None
     best_random: Optional[float] = None
@@ -579,14 +721,9 @@ def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
         if differ:
             raise UserError(f"{last}: was trained with different options ({', '.join(differ)}); "
                             "resume with the same preset and options")
-        q_network.load_state_dict(tensors["q_network"])
-        if target_network is not q_network:
-            target_network.load_state_dict(tensors["target_network"])
-        optimizer.load_state_dict(tensors["optimizer"])
-        if "buffer" in tensors:
-            buffer.load_state_dict(tensors["buffer"])
         counters = meta["counters"]
-        global_step, episodes, updates, vector_steps = (int(counters[k]) for k in ("global_step", "episodes", "updates", "vector_steps"))
+        learner.load(tensors, counters["updates"])
+        global_step, episodes, vector_steps = (int(counters[k]) for k in ("global_step", "episodes", "vector_steps"))
         elapsed_before = float(counters["wall_time"])
         best_success, best_step, time_to_target = counters["best_eval_success"], counters["best_eval_step"], counters["time_to_target"]
         best_random = counters.get("best_eval_random")
@@ -594,27 +731,18 @@ def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
         torch.set_rng_state(tensors["torch_rng"])
         if "best_state" in tensors:
             best_state = tensors["best_state"]
-        if csv_path is not None and csv_path.exists():  # drop rows logged after the checkpoint
-            with open(csv_path, newline="") as f:
-                rows = [r for r in csv.DictReader(f) if int(r["global_step"]) <= global_step]
-            with open(csv_path, "w", newline="") as f:
-                writer = csv.DictWriter(f, CSV_COLUMNS)
-                writer.writeheader()
-                writer.writerows(rows)
-    elif csv_path is not None:
-        with open(csv_path, "w", newline="") as f:
-            csv.writer(f).writerow(CSV_COLUMNS)
+    start_csv(csv_path, CSV_COLUMNS, global_step if resume else None)
 
     envs = env_factory(world, num_envs=config.num_envs, seed=config.seed + global_step,
                        starts=training_starts(world, config.train_starts, config.seed), config=config)
     n = config.num_envs
-    obs, _ = envs.reset(seed=config.seed + global_step)
-    prev_done = np.zeros(n, bool)
-    ep_return = np.zeros(n)
-    recent_returns: collections.deque = collections.deque(maxlen=100)
-    recent_success: collections.deque = collections.deque(maxlen=100)
-    loss_sum = torch.zeros(())
-    loss_count = 0
+    collector = Collector(learner, config.reward_scale)
+    collector.begin(envs.reset(seed=config.seed + global_step)[0])
+    no_success = np.zeros(n, bool)
+
+    def env_step(actions: np.ndarray) -> tuple:
+        next_obs, rewards, terminated, truncated, info = envs.step(actions)
+        return next_obs, rewards, terminated, truncated, info.get("success", no_success)
     history: list[dict] = []
     next_log = (global_step // config.log_every + 1) * config.log_every
     next_eval = (global_step // config.eval_every + 1) * config.eval_every
@@ -623,13 +751,12 @@ def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
     world_info = _world_info(world)
     start_time = time.perf_counter()
     stopped_early = False
-    huber = config.loss == "huber"
 
     def wall() -> float:
         return elapsed_before + time.perf_counter() - start_time
 
     def training_meta() -> dict:
-        return {"world": world_info, "global_step": global_step, "episodes": episodes, "updates": updates,
+        return {"world": world_info, "global_step": global_step, "episodes": episodes, "updates": learner.updates,
                 "wall_time": wall(), "eval_success": best_success, "eval_step": best_step,
                 "eval_random_success": best_random, "eval_random_starts": config.eval_random_starts}
 
@@ -638,50 +765,15 @@ def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
             return
         meta = model_meta(q_network, field_params, config.to_dict(), training_meta())
         meta["kind"] = "checkpoint"
-        meta["counters"] = {"global_step": global_step, "episodes": episodes, "updates": updates,
+        meta["counters"] = {"global_step": global_step, "episodes": episodes, "updates": learner.updates,
                             "vector_steps": vector_steps, "wall_time": wall(), "best_eval_success": best_success,
                             "best_eval_step": best_step, "time_to_target": time_to_target,
                             "best_eval_random": best_random}
         meta["numpy_rng"] = rng.bit_generator.state
-        tensors = {"q_network": q_network.state_dict(), "optimizer": optimizer.state_dict(),
-                   "torch_rng": torch.get_rng_state()}
-        if target_network is not q_network:
-            tensors["target_network"] = target_network.state_dict()
+        tensors = {**learner.tensors(buffer=config.save_buffer), "torch_rng": torch.get_rng_state()}
         if best_state is not None:
             tensors["best_state"] = best_state
-        if config.save_buffer:
-            tensors["buffer"] = buffer.state_dict()
         write_file(out / "last.pt", meta, tensors)
-
-    def update() -> None:
-        nonlocal updates, loss_sum, loss_count
-        batch = buffer.sample(rng)
-        with torch.no_grad():
-            if config.double_dqn:
-                next_actions = q_network(batch.next_observations).argmax(1, keepdim=True)
-                next_q = target_network(batch.next_observations).gather(1, next_actions).squeeze(1)
-            else:
-                next_q = target_network(batch.next_observations).amax(1)
-            # TD target (eq. 32): R + γ·max Q(O_{n+1}), nothing beyond a terminal step
-            td_target = batch.rewards + config.gamma * (1.0 - batch.dones) * next_q
-        q_taken = q_network(batch.observations).gather(1, batch.actions).squeeze(1)
-        if huber:  # Huber loss: less sensitive to outliers than the thesis's MSE
-            loss = F.smooth_l1_loss(q_taken, td_target)
-        else:
-            loss = F.mse_loss(q_taken, td_target)
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        if config.max_grad_norm is not None:
-            torch.nn.utils.clip_grad_norm_(online_params, config.max_grad_norm, foreach=True)
-        optimizer.step()
-        updates += 1
-        if config.target_update == "soft":
-            with torch.no_grad():
-                torch._foreach_lerp_(target_params, online_params, config.tau)
-        elif config.target_update == "hard" and updates % config.target_update_every == 0:
-            target_network.load_state_dict(q_network.state_dict())
-        loss_sum += loss.detach()  # summed as a tensor: no per-update synchronisation
-        loss_count += 1
 
     bar = None
     if progress:
@@ -697,29 +789,16 @@ def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
     try:
         while not finished():
             epsilon = epsilon_schedule(config, episodes)
-            actions = epsilon_greedy(q_network, obs, epsilon, rng)
-            next_obs, rewards, terminated, truncated, info = envs.step(actions)
-            valid = store_transitions(buffer, obs, next_obs, actions, rewards * config.reward_scale, terminated,
-                                      prev_done)
-            done = (terminated | truncated) & valid
-            ep_return += np.where(valid, rewards, 0.0)
-            if done.any():
-                success = np.asarray(info.get("success", np.zeros(n, bool)), bool)
-                recent_returns.extend(ep_return[done].tolist())
-                recent_success.extend(success[done].tolist())
-                episodes += int(done.sum())
-                ep_return[done] = 0.0
-            prev_done = terminated | truncated
-            obs = next_obs
-            added = int(valid.sum())
+            added, ended = collector.step(env_step, epsilon, rng)
+            episodes += ended
             global_step += added
             vector_steps += 1
             if bar is not None:
                 bar.update(added)
 
-            if len(buffer) >= max(config.learning_starts, config.batch_size) and vector_steps % config.train_frequency == 0:
+            if learner.ready and vector_steps % config.train_frequency == 0:
                 for _ in range(config.gradient_steps):
-                    update()
+                    learner.update(rng)
 
             eval_success = eval_random = None
             if global_step >= next_eval:
@@ -742,18 +821,18 @@ def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
             if global_step >= next_log or eval_success is not None or stopped_early:
                 if global_step >= next_log:
                     next_log += config.log_every * max(1, (global_step - next_log) // config.log_every + 1)
+                mean_return, success_rate = collector.means()
                 row = {
                     "global_step": global_step,
                     "episodes": episodes,
                     "epsilon": round(epsilon, 5),
-                    "mean_return": round(float(np.mean(recent_returns)), 4) if recent_returns else "",
-                    "success_rate": round(float(np.mean(recent_success)), 4) if recent_success else "",
-                    "loss": round(float(loss_sum) / loss_count, 6) if loss_count else "",
+                    "mean_return": mean_return,
+                    "success_rate": success_rate,
+                    "loss": "" if (loss := learner.mean_loss()) is None else round(loss, 6),
                     "eval_success": round(eval_success, 4) if eval_success is not None else "",
                     "wall_time": round(wall(), 3),
                     "eval_random_success": round(eval_random, 4) if eval_random is not None else "",
                 }
-                loss_sum, loss_count = torch.zeros(()), 0
                 history.append(row)
                 if csv_path is not None:
                     with open(csv_path, "a", newline="") as f:
@@ -784,7 +863,7 @@ def _train(config, world, out, resume, env_factory, progress) -> TrainResult:
     if csv_path is not None:
         plot_training_curve(csv_path, out / "train.png")
     return TrainResult(
-        config=config, global_step=global_step, episodes=episodes, updates=updates, wall_time=wall(),
+        config=config, global_step=global_step, episodes=episodes, updates=learner.updates, wall_time=wall(),
         best_eval_success=best_success, best_eval_step=best_step, best_eval_random=best_random, time_to_target=time_to_target,
         stopped_early=stopped_early, out_dir=out, network=q_network, best_state=best_state, history=history,
     )

@@ -46,8 +46,6 @@ Usage::
 
 from __future__ import annotations
 
-import collections
-import copy
 import csv
 import dataclasses
 import os
@@ -58,14 +56,12 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from apf_physics.curriculum import Stage, load_curriculum
 from apf_physics.errors import UserError
 from apf_physics.generate import FAMILIES, generate_world
-from apf_physics.rl.buffer import ReplayBuffer
 from apf_physics.rl.checkpoint import model_meta, read_file, save_model, write_file
-from apf_physics.rl.dqn import DQNConfig, epsilon_greedy, epsilon_schedule, store_transitions
+from apf_physics.rl.dqn import Collector, DQNConfig, Learner, epsilon_schedule, start_csv
 from apf_physics.rl.dqn import preset as dqn_preset
 from apf_physics.world import World
 
@@ -496,17 +492,13 @@ def _train(config: GeneralConfig, phases: list[Phase], out: Optional[Path], resu
     torch.manual_seed(d.seed)
     channels = 2 if config.memory else 1
     obs_shape = (channels, d.obs_size, d.obs_size)
-    q_network = d.network(obs_channels=channels)
-    target_network = copy.deepcopy(q_network) if d.target_update != "none" else q_network
-    if target_network is not q_network:
-        target_network.requires_grad_(False)
-    optimizer = torch.optim.Adam(q_network.parameters(), lr=d.learning_rate)
-    buffer = ReplayBuffer(d.buffer_size, obs_shape, d.batch_size)
+    learner = Learner(d, obs_shape)
+    q_network = learner.q_network
     validation = validation_set(config)
     field_params = (phases[0].worlds[0] if phases[0].worlds else validation.worlds[0]).field
 
     # Counters, restored on resume.
-    c = dict(global_step=0, episodes=0, updates=0, phase=0, phase_steps=0, phase_episodes=0, pool_draws=0,
+    c = dict(global_step=0, episodes=0, phase=0, phase_steps=0, phase_episodes=0, pool_draws=0,
              wall_time=0.0, best_step=None)
     best_validation: Optional[dict] = None
     best_state: Optional[dict] = None
@@ -523,34 +515,19 @@ def _train(config: GeneralConfig, phases: list[Phase], out: Optional[Path], resu
         if differ:
             raise UserError(f"{last}: was trained with different options ({', '.join(differ)}); "
                             "resume with the same preset and options")
-        q_network.load_state_dict(tensors["q_network"])
-        if target_network is not q_network:
-            target_network.load_state_dict(tensors["target_network"])
-        optimizer.load_state_dict(tensors["optimizer"])
-        c.update(meta["general"]["counters"])
+        counters = dict(meta["general"]["counters"])
+        learner.load(tensors, counters.pop("updates"))
+        c.update(counters)
         best_validation = meta["general"]["best_validation"]
         best_state = tensors.get("best_state")
         rng.bit_generator.state = meta["general"]["numpy_rng"]
         torch.set_rng_state(tensors["torch_rng"])
-        if csv_path is not None and csv_path.exists():  # drop rows logged after the checkpoint
-            with open(csv_path, newline="") as f:
-                rows = [r for r in csv.DictReader(f) if int(r["global_step"]) <= c["global_step"]]
-            with open(csv_path, "w", newline="") as f:
-                writer = csv.DictWriter(f, CSV_COLUMNS)
-                writer.writeheader()
-                writer.writerows(rows)
-    elif csv_path is not None:
-        with open(csv_path, "w", newline="") as f:
-            csv.writer(f).writerow(CSV_COLUMNS)
+    start_csv(csv_path, CSV_COLUMNS, c["global_step"] if resume else None)
 
     start_time = time.perf_counter()
     elapsed_before = float(c["wall_time"])
     history: list[dict] = []
-    recent_returns: collections.deque = collections.deque(maxlen=200)
-    recent_success: collections.deque = collections.deque(maxlen=200)
-    loss_sum, loss_count = torch.zeros(()), 0
-    online_params, target_params = list(q_network.parameters()), list(target_network.parameters())
-    huber = d.loss == "huber"
+    collector = Collector(learner, d.reward_scale, window=200)
 
     def wall() -> float:
         return elapsed_before + time.perf_counter() - start_time
@@ -561,7 +538,7 @@ def _train(config: GeneralConfig, phases: list[Phase], out: Optional[Path], resu
 
     def training_meta() -> dict:
         return {"curriculum": [p.name for p in phases], "global_step": c["global_step"], "episodes": c["episodes"],
-                "updates": c["updates"], "wall_time": wall(), "validation": best_validation,
+                "updates": learner.updates, "wall_time": wall(), "validation": best_validation,
                 "validation_step": c["best_step"], "validation_seed": config.validation_seed}
 
     def save_checkpoint() -> None:
@@ -570,45 +547,15 @@ def _train(config: GeneralConfig, phases: list[Phase], out: Optional[Path], resu
         c["wall_time"] = wall()
         meta = model_meta(q_network, field_params, config.to_dict(), training_meta())
         meta["kind"] = "checkpoint"
-        meta["general"] = {"counters": dict(c), "best_validation": best_validation,
+        meta["general"] = {"counters": {**c, "updates": learner.updates}, "best_validation": best_validation,
                            "numpy_rng": rng.bit_generator.state}
-        tensors = {"q_network": q_network.state_dict(), "optimizer": optimizer.state_dict(),
-                   "torch_rng": torch.get_rng_state()}
-        if target_network is not q_network:
-            tensors["target_network"] = target_network.state_dict()
+        tensors = {**learner.tensors(), "torch_rng": torch.get_rng_state()}
         if best_state is not None:
             tensors["best_state"] = best_state
         write_file(out / "last.pt", meta, tensors)
 
-    def update() -> None:
-        nonlocal loss_sum, loss_count
-        batch = buffer.sample(rng)
-        with torch.no_grad():
-            if d.double_dqn:  # choose with the online network, value with the target network
-                next_actions = q_network(batch.next_observations).argmax(1, keepdim=True)
-                next_q = target_network(batch.next_observations).gather(1, next_actions).squeeze(1)
-            else:
-                next_q = target_network(batch.next_observations).amax(1)
-            # TD target (eq. 32): R + γ·max Q(O_{n+1}), nothing beyond a terminal step
-            td_target = batch.rewards + d.gamma * (1.0 - batch.dones) * next_q
-        q_taken = q_network(batch.observations).gather(1, batch.actions).squeeze(1)
-        loss = F.smooth_l1_loss(q_taken, td_target) if huber else F.mse_loss(q_taken, td_target)
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        if d.max_grad_norm is not None:
-            torch.nn.utils.clip_grad_norm_(online_params, d.max_grad_norm, foreach=True)
-        optimizer.step()
-        c["updates"] += 1
-        if d.target_update == "soft":
-            with torch.no_grad():
-                torch._foreach_lerp_(target_params, online_params, d.tau)
-        elif d.target_update == "hard" and c["updates"] % d.target_update_every == 0:
-            target_network.load_state_dict(q_network.state_dict())
-        loss_sum += loss.detach()
-        loss_count += 1
-
     def evaluate_and_log(epsilon: float, evaluate: bool) -> None:
-        nonlocal best_validation, best_state, loss_sum, loss_count
+        nonlocal best_validation, best_state
         summary = None
         if evaluate:
             summary = validate(q_network, validation)
@@ -620,23 +567,22 @@ def _train(config: GeneralConfig, phases: list[Phase], out: Optional[Path], resu
                                model_meta(q_network, field_params, config.to_dict(), training_meta()))
             if progress:
                 print(f"[{wall():7.1f} s] step {c['global_step']:>9} phase {phases[min(c['phase'], len(phases) - 1)].name}"
-                      f" eps {epsilon:.3f} train success {np.mean(recent_success) if recent_success else 0:.2f}"
+                      f" eps {epsilon:.3f} train success {collector.means()[1] or 0:.2f}"
                       f" | validation {summary['success']:.3f} trap {summary['trap_success']:.3f}"
                       f" coll {summary['collisions']} ratio {summary['length_ratio']:.3f} spl {summary['spl']:.3f}"
                       f" | best spl {best_validation.get('spl', float('nan')):.3f}", flush=True)
         row = {
             "global_step": c["global_step"], "episodes": c["episodes"],
             "stage": phases[min(c["phase"], len(phases) - 1)].name, "epsilon": round(epsilon, 5),
-            "mean_return": round(float(np.mean(recent_returns)), 4) if recent_returns else "",
-            "success_rate": round(float(np.mean(recent_success)), 4) if recent_success else "",
-            "loss": round(float(loss_sum) / loss_count, 6) if loss_count else "",
+            "mean_return": collector.means()[0],
+            "success_rate": collector.means()[1],
+            "loss": "" if (loss := learner.mean_loss()) is None else round(loss, 6),
             "val_success": round(summary["success"], 4) if summary else "",
             "val_trap_success": round(summary["trap_success"], 4) if summary else "",
             "val_length_ratio": round(summary["length_ratio"], 4) if summary else "",
             "val_spl": round(summary["spl"], 4) if summary else "",
             "pool_draws": c["pool_draws"], "wall_time": round(wall(), 3),
         }
-        loss_sum, loss_count = torch.zeros(()), 0
         history.append(row)
         if csv_path is not None:
             with open(csv_path, "a", newline="") as f:
@@ -648,7 +594,6 @@ def _train(config: GeneralConfig, phases: list[Phase], out: Optional[Path], resu
     next_eval = next_multiple(c["global_step"], config.eval_every)
     next_log = next_multiple(c["global_step"], config.log_every)
     next_checkpoint = next_multiple(c["global_step"], config.checkpoint_every)
-    n = d.num_envs
     epsilon = d.epsilon_initial
     try:
         while c["phase"] < len(phases) and not run_finished():
@@ -660,34 +605,20 @@ def _train(config: GeneralConfig, phases: list[Phase], out: Optional[Path], resu
                 worlds += draw_pool(config, c["pool_draws"])
                 next_refresh = next_multiple(c["phase_steps"], config.refresh_every)
             envs = _Envs(worlds, config, seed=d.seed + c["global_step"])
-            obs = envs.reset()
-            prev_done = np.zeros(n, bool)
-            ep_return = np.zeros(n)
+            collector.begin(envs.reset())
             phase_done = redraw = False
             while not (phase_done or redraw or run_finished()):
                 episodes_for_epsilon = c["phase_episodes"] if config.restart_exploration else c["episodes"]
                 epsilon = epsilon_schedule(d, episodes_for_epsilon)
-                actions = epsilon_greedy(q_network, obs, epsilon, rng)
-                next_obs, rewards, terminated, truncated, success = envs.step(actions)
-                valid = store_transitions(buffer, obs, next_obs, actions, rewards * d.reward_scale, terminated,
-                                          prev_done)
-                done = (terminated | truncated) & valid
-                ep_return += np.where(valid, rewards, 0.0)
-                if done.any():
-                    recent_returns.extend(ep_return[done].tolist())
-                    recent_success.extend(np.asarray(success, bool)[done].tolist())
-                    c["episodes"] += int(done.sum())
-                    c["phase_episodes"] += int(done.sum())
-                    ep_return[done] = 0.0
-                prev_done = terminated | truncated
-                obs = next_obs
-                added = int(valid.sum())
+                added, ended = collector.step(envs.step, epsilon, rng)
+                c["episodes"] += ended
+                c["phase_episodes"] += ended
                 c["global_step"] += added
                 c["phase_steps"] += added
 
-                if len(buffer) >= max(d.learning_starts, d.batch_size):
+                if learner.ready:
                     for _ in range(d.gradient_steps):
-                        update()
+                        learner.update(rng)
 
                 phase_done = ((phase.episodes is not None and c["phase_episodes"] >= phase.episodes)
                               or (phase.steps is not None and c["phase_steps"] >= phase.steps))
@@ -716,7 +647,7 @@ def _train(config: GeneralConfig, phases: list[Phase], out: Optional[Path], resu
         evaluate_and_log(epsilon, True)
     save_checkpoint()
     return GeneralResult(
-        config=config, global_step=c["global_step"], episodes=c["episodes"], updates=c["updates"],
+        config=config, global_step=c["global_step"], episodes=c["episodes"], updates=learner.updates,
         wall_time=wall(), phase=c["phase"], best_validation=best_validation, best_step=c["best_step"],
         out_dir=out, network=q_network, best_state=best_state, history=history,
     )
