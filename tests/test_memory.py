@@ -143,12 +143,20 @@ def test_dqn_planner_runs_a_memory_model(tmp_path, fixed20):
     assert planner.memory is not None and planner.memory.counts.sum() > 2
 
 
-def test_general_memory_preset_trains_a_two_channel_network(tmp_path):
+@pytest.mark.parametrize("name", ["general-memory", "general-revisit"])
+def test_general_memory_presets_train_a_two_channel_network(tmp_path, name):
+    from apf_physics.envs.reward import reward_weights
     from apf_physics.errors import UserError
     from apf_physics.rl.checkpoint import load_model
-    from apf_physics.rl.general import GeneralConfig, general_preset, train_general
+    from apf_physics.rl.general import DEFAULT_PRESET, GeneralConfig, general_preset, train_general
 
-    config = general_preset("general-memory", total_steps=300, time_limit=None, num_envs=4, batch_size=16,
+    weights = reward_weights(general_preset(name).dqn.reward)
+    if name == "general-revisit":
+        assert name == DEFAULT_PRESET
+        assert weights.revisit < 0 and weights.length < 0 and weights.w2 == 1000
+    else:
+        assert weights.revisit == 0 and weights.length == 0
+    config = general_preset(name, total_steps=300, time_limit=None, num_envs=4, batch_size=16,
                             learning_starts=32, buffer_size=2_000, pool_size=2, pool_starts=2,
                             max_episode_steps=30, validation_worlds=1, validation_starts=2,
                             eval_every=200, log_every=100, checkpoint_every=200)

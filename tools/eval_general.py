@@ -2,7 +2,9 @@
 
 For each planner (and each DQN model given): success over all starts, success over the
 trap starts (gradient descent does not reach the target from them), collisions, the mean
-path length on the successes divided by A*'s mean over the same starts, and success over the
+path length on the successes divided by A*'s mean over the same starts, SPL (success weighted
+by path length: the mean over all starts of A* length / max(path, A* length) on a success, 0
+otherwise; Anderson et al. 2018), and success over the
 starts from which unit moves can end within the goal tolerance at all (the DQN planner's
 moves are integer vectors: with a tolerance below √2/2 some starts can never succeed). Episodes run
 through the physics exactly as ``apf-physics eval`` runs them.
@@ -18,6 +20,8 @@ Usage::
         --model general=apf_physics/models/general.pt --model thesis=runs/thesis/best.pt \\
         [--json OUT] [--per-world]
     PYTHONPATH=. python tools/eval_general.py worlds/thesis/test1.yaml ... --planners dqn --per-world
+
+``--model`` applies to the planners ``dqn`` and ``dqn-unshielded`` (one row per model each).
 """
 
 from __future__ import annotations
@@ -71,6 +75,7 @@ def summarise(episodes, labels) -> dict:
         index[e.world] = k + 1
         trapped, astar, lattice = labels[e.world][k]
         rows.append((e.success, e.outcome == "collision", trapped, e.path_length, astar, lattice))
+    spl = [r[4] / max(r[3], r[4]) if r[0] and r[4] else float(r[0]) for r in rows]
     success = np.array([r[0] for r in rows])
     collision = np.array([r[1] for r in rows])
     trapped = np.array([r[2] for r in rows])
@@ -90,6 +95,7 @@ def summarise(episodes, labels) -> dict:
         "length_ratio_vs_astar": float(ratio),
         "mean_path_length": float(np.mean([r[3] for r in ok])) if ok else float("nan"),
         "mean_astar_length": float(np.mean([r[4] for r in ok])) if ok else float("nan"),
+        "spl": float(np.mean(spl)),
     }
 
 
@@ -107,10 +113,10 @@ def main(argv=None) -> int:
     worlds, labels = load_labelled(args.worlds)
     runs = []
     for name in [n.strip() for n in args.planners.split(",") if n.strip()]:
-        if name == "dqn" and args.model:
+        if name in ("dqn", "dqn-unshielded") and args.model:
             for spec in args.model:
                 label, _, path = spec.partition("=")
-                runs.append((f"dqn:{label}", make_planner("dqn", model=path)))
+                runs.append((f"{name}:{label}", make_planner(name, model=path)))
         else:
             runs.append((name, make_planner(name)))
 
@@ -119,8 +125,8 @@ def main(argv=None) -> int:
     n_lattice = sum(q for v in labels.values() for _, _, q in v)
     print(f"{len(worlds)} worlds, {n_starts} starts, {n_trap} trap starts ({n_trap / n_starts:.0%}); "
           f"{n_lattice} starts ({n_lattice / n_starts:.0%}) can end within the goal tolerance with unit moves")
-    header = (f"{'planner':<22} {'success':>13} {'trap-start success':>19} {'collisions':>10} {'length/A*':>10}"
-              f" {'unit-move-reachable':>20}")
+    header = (f"{'planner':<26} {'success':>13} {'trap-start success':>19} {'collisions':>10} {'length/A*':>10}"
+              f" {'SPL':>6} {'unit-move-reachable':>20}")
     print(header)
     print("-" * len(header))
     results = {}
@@ -128,9 +134,9 @@ def main(argv=None) -> int:
         ev = evaluate(planner, worlds, max_steps=args.max_steps)
         s = summarise(ev.episodes, labels)
         results[label] = s
-        print(f"{label:<22} {s['successes']:>4}/{s['starts']:<4}{s['success_rate']:>5.1%} "
+        print(f"{label:<26} {s['successes']:>4}/{s['starts']:<4}{s['success_rate']:>5.1%} "
               f"{s['trap_successes']:>6}/{s['trap_starts']:<4}{s['trap_success_rate']:>7.1%} "
-              f"{s['collisions']:>10} {s['length_ratio_vs_astar']:>10.3f}"
+              f"{s['collisions']:>10} {s['length_ratio_vs_astar']:>10.3f} {s['spl']:>6.3f}"
               f" {s['lattice_successes']:>14}/{s['lattice_starts']:<4}")
         if args.per_world:
             per = {}
@@ -138,7 +144,7 @@ def main(argv=None) -> int:
                 per.setdefault(e.world, []).append(e.success)
             worlds_ok = sum(any(v) for v in per.values())
             detail = ", ".join(f"{w} {sum(v)}/{len(v)}" for w, v in per.items())
-            print(f"{'':<22} worlds with a success: {worlds_ok}/{len(per)} ({detail})")
+            print(f"{'':<26} worlds with a success: {worlds_ok}/{len(per)} ({detail})")
             s["per_world"] = {w: [bool(x) for x in v] for w, v in per.items()}
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))

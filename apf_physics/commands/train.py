@@ -19,12 +19,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     where.add_argument("--curriculum", metavar="FILE",
                        help="general training: a curriculum file of stages (e.g. worlds/curricula/thesis.yaml); "
                             "stage i trains its worlds with every earlier stage's (rehearsal), then generated "
-                            "worlds; presets general-memory (the shipped general model), general or thesis-general")
+                            "worlds; presets general-revisit (default: the shipped general model), general-memory, "
+                            "general or thesis-general")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing)")
     p.add_argument("--preset", default=None,
                    help="with --world: fast (default: learns fastest), thesis-fixed (Table 3 as written) or "
-                        "thesis-general (Table 4); with --curriculum: general (default), general-memory or "
-                        "thesis-general")
+                        "thesis-general (Table 4); with --curriculum: general-revisit (default), general-memory, "
+                        "general or thesis-general")
     p.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="change one training option, e.g. --set total_steps=500000 --set double_dqn=false "

@@ -49,8 +49,8 @@ class RewardWeights:
 REWARD_PRESETS: dict[str, RewardWeights] = {
     "thesis-fixed": RewardWeights(w1=-1000.0, w2=1000.0, w3=-1.0, beta=-4.0),      # Table 3
     "thesis-general": RewardWeights(w1=-10.0, w2=10.0, w3=-0.2, beta=-20.0),       # Table 4
-    # Table 3 with a revisit penalty about the size of a median step's W4 in a 50×50 general field
-    "thesis-fixed-revisit": RewardWeights(w1=-1000.0, w2=1000.0, w3=-1.0, beta=-4.0, revisit=-50.0),
+    # Table 3 plus W5 (a revisit costs about a median step's W4 in a 50×50 general field) and W6
+    "general": RewardWeights(w1=-1000.0, w2=1000.0, w3=-1.0, beta=-4.0, revisit=-50.0, length=-40.0),
 }
 
 TERMS = ("collision", "target", "step", "potential", "revisit", "length")  # W1 ... W6

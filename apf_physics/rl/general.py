@@ -8,7 +8,7 @@ Two presets (:func:`general_preset`):
   own starts) trained through the curriculum file's stages, 150 searches per stage, ε decaying
   anew over each stage's 150 searches. Stage ``i`` trains its worlds together with every
   earlier stage's worlds, one drawn at random per search (rehearsal).
-- ``general`` (recommended): domain randomisation. A pool of worlds freshly drawn with
+- ``general``: domain randomisation. A pool of worlds freshly drawn with
   :func:`apf_physics.generate.generate_world` over all families, redrawn every
   ``refresh_every`` transitions, plus every world of the curriculum file, learned with the
   ``fast`` recipe of :mod:`apf_physics.rl.dqn` (the thesis-fixed network on an 11×11 window,
@@ -27,16 +27,25 @@ Two presets (:func:`general_preset`):
   the environments (not a quarter) starting at the worlds' own starts, behind their
   obstacles where gradient descent gets trapped. A reactive policy on the potential alone
   cannot tell a well it has just left from one it has not tried; the memory can.
+- ``general-revisit`` (recommended; the shipped ``general.pt``): ``general-memory`` with the
+  reward preset ``"general"`` (:mod:`apf_physics.envs.reward`): Table 3's weights plus a
+  revisit term (W5 = −50 per earlier visit of the cell entered, up to 4) and a length term
+  (W6 = −40 per unit moved). With W4 alone, pacing in a well costs next to nothing (each step
+  down pays back the step up) while climbing out costs at once, so the greedy policy learns to
+  pace; W5 makes pacing cost. W3 charges a diagonal move like an axis move, so zigzagging on
+  diagonals costs no more steps than going straight; W6 prefers the shorter path.
 
-Both keep the network with the best greedy evaluation on a fixed validation set of generated
-worlds (``validation_seed``; it must differ from the held-out test seed, 100) in ``best.pt``
-and the full training state in ``last.pt`` (resumable), and log ``train.csv``.
+All keep the network with the best greedy evaluation on a fixed validation set of generated
+worlds (``validation_seed``; it must differ from the held-out test seed, 100) in ``best.pt``:
+fewest collisions, then the highest SPL (success weighted by path length), each episode run
+as ``apf-physics eval --planner dqn`` runs it (through the physics, shielded). The full
+training state goes to ``last.pt`` (resumable) and the log to ``train.csv``.
 
 Usage::
 
     from apf_physics.rl.general import general_preset, train_general
 
-    config = general_preset("general", seed=0, time_limit=1500)
+    config = general_preset("general-revisit", seed=0, time_limit=1500)
     result = train_general(config, curriculum="worlds/curricula/thesis.yaml", out_dir="runs/general")
     print(result.best_validation)           # the best validation summary; the network is in best.pt
 
@@ -182,7 +191,11 @@ PRESETS: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
 }
 PRESETS["general-memory"] = (PRESETS["general"][0], {**PRESETS["general"][1], "obs_transform": "relative-log-memory"},
                              {**PRESETS["general"][2], "memory": True, "world_start_fraction": 0.5})
+PRESETS["general-revisit"] = (PRESETS["general-memory"][0], {**PRESETS["general-memory"][1], "reward": "general"},
+                              PRESETS["general-memory"][2])
 """Presets: the learner preset of :mod:`apf_physics.rl.dqn` they start from and the changes."""
+DEFAULT_PRESET = "general-revisit"
+"""What ``apf-physics train --curriculum FILE`` trains without ``--preset``: the shipped model's recipe."""
 
 
 def _replace(config: GeneralConfig, overrides: dict[str, Any]) -> GeneralConfig:
@@ -205,7 +218,7 @@ def general_preset(name: str, **overrides: Any) -> GeneralConfig:
     """A named general-training configuration with some fields changed.
 
     Args:
-        name: ``"thesis-general"``, ``"general"`` or ``"general-memory"``.
+        name: ``"thesis-general"``, ``"general"``, ``"general-memory"`` or ``"general-revisit"``.
         **overrides: Fields of :class:`GeneralConfig` or of its learner (:class:`DQNConfig`),
             e.g. ``seed=1``, ``time_limit=600``, ``gamma=0.95``.
 
@@ -660,7 +673,8 @@ def run_curriculum_command(curriculum_path: str | os.PathLike | None, preset: Op
 
     Args:
         curriculum_path: The curriculum file (None: only the randomised phase of ``general``).
-        preset: ``"general"`` (default) or ``"thesis-general"``; on resume, the saved one.
+        preset: ``"general-revisit"`` (default), ``"general-memory"``, ``"general"`` or
+            ``"thesis-general"``; on resume, the saved one.
         out: Output directory.
         seed: Random seed (default: the preset's, 0).
         resume: Continue the run in ``out``.
@@ -689,7 +703,7 @@ def run_curriculum_command(curriculum_path: str | os.PathLike | None, preset: Op
     else:
         if (out / "last.pt").exists():
             raise UserError(f"{out} already holds a training run; use --resume to continue it or another --out")
-        config = general_preset(preset or "general", **overrides)
+        config = general_preset(preset or DEFAULT_PRESET, **overrides)
     result = train_general(config, curriculum=curriculum_path, out_dir=out, seed=seed, resume=resume,
                            progress=progress)
     best = result.best_validation
