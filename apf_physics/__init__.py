@@ -1,7 +1,9 @@
 """apf-physics: artificial-potential-field path planning with pymunk physics, DQN planners and Gymnasium environments."""
 
 from apf_physics.errors import ModelError, UserError, WorldError
-from apf_physics.world import FieldParams, World, load_world, load_worlds, save_world, world_from_dict
+from apf_physics.field import FieldParams
+from apf_physics.world import World
+from apf_physics.worldfile import load_world, load_worlds, save_world, world_from_dict
 
 __version__ = "0.1.0"
 

@@ -2,12 +2,9 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
-if TYPE_CHECKING:
-    from apf_physics.world import World
+from apf_physics.world import World
 
 ACTION_NAMES = ("up", "down", "left", "right", "left-up", "left-down", "right-up", "right-down", "stay")
 ACTIONS = np.array(
@@ -23,11 +20,11 @@ MOVE_SAMPLES = 8
 def move_clearance(world: World, positions: np.ndarray, moves: np.ndarray = ACTIONS) -> np.ndarray:
     """A lower bound of the clearance of a robot's centre along each straight move.
 
-    The world's clearance (distance to the nearest obstacle or the map's edge) is sampled at
-    the start and at :data:`MOVE_SAMPLES` evenly spaced points of the move, and the least of
-    them is lowered by half the spacing: clearance changes no faster than distance, so no
-    point between two samples is nearer than that. A move whose bound is at least the
-    robot's radius cannot touch anything (the physics moves the disc along the segment).
+    The world's clearance is sampled at the start and at :data:`MOVE_SAMPLES` evenly spaced
+    points of the move (:meth:`World.path_clearance`), and the least of them is lowered by
+    half the spacing: clearance changes no faster than distance, so no point between two
+    samples is nearer than that. A move whose bound is at least the robot's radius cannot
+    touch anything (the physics moves the disc along the segment).
 
     Args:
         world: The world.
@@ -39,7 +36,9 @@ def move_clearance(world: World, positions: np.ndarray, moves: np.ndarray = ACTI
     """
     positions = np.asarray(positions, dtype=float).reshape(-1, 2)
     moves = np.asarray(moves, dtype=float).reshape(-1, 2)
-    t = np.linspace(0.0, 1.0, MOVE_SAMPLES + 1)
-    points = positions[:, None, None, :] + t[None, None, :, None] * moves[None, :, None, :]   # (N, M, S+1, 2)
-    clear = world.clearance(points.reshape(-1, 2)).reshape(len(positions), len(moves), -1).min(axis=2)
-    return clear - 0.5 * np.hypot(*moves.T)[None, :] / MOVE_SAMPLES
+    spacing = np.hypot(*moves.T) / MOVE_SAMPLES                                   # (M,)
+    start = np.repeat(positions, len(moves), axis=0)
+    end = start + np.tile(moves, (len(positions), 1))
+    # a move of length 0 is one point: any positive spacing samples it
+    clear = world.path_clearance(start, end, np.tile(np.where(spacing > 0, spacing, 1.0), len(positions)))
+    return clear.reshape(len(positions), len(moves)) - 0.5 * spacing[None, :]

@@ -10,7 +10,7 @@ from apf_physics import __version__
 from apf_physics.errors import UserError
 
 # Subcommand modules in apf_physics.commands, in the order ``--help`` lists them.
-COMMANDS = ("demo", "eval", "train", "generate", "render", "plot_field", "plot_curve")
+COMMANDS = ("demo", "eval", "train", "generate", "render", "plot_field", "plot_curve", "worlds")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -23,7 +23,8 @@ from typing import Any, Sequence
 
 
 from apf_physics.errors import UserError
-from apf_physics.world import World, load_world, read_yaml_file
+from apf_physics.world import World
+from apf_physics.worldfile import load_world, read_yaml_file
 
 
 @dataclass(frozen=True)

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import os
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -27,14 +29,15 @@ class Evaluation:
         n = len(eps)
         ok = [e for e in eps if e.success]
         extra = {}
-        if eps and hasattr(eps[0], "link_in_range"):  # formations: link and robot–robot figures
+        formations = [e.formation for e in eps if e.formation is not None]
+        if formations and len(formations) == n:  # formations: link and robot–robot figures
             steps = np.array([max(e.steps, 1) for e in eps], float)
-            shares = np.array([e.link_in_range for e in eps], float).reshape(n, -1)
+            shares = np.array([f.link_in_range for f in formations], float).reshape(n, -1)
             extra = {
                 "link_in_range": [round(float(v), 4) for v in (shares * steps[:, None]).sum(0) / steps.sum()],
                 "episodes_all_links_99": int(np.sum(shares.min(axis=1) >= 0.99)) if shares.size else n,
-                "robot_robot_collisions": int(sum(e.robot_robot_collisions for e in eps)),
-                "min_robot_distance": round(float(min(e.min_robot_distance for e in eps)), 4),
+                "robot_robot_collisions": int(sum(f.robot_robot_collisions for f in formations)),
+                "min_robot_distance": round(float(min(f.min_robot_distance for f in formations)), 4),
             }
         return {
             "episodes": n,
@@ -52,16 +55,25 @@ class Evaluation:
 
 
 def evaluate(planner: Planner, worlds: Sequence[World], starts: dict[str, np.ndarray] | None = None,
-             max_steps: int | None = None, run=rollout, label: str | None = None) -> Evaluation:
+             max_steps: int | None = None, formation: bool = False,
+             progress: Callable[[World], None] | None = None) -> Evaluation:
     """Run ``planner`` from every start of every world (or from ``starts[world.name]``).
 
-    ``run`` is the rollout function (:func:`~apf_physics.rollout.rollout`, or a formation's).
+    Args:
+        planner: The planner (of the leaders, with ``formation``).
+        worlds: The worlds.
+        starts: Starts per world name, instead of the worlds' own.
+        max_steps: Step limit per episode (default: :func:`~apf_physics.rollout.default_max_steps`).
+        formation: Run each world's formation (its followers behind each leader).
+        progress: Called with each world once its episodes are done.
     """
     episodes: list[Episode] = []
     for world in worlds:
         s = world.starts if starts is None else starts[world.name]
-        episodes.extend(run(world, planner, s, max_steps=max_steps))
-    return Evaluation(label or planner.name, episodes)
+        episodes.extend(rollout(world, planner, s, max_steps=max_steps, formation=formation))
+        if progress is not None:
+            progress(world)
+    return Evaluation(f"{planner.name}+formation" if formation else planner.name, episodes)
 
 
 def format_table(evaluations: Sequence[Evaluation]) -> str:
@@ -93,16 +105,12 @@ def format_table(evaluations: Sequence[Evaluation]) -> str:
 
 
 def write_json(evaluations: Sequence[Evaluation], path: str | Path) -> None:
-    """One planner: ``{"planner", "episodes", "summary"}``; several: a list of those."""
-    data = evaluations[0].to_dict() if len(evaluations) == 1 else [ev.to_dict() for ev in evaluations]
-    write_text_atomic(path, json.dumps(data, indent=1))
+    """A list with one ``{"planner", "episodes", "summary"}`` object per planner (one or several)."""
+    write_text_atomic(path, json.dumps([ev.to_dict() for ev in evaluations], indent=1))
 
 
 def write_text_atomic(path: str | Path, text: str) -> None:
     """Write ``text`` to ``path`` through a temporary file and a rename; a clear error if it cannot."""
-    import os
-    import tempfile
-
     path = Path(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -17,14 +17,45 @@ same formula continued.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Sequence
+import math
+from dataclasses import dataclass, fields
+from typing import Sequence
 
 import numpy as np
 
+from apf_physics.obstacles import Obstacle
 
-if TYPE_CHECKING:
-    from apf_physics.world import FieldParams, Obstacle
+FIELD_PRESETS: dict[str, dict[str, float]] = {
+    # SPEC §1, thesis Tables 2–4. u_max is the cap used in place of infinity (thesis Fig. 11).
+    "thesis-demo": {"katt": 1, "krep": 20, "kstr": 8, "p0": 3, "ps": 8, "u_max": 100},
+    "thesis-fixed": {"katt": 2, "krep": 20, "kstr": 8, "p0": 0.5, "ps": 8, "u_max": 100},
+    "thesis-general": {"katt": 1, "krep": 20, "kstr": 8, "p0": 3, "ps": 8, "u_max": 100},
+}
+"""The thesis's parameter sets by name."""
+
+
+@dataclass(frozen=True)
+class FieldParams:
+    """Parameters of the artificial potential field (SPEC §1)."""
+
+    katt: float   # attraction gain
+    krep: float   # repulsion gain
+    kstr: float   # black-hole strength
+    p0: float     # repulsion range [world units]
+    ps: float     # black-hole range [world units]
+    u_max: float  # cap of each repulsive term, also its value inside an obstacle
+
+    @classmethod
+    def preset(cls, name: str) -> "FieldParams":
+        """One of :data:`FIELD_PRESETS` by name."""
+        return cls(**{k: float(v) for k, v in FIELD_PRESETS[name].items()})
+
+    def as_dict(self) -> dict[str, float]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def equals_preset(self, name: str) -> bool:
+        """Whether these parameters are exactly those of preset ``name``."""
+        return self.as_dict() == {k: float(v) for k, v in FIELD_PRESETS[name].items()}
 
 
 def _target_offsets(points: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -205,3 +236,77 @@ class Raster:
         v = self.values
         return ((1 - fy) * ((1 - fx) * v[r0, c0] + fx * v[r0, c0 + 1])
                 + fy * ((1 - fx) * v[r0 + 1, c0] + fx * v[r0 + 1, c0 + 1]))
+
+
+class Atlas:
+    """Several rasters of one resolution packed into one float32 image, sampled in one call.
+
+    Sampling thousands of points spread over several worlds' rasters is one
+    ``cv2.remap`` (bilinear, float weights from OpenCV 5 on): the environments sample every
+    robot's observation window this way, and the physics its clearance. Points must lie
+    within their own raster (callers pad their rasters to cover every point they ask
+    for): unlike :meth:`Raster.sample`, nothing is clamped, which would cost more than the
+    lookup itself.
+
+    Args:
+        resolution: Nodes per world unit of every raster added.
+    """
+
+    def __init__(self, resolution: int):
+        self.resolution = int(resolution)
+        self.rasters: list[Raster] = []
+        self._image: np.ndarray | None = None
+
+    def add(self, raster: Raster) -> int:
+        """Add a raster (its grid must have this atlas's resolution) and return its index."""
+        if raster.grid.resolution != self.resolution:
+            raise ValueError(f"raster resolution {raster.grid.resolution} in an atlas of resolution {self.resolution}")
+        self.rasters.append(raster)
+        self._image = None
+        return len(self.rasters) - 1
+
+    def _build(self) -> None:
+        """Lay the rasters out in blocks on a square-ish grid of one float32 image."""
+        rows = max(r.grid.shape[0] for r in self.rasters) + 1   # one spare row and column between blocks
+        cols = max(r.grid.shape[1] for r in self.rasters) + 1
+        per_row = math.ceil(math.sqrt(len(self.rasters)))
+        n_rows = math.ceil(len(self.rasters) / per_row)
+        image = np.zeros((n_rows * rows, per_row * cols), np.float32)
+        corner = np.zeros((len(self.rasters), 2))                # image (col, row) of each raster's node [0, 0]
+        for i, raster in enumerate(self.rasters):
+            r0, c0 = (i // per_row) * rows, (i % per_row) * cols
+            h, w = raster.grid.shape
+            image[r0:r0 + h, c0:c0 + w] = raster.values
+            corner[i] = (c0, r0)
+        self._image = image
+        origin = np.array([r.grid.origin for r in self.rasters], float)
+        self._shift = corner - origin * self.resolution          # image index = world point · resolution + shift
+
+    def sample(self, points: np.ndarray, ids: np.ndarray | int, offsets: np.ndarray | None = None) -> np.ndarray:
+        """Bilinear values at points of the rasters ``ids``.
+
+        Args:
+            points: (N, 2) world points; point ``n`` is in raster ``ids[n]`` (or all in raster ``ids``).
+            ids: (N,) raster indices, or one index for all.
+            offsets: (Q, 2) world offsets; when given, each point stands for the Q points
+                ``points[n] + offsets[q]`` (e.g. an observation window around a robot).
+
+        Returns:
+            (N,) float32 values, or (N, Q) with ``offsets``.
+        """
+        import cv2
+
+        if self._image is None:
+            self._build()
+        index = np.asarray(points, dtype=float).reshape(-1, 2) * self.resolution
+        index += self._shift[ids]
+        index = index.astype(np.float32)          # image coordinates: float32 is what remap takes
+        if offsets is None:
+            map_x, map_y = index[:, 0:1], index[:, 1:2]
+        else:  # x and y maps apart: broadcasting over a last axis of 2 is several times slower
+            scaled = (np.asarray(offsets, float) * self.resolution).astype(np.float32)
+            map_x = index[:, 0:1] + scaled[None, :, 0]
+            map_y = index[:, 1:2] + scaled[None, :, 1]
+        values = cv2.remap(self._image, np.ascontiguousarray(map_x), np.ascontiguousarray(map_y), cv2.INTER_LINEAR,
+                           borderMode=cv2.BORDER_REPLICATE)
+        return values[:, 0] if offsets is None else values

@@ -1,23 +1,30 @@
-"""Formations: a leader steered by a planner, followers moved by their own fields (SPEC §3).
+"""Formations (SPEC §3): where followers start, and the rule by which each follower moves.
 
-:func:`rollout_formation` runs one formation per start, all at once (one physics slot per
-start, ``1 + followers`` robots per slot), and reports per episode every robot's success,
-the smallest robot–robot distance, collisions by kind, and the share of steps each link
-stayed within ``comm_range``.
+Follower i moves by its own potential field: attraction to its anchor (in a line, the point ``spacing`` back along the
+path of the robot it follows, so that the chain retraces a path known to be free; for other
+shapes, its slot relative to the leader's heading), repulsion from the obstacles, and
+repulsion from the other robots, except the one it follows (as the thesis assigns them:
+follower 1 is repelled by follower 2, follower 2 by the leader). Each control step it
+takes the best of its nine neighbouring moves; when the best would make it collide (with
+the robot it follows, another robot's move this step, an obstacle or the map's edge) it
+takes the next best, and so on (the thesis's "second best" rule, carried on until a safe
+move is found). Followers decide in chain order, each knowing the moves already chosen
+ahead of it, so that all robots then move at the same time without touching.
+
+This is a policy: it produces displacements; the physics knows nothing of it. It lives
+beside the engine rather than with the planners because every formation runs it, whoever
+steers the leader (a planner, a Gymnasium agent).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Sequence
+from dataclasses import replace
 
 import numpy as np
 
-from apf_physics.evaluate import Evaluation, evaluate
-from apf_physics.physics import Physics
-from apf_physics.planners.base import Planner
-from apf_physics.planners.follower import FollowerController, initial_followers
-from apf_physics.rollout import Episode, TrapDetector, default_max_steps
+from apf_physics.actions import ACTIONS, SAFETY
+from apf_physics.errors import UserError
+from apf_physics.field import repulsive, repulsive_term
 from apf_physics.world import FormationSpec, World
 
 
@@ -26,141 +33,239 @@ def formation_spec(world: World) -> FormationSpec:
     return world.formation if world.formation is not None else FormationSpec()
 
 
-@dataclass
-class FormationEpisode(Episode):
-    """A formation's run from one start (the leader's path is :attr:`path`).
+def formation_offsets(spec: FormationSpec) -> np.ndarray | None:
+    """``(n, 2)`` slot offsets ``[back, left]`` relative to the leader's heading, or None for a line."""
+    n = spec.followers
+    if spec.shape == "line":
+        return None
+    if spec.shape == "wedge":
+        rows = (np.arange(n) // 2 + 1) * spec.spacing
+        side = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
+        return np.column_stack([rows, side * rows])
+    return np.asarray(spec.offsets, dtype=float).reshape(n, 2)
 
-    Attributes:
-        positions: ``(steps + 1, 1 + n, 2)`` every robot's positions, the leader first.
-        comm_range: The formation's communication range.
-        robot_robot_collisions: Control steps in which two robots touched.
-        robot_obstacle_collisions: Control steps in which a robot touched an obstacle or the edge.
-        link_in_range: Per link (follower i and the robot it follows), the share of steps within range.
+
+def swept_distance(p: np.ndarray, dp: np.ndarray, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+    """Smallest distance between two points moving linearly over one step (broadcasting)."""
+    r0 = p - q
+    dr = dp - dq
+    a = np.sum(dr * dr, axis=-1)
+    t = np.clip(np.where(a > 0, -np.sum(r0 * dr, axis=-1) / np.where(a > 0, a, 1.0), 0.0), 0.0, 1.0)
+    closest = r0 + t[..., None] * dr
+    return np.sqrt(np.sum(closest * closest, axis=-1))
+
+
+class FollowerController:
+    """Moves of the followers of one formation.
+
+    Args:
+        world: The world (obstacles, field parameters).
+        spec: The formation.
+        katt: Attraction gain towards the anchor (default: the world's ``katt``).
+        robot_repulsion_range: Surface distance under which another robot repels [units].
     """
 
-    positions: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 2)))
-    comm_range: float = 0.0
-    robot_robot_collisions: int = 0
-    robot_obstacle_collisions: int = 0
-    link_in_range: list = field(default_factory=list)
-    followed: list = field(default_factory=list)
+    def __init__(self, world: World, spec: FormationSpec, katt: float | None = None,
+                 robot_repulsion_range: float | None = None):
+        self.world = world
+        self.spec = spec
+        self.katt = world.field.katt if katt is None else katt
+        self.krep = world.field.krep
+        self.u_max = world.field.u_max
+        self.robot_range = 0.5 * spec.spacing if robot_repulsion_range is None else robot_repulsion_range
+        # Obstacles repel followers over a short range only: the trail they retrace is already
+        # clear, and a wide repulsion (Table 2/4's p0 = 3) would push them off it and behind.
+        self.obstacle_field = replace(world.field, p0=min(world.field.p0, 0.5))
+        self.offsets = formation_offsets(spec)
+        r = world.robot_radius
+        self.contact = 2 * r + SAFETY
+        self.fractions = np.array([0.25, 0.5, 0.75, 1.0])
 
-    @property
-    def min_robot_distance(self) -> float:
-        p = self.positions
-        diff = p[:, :, None, :] - p[:, None, :, :]
-        d = np.sqrt(np.sum(diff * diff, axis=-1))
-        n = p.shape[1]
-        return float(d[:, ~np.eye(n, dtype=bool)].min()) if n > 1 else float("inf")
+    HEADING_SMOOTHING = 0.8  # share of the previous heading kept each step (slots swing less)
 
-    def final_links_in_range(self) -> list[bool]:
-        last = self.positions[-1]
-        return [bool(np.hypot(*(last[i + 1] - last[j])) <= self.comm_range) for i, j in enumerate(self.followed)]
+    def reset(self, positions: np.ndarray) -> None:
+        """Start a new run with robots at ``positions`` (leader first)."""
+        positions = np.asarray(positions, dtype=float)
+        self.trails = [[p.copy()] for p in positions]
+        target = self.world.targets[np.argmin(np.hypot(*(self.world.targets - positions[0]).T))]
+        to_target = target - positions[0]
+        self.heading = to_target / max(np.hypot(*to_target), 1e-12)
 
-    @property
-    def success(self) -> bool:
-        return self.outcome == "reached" and all(self.final_links_in_range())
+    def _trail_point(self, robot: int, head: np.ndarray, back: float) -> np.ndarray:
+        """The point ``back`` units along ``robot``'s trail behind ``head`` (its next position)."""
+        points = [head] + self.trails[robot][::-1]
+        remaining = back
+        for a, b in zip(points[:-1], points[1:]):
+            seg = float(np.hypot(*(b - a)))
+            if seg >= remaining:
+                return a + (b - a) * (remaining / seg)
+            remaining -= seg
+        return points[-1]
 
-    def to_dict(self) -> dict:
-        data = super().to_dict()
-        data["success"] = self.success
-        links = self.final_links_in_range()
-        roles = ["leader"] + [f"follower{i + 1}" for i in range(len(self.followed))]
-        data["robots"] = [
-            {"role": role, "success": (self.outcome == "reached") if k == 0 else (self.outcome == "reached" and links[k - 1]),
-             "final_position": [round(float(v), 4) for v in self.positions[-1, k]]}
-            for k, role in enumerate(roles)]
-        data["min_robot_distance"] = round(self.min_robot_distance, 4)
-        data["robot_robot_collisions"] = self.robot_robot_collisions
-        data["robot_obstacle_collisions"] = self.robot_obstacle_collisions
-        data["link_in_range"] = [round(v, 4) for v in self.link_in_range]
-        return data
+    def anchors(self, positions: np.ndarray, heading: np.ndarray) -> np.ndarray:
+        """Where each follower is pulled to: ``spacing`` back along the trail of the robot it
+        follows (line), or its slot relative to the leader's heading."""
+        if self.offsets is None:
+            return np.array([self._trail_point(i, positions[i], self.spec.spacing) for i in range(len(positions) - 1)])
+        h = heading / max(np.hypot(*heading), 1e-12)
+        left = np.array([-h[1], h[0]])
+        return positions[0] - self.offsets[:, :1] * h + self.offsets[:, 1:] * left
+
+    def _clear_line(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """True when a robot could move straight from ``a`` to ``b`` without nearing an obstacle."""
+        return bool(self.world.path_clearance(a[None], b[None], 0.25)[0] >= self.world.robot_radius + SAFETY)
+
+    def potential(self, follower: int, points: np.ndarray, positions: np.ndarray, anchor: np.ndarray) -> np.ndarray:
+        """Follower ``follower`` (1-based robot index)'s field at candidate ``points``."""
+        d = np.hypot(*(points - anchor).T)
+        u = 0.5 * self.katt * d * d
+        u += repulsive(points, self.world.obstacles, self.obstacle_field)
+        followed = follower - 1 if self.offsets is None else None
+        for j in range(len(positions)):
+            if j == follower or j == followed:
+                continue
+            surface = np.hypot(*(points - positions[j]).T) - 2 * self.world.robot_radius
+            u += repulsive_term(surface, self.krep, self.robot_range, self.u_max)
+        return u
+
+    def act(self, positions: np.ndarray, leader_move: np.ndarray) -> np.ndarray:
+        """Moves of all followers given every robot's position and the leader's chosen move.
+
+        Args:
+            positions: ``(1 + n, 2)``, the leader first.
+            leader_move: The leader's displacement this step.
+
+        Returns:
+            ``(n, 2)`` displacements.
+        """
+        n = len(positions) - 1
+        moves = np.zeros((n + 1, 2))
+        moves[0] = leader_move
+        speed = np.hypot(*leader_move)
+        if speed > 0:
+            h = self.HEADING_SMOOTHING * self.heading + (1 - self.HEADING_SMOOTHING) * leader_move / speed
+            self.heading = h / max(np.hypot(*h), 1e-12)
+        heading = self.heading
+        r = self.world.robot_radius
+        for i in range(1, n + 1):
+            # Pulled towards where the robots ahead will be after this step (their moves are
+            # already decided), so that the chain keeps up with a leader moving diagonally.
+            ahead = positions + moves
+            anchor = self.anchors(ahead, heading)[i - 1]
+            if self.offsets is not None and not self._clear_line(positions[i], anchor):
+                # The slot is behind an obstacle: fall in behind the leader on its trail
+                # (known to be free) until the slot is in clear sight again.
+                anchor = self._trail_point(0, ahead[0], float(np.hypot(*self.offsets[i - 1])))
+            candidates = positions[i] + ACTIONS                           # (9, 2)
+            u = self.potential(i, candidates, positions, anchor)
+            # Safe: every point along the move keeps clear of obstacles and the edge, and
+            # the swept distance to every robot stays above contact (robots ahead of this
+            # one move as already decided; those behind have not moved yet).
+            path = positions[i] + self.fractions[None, :, None] * ACTIONS[:, None, :]   # (9, 4, 2)
+            clear = self.world.clearance(path.reshape(-1, 2)).reshape(9, -1).min(axis=1)
+            margin = clear - (r + SAFETY)
+            for j in range(n + 1):
+                if j == i:
+                    continue
+                other_move = moves[j] if j < i else np.zeros(2)
+                dist = swept_distance(positions[i], ACTIONS, positions[j], other_move)
+                margin = np.minimum(margin, dist - self.contact)
+            safe = margin >= 0
+            order = np.argsort(u, kind="stable")
+            safe_order = order[safe[order]]
+            if len(safe_order):
+                moves[i] = ACTIONS[safe_order[0]]
+            else:  # nothing is safe: keep as much room as possible from everything
+                moves[i] = ACTIONS[int(np.argmax(margin))]
+        for trail, p, move in zip(self.trails, positions, moves):
+            trail.append(p + move)
+        return moves[1:]
 
 
-def rollout_formation(world: World, planner: Planner, starts: Sequence[Sequence[float]] | np.ndarray,
-                      max_steps: int | None = None, trap: TrapDetector = TrapDetector()) -> list[FormationEpisode]:
-    """Run a formation from every start (the leader's start) in ``world``, all at once.
+def initial_followers(world: World, spec: FormationSpec, leader: np.ndarray) -> np.ndarray:
+    """Free start positions behind the leader (away from the nearest target), one per follower.
 
-    The leader follows ``planner``; the followers follow :class:`FollowerController`. An
-    episode ends when the leader reaches a target, when any robot touches an obstacle, the
-    edge or another robot (collision), when the leader is trapped, or at ``max_steps``.
+    Each follower takes the free position nearest to where the formation wants it (``spacing``
+    behind the robot it follows, or its slot), among positions within ``comm_range`` of the
+    robot it follows and clear of the robots already placed.
+
+    Raises:
+        UserError: No free position within range fits a follower.
     """
-    spec = formation_spec(world)
-    starts = np.asarray(starts, dtype=float).reshape(-1, 2)
-    n, m = len(starts), spec.followers + 1
-    if n == 0:
-        return []
-    max_steps = default_max_steps(world) if max_steps is None else int(max_steps)
-    controllers = [FollowerController(world, spec) for _ in range(n)]
-    followed = list(range(spec.followers)) if spec.shape == "line" else [0] * spec.followers
-    initial = np.stack([np.vstack([s, initial_followers(world, spec, s)]) for s in starts])    # (n, m, 2)
-    physics = Physics([world] * n, robots_per_slot=m)
-    physics.place(np.arange(n * m), initial.reshape(-1, 2))
-    for controller, robots in zip(controllers, initial):
-        controller.reset(robots)
-    planner.reset(world, starts.copy())
-
-    history = [initial.copy()]
-    watch = trap.watch(planner.trap_rule, starts, world.potential(starts), planner.trap_window)
-    outcome: list[str | None] = [None] * n
-    contacts: list[list[str]] = [[] for _ in range(n)]
-    rr = np.zeros(n, int)
-    ro = np.zeros(n, int)
-    in_range = np.zeros((n, spec.followers))
-    steps = np.zeros(n, int)
-    active = np.ones(n, bool)
-    positions = initial.copy()
-    for _ in range(max_steps):
-        if not active.any():
-            break
-        leader_cmd = planner.act(positions[:, 0], active)
-        gave_up = planner.stuck()
-        if gave_up is not None:
-            for i in np.flatnonzero(gave_up & active):
-                outcome[i] = "trapped"
-                active[i] = False
-        commands = np.zeros((n, m, 2))
-        for i in np.flatnonzero(active):
-            commands[i, 0] = leader_cmd[i]
-            commands[i, 1:] = controllers[i].act(positions[i], leader_cmd[i])
-        log = physics.step(commands.reshape(-1, 2))
-        new = physics.positions.reshape(n, m, 2)
-        positions = np.where(active[:, None, None], new, positions)
-        history.append(positions.copy())
-        leader_u = world.potential(positions[:, 0])
-        touched_robot = log.robot.reshape(n, m).any(axis=1)
-        touched_obstacle = (log.obstacle | log.wall).reshape(n, m).any(axis=1)
-        dist = np.min(np.linalg.norm(positions[:, 0, None, :] - world.targets[None], axis=2), axis=1)
-        for i in np.flatnonzero(active):
-            steps[i] += 1
-            link = np.array([np.hypot(*(positions[i, k + 1] - positions[i, j])) for k, j in enumerate(followed)])
-            in_range[i] += link <= spec.comm_range
-            rr[i] += int(touched_robot[i])
-            ro[i] += int(touched_obstacle[i])
-            if touched_robot[i] or touched_obstacle[i]:
-                outcome[i] = "collision"
-                mine = set(range(i * m, (i + 1) * m))
-                contacts[i] = sorted({c.kind for c in log.contacts if c.robot in mine})
-            elif dist[i] <= world.goal_tolerance:
-                outcome[i] = "reached"
-            else:
-                if watch.step(i, positions[i, 0], leader_u[i]):
-                    outcome[i] = "trapped"
-            if outcome[i] is not None:
-                active[i] = False
-    traj = np.stack(history)                                               # (T, n, m, 2)
-    episodes = []
-    for i in range(n):
-        positions_i = traj[: steps[i] + 1, i]
-        episodes.append(FormationEpisode(
-            world.name, starts[i], outcome[i] or "timeout", int(steps[i]), positions_i[:, 0].copy(), contacts[i],
-            positions=positions_i, comm_range=spec.comm_range, robot_robot_collisions=int(rr[i]),
-            robot_obstacle_collisions=int(ro[i]),
-            link_in_range=list(in_range[i] / max(steps[i], 1)), followed=followed))
-    return episodes
+    leader = np.asarray(leader, dtype=float)
+    target = world.targets[np.argmin(np.hypot(*(world.targets - leader).T))]
+    back = leader - target
+    back = back / np.hypot(*back) if np.hypot(*back) > 0 else np.array([-1.0, 0.0])
+    left = np.array([-back[1], back[0]])
+    offsets = formation_offsets(spec)
+    r = world.robot_radius
+    placed = [leader]
+    angles = np.deg2rad(np.arange(0, 360, 10))
+    ring = np.column_stack([np.cos(angles), np.sin(angles)])
+    for i in range(spec.followers):
+        anchor = placed[-1] if offsets is None else leader
+        if offsets is None:
+            wanted = anchor + spec.spacing * back
+        else:  # offsets are [back, left] relative to the heading (towards the target)
+            wanted = leader + offsets[i, 0] * back - offsets[i, 1] * left
+        radii = np.linspace(2 * r + SAFETY, spec.comm_range, 12)
+        candidates = np.vstack([wanted[None], (anchor + radii[:, None, None] * ring[None]).reshape(-1, 2)])
+        ok = world.is_free(candidates, r + SAFETY)
+        ok &= np.hypot(*(candidates - anchor).T) <= spec.comm_range
+        for q in placed:
+            ok &= np.hypot(*(candidates - q).T) >= 2 * r + SAFETY
+        if not ok.any():
+            raise UserError(f"{world.source or world.name}: no free position for follower {i + 1} near the leader "
+                            f"at {np.round(leader, 3).tolist()} (within comm_range {spec.comm_range:g})")
+        good = candidates[ok]
+        placed.append(good[np.argmin(np.hypot(*(good - wanted).T))])
+    return np.array(placed[1:])
 
 
-def evaluate_formation(planner: Planner, worlds: Sequence[World], starts: dict[str, np.ndarray] | None = None,
-                       max_steps: int | None = None) -> Evaluation:
-    """Run the formation from every start of every world."""
-    return evaluate(planner, worlds, starts, max_steps, run=rollout_formation, label=f"{planner.name}+formation")
+class FormationTeam:
+    """The followers of a batch of formations, one per slot of a :class:`~apf_physics.engine.Stepper`.
+
+    Whoever steers the leaders (a planner in ``eval``, an agent in ``Formation-v0``), the
+    followers are moved the same way: this object turns the leaders' moves into every
+    robot's command, with one :class:`FollowerController` per slot.
+
+    Args:
+        spec: The formation (the same in every slot).
+        num_slots: Number of formations.
+    """
+
+    def __init__(self, spec: FormationSpec, num_slots: int):
+        self.spec = spec
+        self.robots = spec.followers + 1
+        self.followed = spec.followed
+        self.controllers: list[FollowerController | None] = [None] * int(num_slots)
+
+    def starts(self, world: World, leaders: np.ndarray) -> np.ndarray:
+        """(k, m, 2) positions of whole formations whose leaders start at ``leaders`` (k, 2).
+
+        Raises:
+            UserError: No free position within range fits a follower.
+        """
+        leaders = np.asarray(leaders, float).reshape(-1, 2)
+        return np.stack([np.vstack([p, initial_followers(world, self.spec, p)]) for p in leaders])
+
+    def reset(self, slots: np.ndarray, worlds: list[World], positions: np.ndarray) -> None:
+        """Start formations in ``slots`` (in ``worlds``) at ``positions`` (k, m, 2)."""
+        for slot, world, robots in zip(np.asarray(slots).tolist(), worlds, positions):
+            controller = FollowerController(world, self.spec)
+            controller.reset(robots)
+            self.controllers[slot] = controller
+
+    def commands(self, positions: np.ndarray, leader_moves: np.ndarray, active: np.ndarray) -> np.ndarray:
+        """(S, m, 2) every robot's move: the leaders' as given, the followers' by their rule (0 where inactive)."""
+        out = np.zeros(positions.shape)
+        for slot in np.flatnonzero(active).tolist():
+            out[slot, 0] = leader_moves[slot]
+            out[slot, 1:] = self.controllers[slot].act(positions[slot], leader_moves[slot])
+        return out
+
+    def links(self, positions: np.ndarray) -> np.ndarray:
+        """(..., F) distance of each follower to the robot it follows."""
+        followers = positions[..., 1:, :]
+        ahead = positions[..., self.followed, :]
+        return np.hypot(*(followers - ahead).transpose(-1, *range(followers.ndim - 1)))

@@ -104,3 +104,92 @@ def polygon_is_simple(vertices: np.ndarray) -> bool:
         (o3 == 0) & on_segment(q1, q2, p1)) | ((o4 == 0) & on_segment(q1, q2, p2))
     # Collinear consecutive edges (o == 0 everywhere) of adjacent pairs are excluded above.
     return not bool(np.any(proper | touching))
+
+
+def triangulate(vertices: np.ndarray) -> list[np.ndarray]:
+    """Split a simple counter-clockwise polygon into convex pieces (ear clipping; convex stays whole)."""
+    n = len(vertices)
+    edges = np.roll(vertices, -1, axis=0) - vertices
+    turn = edges[:, 0] * np.roll(edges, -1, axis=0)[:, 1] - edges[:, 1] * np.roll(edges, -1, axis=0)[:, 0]
+    if np.all(turn >= -1e-12):
+        return [vertices]
+    idx = list(range(n))
+    pieces = []
+
+    def cross(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    guard = 0
+    while len(idx) > 3 and guard < 10 * n * n:
+        guard += 1
+        m = len(idx)
+        for k in range(m):
+            i0, i1, i2 = idx[(k - 1) % m], idx[k], idx[(k + 1) % m]
+            a, b, c = vertices[i0], vertices[i1], vertices[i2]
+            if cross(a, b, c) <= 1e-12:
+                continue  # reflex or degenerate corner
+            ear = True
+            for j in idx:
+                if j in (i0, i1, i2):
+                    continue
+                p = vertices[j]
+                if cross(a, b, p) >= 0 and cross(b, c, p) >= 0 and cross(c, a, p) >= 0:
+                    ear = False
+                    break
+            if ear:
+                pieces.append(np.array([a, b, c]))
+                idx.pop(k)
+                break
+        else:  # numerically stuck: fall back to a fan of what is left
+            break
+    if len(idx) >= 3:
+        rest = vertices[idx]
+        pieces.extend(np.array([rest[0], rest[i], rest[i + 1]]) for i in range(1, len(rest) - 1))
+    return pieces
+
+
+def segment_samples(a: np.ndarray, b: np.ndarray, spacing: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+    """Evenly spaced points along each segment ``a[i] → b[i]``, both ends included.
+
+    Segment ``i`` is cut into ``max(1, ceil(length / spacing))`` equal intervals, so that no
+    two neighbouring samples are more than ``spacing`` apart.
+
+    Args:
+        a: (K, 2) segment starts.
+        b: (K, 2) segment ends.
+        spacing: Scalar or (K,) largest distance between neighbouring samples (> 0).
+
+    Returns:
+        ``(points (P, 2), owner (P,))``: the samples and the segment each belongs to, in order.
+    """
+    a = np.asarray(a, float).reshape(-1, 2)
+    b = np.asarray(b, float).reshape(-1, 2)
+    spacing = np.broadcast_to(np.asarray(spacing, float), (len(a),))
+    length = np.hypot(*(b - a).T)
+    intervals = np.maximum(1, np.ceil(length / spacing - 1e-9).astype(np.intp))
+    if len(a) and np.all(intervals == intervals[0]):  # one shape for all: broadcast
+        t = np.linspace(0.0, 1.0, int(intervals[0]) + 1)
+        points = a[:, None, :] + t[None, :, None] * (b - a)[:, None, :]
+        return points.reshape(-1, 2), np.repeat(np.arange(len(a)), len(t))
+    counts = intervals + 1
+    owner = np.repeat(np.arange(len(a)), counts)
+    first = np.repeat(np.cumsum(counts) - counts, counts)
+    t = (np.arange(len(owner)) - first) / intervals[owner]
+    return a[owner] + t[:, None] * (b - a)[owner], owner
+
+
+def convex_width(vertices: np.ndarray) -> float:
+    """Least width of a convex polygon: the smallest distance between parallel lines enclosing it.
+
+    (The minimum over its edges of the farthest vertex from the edge's line.)
+    """
+    a = vertices
+    edges = np.roll(vertices, -1, axis=0) - a
+    length = np.hypot(edges[:, 0], edges[:, 1])
+    keep = length > 1e-12
+    if not keep.any():
+        return 0.0
+    a, edges, length = a[keep], edges[keep], length[keep]
+    rel = vertices[None, :, :] - a[:, None, :]
+    dist = np.abs(edges[:, None, 0] * rel[:, :, 1] - edges[:, None, 1] * rel[:, :, 0]) / length[:, None]
+    return float(dist.max(axis=1).min())

@@ -1,149 +1,192 @@
-"""The observation of SPEC §2: a k×k window of the potential around each robot.
+"""What a robot sees (SPEC §2): windows of the potential around it, and optionally its memory.
 
-Window point ``[i, j]`` of a robot at ``(x, y)`` is ``(x + (j − k//2), y + (k//2 − i))``: row 0
-is the top (highest y), as in an image. Values come from a padded raster of U built once per
-world; nodes inside an obstacle or outside the map read ``world.u_wall``, the map's highest
-potential, so blocked points always look impassable. Because the window's spacing (1 unit)
-is a whole number of raster cells, every point of a window shares the same bilinear weights:
-sampling N windows is four gathers and a weighted sum, for robots in any mix of worlds.
+One :class:`Observer` builds every observation in the project: the environments'
+(``Navigate-v0``, its vector version, ``Formation-v0``) and the DQN planner's, from one
+:class:`ObserverConfig` that is saved in every model file, so a network always gets what it
+was trained on.
+
+Channel ``"potential"``: window point ``[i, j]`` of a robot at ``(x, y)`` is
+``(x + (j − k//2), y + (k//2 − i))`` (row 0 is the top, the highest y, as in an image); its
+value is U there, sampled bilinearly from a padded raster of U built once per world, where
+nodes inside an obstacle or outside the map read ``world.u_wall`` (the map's highest
+potential), so blocked points always look impassable. All robots' windows, in any mix of
+worlds, are one :class:`~apf_physics.field.Atlas` lookup.
+
+Channel ``"memory"``: the robot's visits to the 1×1 cells of its map at the same points,
+``min(n, cap) / cap`` (:class:`VisitMemory`); points outside the map read 1.
 """
 
 from __future__ import annotations
 
-from typing import Sequence
+from dataclasses import dataclass
+from typing import Any, Sequence
 
 import numpy as np
 
-from apf_physics.field import Grid, Raster
+from apf_physics.field import Atlas, Grid, Raster
 from apf_physics.world import World
 
+CHANNELS = ("potential", "memory")
+"""Channels an observer can build, in the order they are stacked."""
+SCALES = ("raw", "log")
+"""Values of :attr:`ObserverConfig.scale`."""
 
-def observation_raster(world: World, margin: int, resolution: int = 4) -> Raster:
+
+@dataclass(frozen=True)
+class ObserverConfig:
+    """How observations are built (saved with every model).
+
+    Attributes:
+        size: Window side ``k`` (odd) [points, spacing 1 world unit].
+        resolution: Raster nodes per world unit the potential is sampled from.
+        channels: Which channels, from :data:`CHANNELS`, in that order.
+        memory_cap: Visits at which a memory cell reads 1.
+        scale: ``"raw"``: the potential as it is (unbounded; the package's networks transform
+            it themselves); ``"log"``: ``sign(d)·log(1 + |d|) / log(1 + D)`` with
+            ``d = U − U(robot)`` and ``D`` the world's range of U (``u_wall − min U``), in
+            ``[-1, 1]``: bounded, 0 at the robot, uphill positive, walls near 1.
+    """
+
+    size: int = 11
+    resolution: int = 4
+    channels: tuple[str, ...] = ("potential",)
+    memory_cap: int = 4
+    scale: str = "raw"
+
+    def __post_init__(self):
+        if self.size < 1 or self.size % 2 == 0:
+            raise ValueError(f"observation size must be odd and positive, got {self.size}")
+        if self.resolution < 1:
+            raise ValueError(f"observation resolution must be positive, got {self.resolution}")
+        if not self.channels or len(set(self.channels)) != len(self.channels) or \
+                any(c not in CHANNELS for c in self.channels) or self.channels[0] != "potential":
+            raise ValueError(f"observation channels must start with 'potential' and be among {CHANNELS}, "
+                             f"got {self.channels}")
+        if self.memory_cap < 1:
+            raise ValueError(f"memory_cap must be positive, got {self.memory_cap}")
+        if self.scale not in SCALES:
+            raise ValueError(f"observation scale must be one of {SCALES}, got {self.scale!r}")
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """``(C, k, k)``."""
+        return (len(self.channels), self.size, self.size)
+
+    @property
+    def memory(self) -> bool:
+        return "memory" in self.channels
+
+    @property
+    def bounds(self) -> tuple[float, float]:
+        """Lowest and highest value of any observation element (infinite for the raw potential)."""
+        return (-1.0, 1.0) if self.scale == "log" else (-np.inf, np.inf)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"size": self.size, "resolution": self.resolution, "channels": list(self.channels),
+                "memory_cap": self.memory_cap, "scale": self.scale}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "ObserverConfig":
+        return cls(size=int(data["size"]), resolution=int(data["resolution"]), channels=tuple(data["channels"]),
+                   memory_cap=int(data.get("memory_cap", 4)), scale=str(data.get("scale", "raw")))
+
+
+def observation_raster(world: World, margin: int, resolution: int) -> Raster:
     """U over the map plus ``margin`` units on every side, blocked nodes set to ``world.u_wall``.
 
     Built once per world and cached.
     """
-    key = ("observation", int(margin), int(resolution))
-    if key not in world._cache:
+    def build() -> Raster:
         grid = Grid.covering((-margin, -margin), (world.size[0] + margin, world.size[1] + margin), resolution)
         nodes = grid.node_points()
         values = world.potential(nodes)
         blocked = (world.edge_distance(nodes) < 0) | (world.obstacle_distance(nodes) <= 0)
         values[blocked] = world.u_wall
-        world._cache[key] = Raster(grid, values.reshape(grid.shape))
-    return world._cache[key]
+        return Raster(grid, values.reshape(grid.shape))
+    return world.cached(("observation", int(margin), int(resolution)), build)
 
 
-class WindowSampler:
-    """Samples k×k potential windows for batches of robots, each robot in its own world.
+class Observer:
+    """Builds observations for ``num`` robots, each in a world of its own.
 
     Args:
-        worlds: Worlds the robots may be in; more can be added with :meth:`add_world`.
-        size: Window side ``k`` (odd).
-        resolution: Raster nodes per unit.
+        config: What to build.
+        num: Number of robots observed.
+        worlds: Worlds the robots may be in (more can be added with :meth:`add_world`).
+        track_visits: Keep the robots' visit counts even without a memory channel (for a
+            reward that charges revisits); they are always kept with one.
+
+    Use: :meth:`reset` when robots start an episode, :meth:`visit` after every step that
+    moves them (the memory counts the cells they are in; it returns how often each had been
+    visited before), :meth:`observe` for their observations.
     """
 
-    def __init__(self, worlds: Sequence[World] = (), size: int = 11, resolution: int = 4):
-        if size < 1 or size % 2 == 0:
-            raise ValueError(f"observation size must be odd and positive, got {size}")
-        self.size = int(size)
-        self.resolution = int(resolution)
-        self.margin = self.size // 2 + 2
+    def __init__(self, config: ObserverConfig, num: int, worlds: Sequence[World] = (), track_visits: bool = False):
+        self.config = config
+        self.num = int(num)
+        self.margin = config.size // 2 + 2
+        self._atlas = Atlas(config.resolution)
+        self._world_ids: dict[int, int] = {}
         self.worlds: list[World] = []
-        self._ids: dict[int, int] = {}
-        self._values = np.zeros(0)
-        self._start: list[int] = []
-        self._cols: list[int] = []
-        self._origin: list[tuple[float, float]] = []
-        self._shape: list[tuple[int, int]] = []
-        half = self.size // 2
-        steps = np.arange(self.size) - half
-        self._dx = steps[None, :] * self.resolution           # (1, k) columns, left → right
-        self._dy = -steps[:, None] * self.resolution          # (k, 1) rows, top → bottom
+        self._log_range = np.zeros(0)
+        half = config.size // 2
+        steps = np.arange(config.size, dtype=float) - half
+        # window point [i, j] is (x + j − k//2, y + k//2 − i)
+        self._offsets = np.column_stack([np.tile(steps, config.size), np.repeat(-steps, config.size)])
+        self.world_of = np.zeros(self.num, np.intp)
+        self.memory = VisitMemory(self.num, config.size, config.memory_cap) if config.memory or track_visits else None
         for world in worlds:
             self.add_world(world)
 
     def add_world(self, world: World) -> int:
         """Register a world (once) and return its index."""
         key = id(world)
-        if key in self._ids and self.worlds[self._ids[key]] is world:
-            return self._ids[key]
-        raster = observation_raster(world, self.margin, self.resolution)
-        self._ids[key] = len(self.worlds)
-        self.worlds.append(world)
-        self._start.append(len(self._values))
-        self._cols.append(raster.grid.shape[1])
-        self._origin.append(raster.grid.origin)
-        self._shape.append(raster.grid.shape)
-        self._values = np.concatenate([self._values, raster.values.ravel()])
-        self._grids = [self._values[a:a + r * c].reshape(r, c) for a, (r, c) in zip(self._start, self._shape)]
-        self._start_arr = np.asarray(self._start)
-        self._cols_arr = np.asarray(self._cols)
-        self._origin_arr = np.asarray(self._origin, dtype=float)
-        self._shape_arr = np.asarray(self._shape)
-        return self._ids[key]
+        if key not in self._world_ids:
+            raster = observation_raster(world, self.margin, self.config.resolution)
+            self._world_ids[key] = self._atlas.add(raster)
+            self.worlds.append(world)
+            self._log_range = np.append(self._log_range, np.log1p(world.u_wall - raster.values.min()))
+        return self._world_ids[key]
 
-    def world_index(self, world: World) -> int:
-        return self.add_world(world)
+    def reset(self, robots: np.ndarray, positions: np.ndarray, worlds: Sequence[World]) -> None:
+        """Start episodes: robot ``robots[n]`` in ``worlds[n]`` at ``positions[n]``; memories cleared."""
+        robots = np.asarray(robots, dtype=np.intp).reshape(-1)
+        self.world_of[robots] = [self.add_world(w) for w in worlds]
+        if self.memory is not None:
+            self.memory.reset(robots, positions, worlds)
 
-    def sample(self, positions: np.ndarray, world_ids: np.ndarray | int = 0) -> np.ndarray:
-        """Windows around ``positions`` (N, 2), robot n in world ``world_ids[n]``.
+    def visit(self, positions: np.ndarray, robots: np.ndarray | None = None) -> np.ndarray:
+        """Count the cells ``robots`` (default all) are in; returns each cell's visits before this one (at most the cap)."""
+        robots = np.arange(self.num) if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
+        if self.memory is None:
+            return np.zeros(len(robots), np.int32)
+        before = self.memory.count(positions, robots)
+        self.memory.visit(positions, robots)
+        return before
 
-        Returns:
-            (N, k, k) float64.
-        """
-        positions = np.asarray(positions, dtype=float).reshape(-1, 2)
-        if len(positions) == 1:
-            return self._sample_one(positions[0], int(np.asarray(world_ids).ravel()[0]))
-        ids = np.asarray(world_ids, dtype=np.intp)
-        if ids.ndim == 0:
-            ids = np.full(len(positions), int(ids))
-        c0, r0, fx, fy = self._corner(positions, ids)
-        cols = self._cols_arr[ids][:, None, None]
-        base = (self._start_arr[ids] + r0 * self._cols_arr[ids] + c0)[:, None, None]
-        idx = base + self._dy[None] * cols + self._dx[None]          # (N, k, k)
-        v = self._values
-        fx = fx[:, None, None]
-        fy = fy[:, None, None]
-        top = v[idx + cols]
-        top += fx * (v[idx + cols + 1] - top)
-        bottom = v[idx]
-        bottom += fx * (v[idx + 1] - bottom)
-        bottom += fy * (top - bottom)
-        return bottom
+    def potential_at(self, positions: np.ndarray, robots: np.ndarray | None = None) -> np.ndarray:
+        """(n,) U at ``positions`` of ``robots`` (default all), from the same raster as the windows."""
+        robots = np.arange(self.num) if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
+        return self._atlas.sample(positions, self.world_of[robots]).astype(float)
 
-    def _corner(self, positions: np.ndarray, ids: np.ndarray):
-        """Lower-left raster node of each window's centre cell, and the bilinear weights."""
-        res = self.resolution
-        index = (positions - self._origin_arr[ids]) * res            # continuous (col, row)
-        shape = self._shape_arr[ids]
-        # Keep every window inside its padded raster (robots never leave their map).
-        reach = self.size // 2 * res
-        col = np.clip(index[:, 0], reach, shape[:, 1] - 2 - reach)
-        row = np.clip(index[:, 1], reach, shape[:, 0] - 2 - reach)
-        c0 = col.astype(np.intp)
-        r0 = row.astype(np.intp)
-        return c0, r0, col - c0, row - r0
+    def potential_windows(self, positions: np.ndarray, robots: np.ndarray | None = None) -> np.ndarray:
+        """(n, k, k) float32 windows of U around ``positions`` of ``robots`` (default all)."""
+        robots = np.arange(self.num) if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
+        k = self.config.size
+        windows = self._atlas.sample(positions, self.world_of[robots], self._offsets).reshape(-1, k, k)
+        if self.config.scale == "log":
+            d = windows - windows[:, k // 2, k // 2, None, None]
+            windows = np.sign(d) * np.log1p(np.abs(d)) / self._log_range[self.world_of[robots], None, None].astype(np.float32)
+        return windows
 
-    def _sample_one(self, position: np.ndarray, world_id: int) -> np.ndarray:
-        """One window from strided views of the raster: no index arrays at all."""
-        res, reach = self.resolution, self.size // 2 * self.resolution
-        rows, cols = self._shape[world_id]
-        ox, oy = self._origin[world_id]
-        col = min(max((position[0] - ox) * res, reach), cols - 2 - reach)
-        row = min(max((position[1] - oy) * res, reach), rows - 2 - reach)
-        c0, r0 = int(col), int(row)
-        fx, fy = col - c0, row - r0
-        grid = self._grids[world_id]
-        rs = slice(r0 - reach, r0 + reach + 1, res)
-        rs1 = slice(r0 + 1 - reach, r0 + reach + 2, res)
-        cs = slice(c0 - reach, c0 + reach + 1, res)
-        cs1 = slice(c0 + 1 - reach, c0 + reach + 2, res)
-        out = grid[rs, cs] * ((1 - fx) * (1 - fy))
-        out += grid[rs, cs1] * (fx * (1 - fy))
-        out += grid[rs1, cs] * ((1 - fx) * fy)
-        out += grid[rs1, cs1] * (fx * fy)
-        return out[None, ::-1]
+    def observe(self, positions: np.ndarray, robots: np.ndarray | None = None) -> np.ndarray:
+        """(n, C, k, k) float32 observations of ``robots`` (default all) at ``positions``."""
+        robots = np.arange(self.num) if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
+        out = np.empty((len(robots), *self.config.shape), np.float32)
+        out[:, 0] = self.potential_windows(positions, robots)
+        if self.config.memory:
+            out[:, self.config.channels.index("memory")] = self.memory.window(positions, robots)
+        return out
 
 
 class VisitMemory:
@@ -152,8 +195,8 @@ class VisitMemory:
     Cell ``(c, r)`` of a world covers ``[c, c + 1) × [r, r + 1)`` of its map. :meth:`reset`
     clears a robot's counts and counts its start cell; :meth:`visit` counts the cells the
     robots are in (call it after every step). :meth:`window` reads the counts at the same
-    points as :class:`WindowSampler` (point ``[i, j]`` is ``(x + j − k//2, y + k//2 − i)``)
-    as ``min(count, cap) / cap``; points outside the map read 1, like a cell visited often.
+    points as the potential window (point ``[i, j]`` is ``(x + j − k//2, y + k//2 − i)``) as
+    ``min(count, cap) / cap``; points outside the map read 1, like a cell visited often.
 
     Args:
         num: Number of robots.
@@ -162,8 +205,6 @@ class VisitMemory:
     """
 
     def __init__(self, num: int, size: int = 11, cap: int = 4):
-        if size < 1 or size % 2 == 0:
-            raise ValueError(f"window size must be odd and positive, got {size}")
         self.num = int(num)
         self.size = int(size)
         self.cap = int(cap)
@@ -179,47 +220,47 @@ class VisitMemory:
         """(columns, rows) of 1×1 cells covering a world's map."""
         return max(1, int(np.ceil(world.size[0]))), max(1, int(np.ceil(world.size[1])))
 
-    def _cell(self, positions: np.ndarray, slots: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _cell(self, positions: np.ndarray, robots: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         cell = np.floor(np.asarray(positions, dtype=float).reshape(-1, 2)).astype(np.intp)
-        dims = self.dims[slots]
+        dims = self.dims[robots]
         return np.clip(cell[:, 0], 0, dims[:, 0] - 1), np.clip(cell[:, 1], 0, dims[:, 1] - 1)
 
-    def reset(self, slots: np.ndarray, positions: np.ndarray, worlds: Sequence[World]) -> None:
-        """Start new episodes for ``slots``: robot ``slots[m]`` in ``worlds[m]`` at ``positions[m]``."""
-        slots = np.asarray(slots, dtype=np.intp).reshape(-1)
-        for m, slot in enumerate(slots):
-            self.dims[slot] = self.cells_of(worlds[m])
+    def reset(self, robots: np.ndarray, positions: np.ndarray, worlds: Sequence[World]) -> None:
+        """Start new episodes for ``robots``: robot ``robots[n]`` in ``worlds[n]`` at ``positions[n]``."""
+        robots = np.asarray(robots, dtype=np.intp).reshape(-1)
+        for n, robot in enumerate(robots):
+            self.dims[robot] = self.cells_of(worlds[n])
         need = self.dims.max(axis=0)
         if need[0] > self.counts.shape[1] or need[1] > self.counts.shape[2]:
             grown = np.zeros((self.num, max(need[0], self.counts.shape[1]), max(need[1], self.counts.shape[2])),
                              dtype=np.int32)
             grown[:, :self.counts.shape[1], :self.counts.shape[2]] = self.counts
             self.counts = grown
-        self.counts[slots] = 0
-        self.visit(positions, slots)
+        self.counts[robots] = 0
+        self.visit(positions, robots)
 
-    def visit(self, positions: np.ndarray, slots: np.ndarray | None = None) -> None:
-        """Count the cell each robot is in (``slots``: which robots ``positions`` are; default all)."""
-        slots = np.arange(self.num) if slots is None else np.asarray(slots, dtype=np.intp).reshape(-1)
-        c, r = self._cell(positions, slots)
-        self.counts[slots, c, r] += 1
+    def visit(self, positions: np.ndarray, robots: np.ndarray | None = None) -> None:
+        """Count the cell each robot is in (``robots``: which robots ``positions`` are; default all)."""
+        robots = np.arange(self.num) if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
+        c, r = self._cell(positions, robots)
+        self.counts[robots, c, r] += 1
 
-    def count(self, positions: np.ndarray, slots: np.ndarray | None = None) -> np.ndarray:
-        """(N,) visits so far of the cell each robot is in, at most ``cap`` (robots ``slots``, default all)."""
-        slots = np.arange(self.num) if slots is None else np.asarray(slots, dtype=np.intp).reshape(-1)
-        c, r = self._cell(positions, slots)
-        return np.minimum(self.counts[slots, c, r], self.cap)
+    def count(self, positions: np.ndarray, robots: np.ndarray | None = None) -> np.ndarray:
+        """(N,) visits so far of the cell each robot is in, at most ``cap`` (robots ``robots``, default all)."""
+        robots = np.arange(self.num) if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
+        c, r = self._cell(positions, robots)
+        return np.minimum(self.counts[robots, c, r], self.cap)
 
-    def window(self, positions: np.ndarray, slots: np.ndarray | None = None) -> np.ndarray:
-        """(N, k, k) float32 memory windows around ``positions`` (robots ``slots``, default all)."""
-        slots = np.arange(self.num) if slots is None else np.asarray(slots, dtype=np.intp).reshape(-1)
-        c0, r0 = self._cell(positions, slots)
-        dims = self.dims[slots]
+    def window(self, positions: np.ndarray, robots: np.ndarray | None = None) -> np.ndarray:
+        """(N, k, k) float32 memory windows around ``positions`` (robots ``robots``, default all)."""
+        robots = np.arange(self.num) if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
+        c0, r0 = self._cell(positions, robots)
+        dims = self.dims[robots]
         c = c0[:, None, None] + self._dc[None]
         r = r0[:, None, None] + self._dr[None]
         cols, rows = dims[:, 0, None, None], dims[:, 1, None, None]
         outside = (c < 0) | (c >= cols) | (r < 0) | (r >= rows)
-        counts = self.counts[slots[:, None, None], np.clip(c, 0, cols - 1), np.clip(r, 0, rows - 1)]
+        counts = self.counts[robots[:, None, None], np.clip(c, 0, cols - 1), np.clip(r, 0, rows - 1)]
         values = np.minimum(counts, self.cap).astype(np.float32) / np.float32(self.cap)
         values[outside] = 1.0
         return values

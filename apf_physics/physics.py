@@ -1,16 +1,34 @@
-"""Physics with pymunk: robots are dynamic discs among static obstacles and the map's walls.
+"""Physics with pymunk: robots are discs among static obstacles and the map's walls.
 
-Several worlds ("slots") can share one pymunk space, tiled side by side, so that a whole
-batch of environments advances with one ``space.step`` per substep. Every control step
-takes one velocity command per robot and advances ``substeps`` fixed substeps; contacts
-are recorded by collision callbacks into a :class:`ContactLog` that the caller reads after
-the step. The physics knows nothing of planners or rewards.
+The robots of many episodes ("slots") advance together: every control step takes one
+velocity command per robot and returns a :class:`ContactLog` of what touched what, read
+from pymunk's arbiters after every substep. The physics knows nothing of planners,
+observations or rewards.
 
-Tunnelling: Chipmunk detects overlaps, not swept contacts, so a disc moving ``δ`` per
+**Where pymunk does the work.** A robot whose move this step provably cannot touch anything
+moves exactly as pymunk would move a free disc (``p + v·dt``), without pymunk: the test is
+conservative, from a raster of capped clearance (1-Lipschitz, so three samples along the
+move bound it everywhere; the raster's interpolation error is subtracted) and, for robots
+sharing a slot, the exact closest approach of two linearly moving points. Every other robot
+is simulated by pymunk through a *proxy*: a dynamic disc that is put in the robot's world,
+moved by pymunk with the robot's velocity over fixed substeps, and read back. Proxies stay
+with their robot while it keeps needing physics and are parked far away when it does not.
+Robots in open space (most of them, most of the time) therefore cost pymunk nothing, and the
+cost per robot-step does not grow with the number of robots.
+
+**Tiles.** Each world's obstacles and walls are built once as static shapes in a tile of
+the space. Robots that are alone in their slot share their world's tile: their proxies are
+in one collision group and never touch each other. Slots of several robots (formations) get
+a tile each, so that their robots touch each other but never another slot's.
+
+**Tunnelling.** Chipmunk detects overlaps, not swept contacts, so a disc moving ``δ`` per
 substep can sink at most ``δ`` into an obstacle before the solver pushes it out. The
-substep count is chosen so that ``δ ≤ 0.9 · robot_radius`` at the fastest allowed
-speed: a robot's centre therefore never enters an obstacle, however thin (a zero-radius
-point obstacle or a zero-thickness wall included).
+substep count is chosen so that ``δ ≤ 0.9 · robot_radius`` at the fastest allowed speed: a
+robot's centre therefore never enters an obstacle, however thin (a zero-radius point
+obstacle or a zero-thickness wall included).
+
+Only public pymunk API is used; ``pymunk.batch`` (reading and writing every body's
+position and velocity in one call) is marked experimental by pymunk, hence ``pymunk<8``.
 """
 
 from __future__ import annotations
@@ -23,13 +41,23 @@ from typing import Sequence
 import numpy as np
 import pymunk
 import pymunk.batch
-from pymunk._chipmunk_cffi import lib as _cp
 
-from apf_physics.world import CircleObstacle, PolygonObstacle, World
+from apf_physics.field import Atlas
+from apf_physics.obstacles import CircleObstacle, PolygonObstacle
+from apf_physics.world import World
 
-_FEW = 4  # up to this many robots, per-body attribute access beats pymunk.batch's fixed cost
 WALL_THICKNESS = 1.0  # of the slabs around each map [units]
 MAX_SPEED = math.sqrt(2.0)  # a diagonal unit move (±1, ±1) per control step [units per control step]
+TILE_GAP = 4.0  # free space between neighbouring tiles, beyond their walls [units]
+CONTACT_MARGIN = 0.01  # a move that keeps this much more than touching distance needs no physics [units]
+CLEARANCE_RESOLUTION = 8  # nodes per unit of the clearance rasters that decide who needs physics
+CLEARANCE_CAP = 4.0  # clearance beyond this is not measured (it exceeds any move plus a radius)
+_FEW = 4  # up to this many proxies, per-body attribute access beats pymunk.batch's fixed cost
+_PROXY_GROUP = 1  # collision group of proxies of single-robot slots: they never touch each other
+_THIRDS = np.array([0.0, 0.5, 1.0])[None, :, None]  # where a move's clearance is sampled
+KINDS = ("obstacle", "wall", "robot")
+"""What a robot can touch; :attr:`ContactLog.kind` holds indices into this."""
+_OBSTACLE, _WALL, _ROBOT = range(3)
 
 
 class CollisionType(IntEnum):
@@ -54,81 +82,60 @@ class Contact:
     other: int
 
 
-@dataclass
+@dataclass(frozen=True)
 class ContactLog:
-    """Contacts of the last control step, per robot."""
+    """What touched what during the last control step.
 
-    obstacle: np.ndarray          # (N,) bool: touched an obstacle
-    wall: np.ndarray              # (N,) bool: touched the map's edge
-    robot: np.ndarray             # (N,) bool: touched another robot
-    contacts: list[Contact] = field(default_factory=list)
+    Attributes:
+        obstacle: (N,) bool: the robot touched an obstacle.
+        wall: (N,) bool: the robot touched the map's edge.
+        robot: (N,) bool: the robot touched another robot.
+        pairs: (K, 3) int: one row ``(robot, kind, other)`` per touching pair (:data:`KINDS`;
+            a robot–robot touch appears once per robot), sorted.
+    """
+
+    obstacle: np.ndarray
+    wall: np.ndarray
+    robot: np.ndarray
+    pairs: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.intp))
 
     @property
     def any(self) -> np.ndarray:
         """(N,) bool: touched anything."""
         return self.obstacle | self.wall | self.robot
 
+    @property
+    def touched(self) -> bool:
+        """Whether anything touched anything."""
+        return len(self.pairs) > 0
 
-def triangulate(vertices: np.ndarray) -> list[np.ndarray]:
-    """Split a simple counter-clockwise polygon into convex pieces (ear clipping; convex stays whole)."""
-    n = len(vertices)
-    edges = np.roll(vertices, -1, axis=0) - vertices
-    turn = edges[:, 0] * np.roll(edges, -1, axis=0)[:, 1] - edges[:, 1] * np.roll(edges, -1, axis=0)[:, 0]
-    if np.all(turn >= -1e-12):
-        return [vertices]
-    idx = list(range(n))
-    pieces = []
+    @property
+    def contacts(self) -> list[Contact]:
+        """The pairs as :class:`Contact` records."""
+        return [Contact(int(r), KINDS[k], int(o)) for r, k, o in self.pairs.tolist()]
 
-    def cross(o, a, b):
-        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
 
-    guard = 0
-    while len(idx) > 3 and guard < 10 * n * n:
-        guard += 1
-        m = len(idx)
-        for k in range(m):
-            i0, i1, i2 = idx[(k - 1) % m], idx[k], idx[(k + 1) % m]
-            a, b, c = vertices[i0], vertices[i1], vertices[i2]
-            if cross(a, b, c) <= 1e-12:
-                continue  # reflex or degenerate corner
-            ear = True
-            for j in idx:
-                if j in (i0, i1, i2):
-                    continue
-                p = vertices[j]
-                if cross(a, b, p) >= 0 and cross(b, c, p) >= 0 and cross(c, a, p) >= 0:
-                    ear = False
-                    break
-            if ear:
-                pieces.append(np.array([a, b, c]))
-                idx.pop(k)
-                break
-        else:  # numerically stuck: fall back to a fan of what is left
-            break
-    if len(idx) >= 3:
-        rest = vertices[idx]
-        pieces.extend(np.array([rest[0], rest[i], rest[i + 1]]) for i in range(1, len(rest) - 1))
-    return pieces
+def substeps_for(radius: float, max_speed: float = MAX_SPEED) -> int:
+    """The fewest substeps (a power of two) that keep a robot's centre out of every obstacle."""
+    return 2 ** math.ceil(math.log2(max(1.0, max_speed / (0.9 * radius))))
 
 
 class Physics:
-    """One pymunk space holding ``len(worlds)`` slots, each a world with its robots.
+    """Robots in slots, each slot in a world; one pymunk space for all of them.
 
     Args:
-        worlds: The world of each slot (a slot's world can be replaced later with :meth:`set_world`).
+        worlds: The world of each slot (a slot's world can be replaced with :meth:`set_world`).
         robots_per_slot: Robots in each slot; robot ``r`` of slot ``s`` has global index
             ``s * robots_per_slot + r``.
         control_dt: Duration of one control step; a velocity command ``v`` moves a free robot by
             ``v · control_dt``.
         max_speed: Fastest allowed speed, in units per control step; commands are clipped to it.
         substeps: Substeps per control step; by default the fewest (a power of two) that keep
-            tunnelling impossible (see the module docstring).
-        pitch: Spacing of the tiles; by default the largest world plus a margin. Worlds swapped
-            in later must fit in it.
+            tunnelling impossible for the smallest robot (see the module docstring).
     """
 
     def __init__(self, worlds: Sequence[World], robots_per_slot: int = 1, control_dt: float = 1.0,
-                 max_speed: float = MAX_SPEED, substeps: int | None = None, pitch: float | None = None):
+                 max_speed: float = MAX_SPEED, substeps: int | None = None):
         if not worlds:
             raise ValueError("Physics needs at least one world")
         self.num_slots = len(worlds)
@@ -136,224 +143,336 @@ class Physics:
         self.num_robots = self.num_slots * self.robots_per_slot
         self.control_dt = float(control_dt)
         self.max_speed = float(max_speed)
-        radius = min(w.robot_radius for w in worlds)
-        if substeps is None:
-            substeps = 2 ** math.ceil(math.log2(max(1.0, self.max_speed / (0.9 * radius))))
-        self.substeps = int(substeps)
+        self._min_radius = min(w.robot_radius for w in worlds)
+        self.substeps = int(substeps) if substeps is not None else substeps_for(self._min_radius, self.max_speed)
         self.dt = self.control_dt / self.substeps
-        if pitch is None:
-            pitch = max(max(w.size) for w in worlds) + 2 * WALL_THICKNESS + 2.0
-        self.pitch = float(pitch)
-        cols = math.ceil(math.sqrt(self.num_slots))
-        slots = np.arange(self.num_slots)
-        self.offsets = np.column_stack([(slots % cols) * self.pitch, (slots // cols) * self.pitch]).astype(float)
-        self._robot_offsets = np.repeat(self.offsets, self.robots_per_slot, axis=0)
 
         self.space = pymunk.Space()
         self.space.iterations = 10
         # Chipmunk tolerates 0.1 of overlap by default; a robot resting against an obstacle with
         # that much overlap would sink past its boundary on the next push. Correct overlaps fully.
         self.space.collision_slop = 0.002
-        # Forget a contact as soon as it ends: a teleported robot must not inherit the warm-start
-        # impulses of the contact it had before (runs would then depend on how a reset was timed).
+        # Forget a contact as soon as it ends: a proxy that moves to another robot must not
+        # inherit the warm-start impulses of the contact it had before, and the arbiters read
+        # after a substep are exactly the pairs touching then.
         self.space.collision_persistence = 1
-        self.worlds: list[World] = list(worlds)
-        self._slot_shapes: list[list[pymunk.Shape]] = [[] for _ in range(self.num_slots)]
-        self._shape_label: dict[pymunk.Shape, tuple[str, int]] = {}
-        self.bodies: list[pymunk.Body] = []
-        for s, world in enumerate(self.worlds):
-            self._add_static(s, world)
-            for r in range(self.robots_per_slot):
-                body, shape = self._new_robot(world.robot_radius)
-                body.position = tuple(self.offsets[s] + 1.0 + r)  # placed properly by place()
-                self.space.add(body, shape)
-                self._shape_label[shape] = ("robot", len(self.bodies))
-                self.bodies.append(body)
 
-        self._contacts: set[tuple[int, str, int]] = set()
-        # Pairs touching now. Callbacks fire only when a touch begins or ends (not every
-        # substep), so a resting contact costs no Python; the log of a step is every pair
-        # that touched at some point of it.
-        self._touching: set[tuple[int, str, int]] = set()
-        for other in (CollisionType.OBSTACLE, CollisionType.WALL, CollisionType.ROBOT):
-            self.space.on_collision(CollisionType.ROBOT, other, begin=self._begin, separate=self._separate)
+        # Static geometry: one tile per (world, lane); lane 0 is shared by single-robot slots.
+        # Each obstacle and each wall of a tile has a static body of its own: an arbiter's body
+        # ids then say what a robot touched.
+        self._tiles: dict[tuple[int, int], int] = {}
+        self._tile_offset = np.zeros((0, 2))
+        self._next_tile_x = 0.0
+        self._static_ids = np.zeros(0, np.uintp)        # sorted body ids of the static bodies
+        self._static_label = np.zeros((0, 2), np.intp)  # (kind, index) of each, in that order
+        # Clearance rasters, one per distinct world, sampled together.
+        self._atlas = Atlas(CLEARANCE_RESOLUTION)
+        self._atlas_ids: dict[int, int] = {}
+        self._positions = np.zeros((self.num_robots, 2))
 
-        # A spatial hash beats the default bounding-box tree for many small discs moving among
-        # tiled static shapes (tools/bench_env.py: ~1.8x faster steps at N = 256).
-        shapes = len(self.space.shapes)
-        if self.num_robots > 16:
-            self.space.use_spatial_hash(4.0, max(1000, 10 * shapes))
+        self.worlds: list[World] = [None] * self.num_slots  # type: ignore[list-item]
+        self._slot_tile = np.zeros(self.num_slots, np.intp)
+        self._slot_radius = np.zeros(self.num_slots)
+        # per robot, for needs_physics(): its world's clearance raster (three samples each) and
+        # the least clearance that needs no physics
+        self._sample_atlas = np.zeros(3 * self.num_robots, np.intp)
+        self._free_above = np.zeros(self.num_robots)
+        for s, world in enumerate(worlds):
+            self._assign(s, world)
 
+        # Proxies: dynamic discs lent to the robots that need physics this step.
+        self._proxy_body: list[pymunk.Body] = []
+        self._proxy_robot = np.zeros(0, np.intp)     # robot each proxy simulates, -1: parked
+        self._proxy_dirty = np.zeros(0, bool)        # parked this step; may carry solver state
+        self._proxy_radius = np.zeros(0)
+        self._proxy_ids = np.zeros(0, np.uintp)      # their body ids
+        self._robot_proxy = np.full(self.num_robots, -1, np.intp)
+        self._proxy_held = False                     # some robot holds a proxy
         self._buffer = pymunk.batch.Buffer()
-        self._index_bodies()
+        self._arbiters = pymunk.batch.Buffer()
+        self._rows_dirty = True
+        nothing = np.zeros(self.num_robots, bool)
+        nothing.flags.writeable = False
+        self._touch_free = ContactLog(nothing, nothing, nothing)   # the log of a step without contacts
 
-    # -- construction --------------------------------------------------------------------
-    def _add_static(self, slot: int, world: World) -> None:
-        static = self.space.static_body
-        ox, oy = self.offsets[slot]
+    # -- worlds and tiles ------------------------------------------------------------------
+    def _lane(self, slot: int) -> int:
+        return slot + 1 if self.robots_per_slot > 1 else 0
+
+    def _assign(self, slot: int, world: World) -> None:
+        key = (id(world), self._lane(slot))
+        if key not in self._tiles:
+            self._tiles[key] = self._build_tile(world)
+        if id(world) not in self._atlas_ids:
+            self._atlas_ids[id(world)] = self._atlas.add(world.clearance_raster(CLEARANCE_RESOLUTION, CLEARANCE_CAP))
+        self.worlds[slot] = world
+        self._slot_tile[slot] = self._tiles[key]
+        self._slot_radius[slot] = world.robot_radius
+        m = self.robots_per_slot
+        self._sample_atlas[3 * m * slot:3 * m * (slot + 1)] = self._atlas_ids[id(world)]
+        # the raster is within 0.71 / resolution of the clearance (see World.clearance_raster)
+        self._free_above[m * slot:m * (slot + 1)] = world.robot_radius + CONTACT_MARGIN + 0.71 / CLEARANCE_RESOLUTION
+
+    def _build_tile(self, world: World) -> int:
+        """Add ``world``'s obstacles and walls as static shapes at a fresh offset; returns the tile index."""
+        tile = len(self._tile_offset)
+        ox, oy = self._next_tile_x + WALL_THICKNESS, 0.0
         w, h = world.size
-        if w > self.pitch - 2 * WALL_THICKNESS - 1.0 or h > self.pitch - 2 * WALL_THICKNESS - 1.0:
-            raise ValueError(f"world {world.name!r} ({w:g} x {h:g}) does not fit the tile pitch {self.pitch:g}")
-        shapes: list[pymunk.Shape] = []
+        self._next_tile_x += w + 2 * WALL_THICKNESS + TILE_GAP
+        bodies: list[tuple[pymunk.Body, list[pymunk.Shape], int, int]] = []   # body, shapes, kind, index
         for i, obstacle in enumerate(world.obstacles):
+            body = pymunk.Body(body_type=pymunk.Body.STATIC)
             if isinstance(obstacle, PolygonObstacle):
-                for piece in triangulate(obstacle.vertices):
-                    shapes.append(pymunk.Poly(static, [(x + ox, y + oy) for x, y in piece]))
-                    self._shape_label[shapes[-1]] = ("obstacle", i)
+                shapes = [pymunk.Poly(body, [(x + ox, y + oy) for x, y in piece]) for piece in obstacle.convex_pieces()]
             elif isinstance(obstacle, CircleObstacle):
                 cx, cy = obstacle.center
-                shapes.append(pymunk.Circle(static, obstacle.radius, offset=(cx + ox, cy + oy)))
-                self._shape_label[shapes[-1]] = ("obstacle", i)
-        for shape in shapes:
-            shape.collision_type = CollisionType.OBSTACLE
+                shapes = [pymunk.Circle(body, obstacle.radius, offset=(cx + ox, cy + oy))]
+            for shape in shapes:
+                shape.collision_type = CollisionType.OBSTACLE
+            bodies.append((body, shapes, _OBSTACLE, i))
         # Walls are solid slabs just outside the map (a zero-thickness segment could be crossed
         # by a robot squeezed against it): bottom, right, top, left.
         t = WALL_THICKNESS
         slabs = [(ox - t, oy - t, ox + w + t, oy), (ox + w, oy - t, ox + w + t, oy + h + t),
                  (ox - t, oy + h, ox + w + t, oy + h + t), (ox - t, oy - t, ox, oy + h + t)]
         for i, (x0, y0, x1, y1) in enumerate(slabs):
-            wall = pymunk.Poly(static, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
+            body = pymunk.Body(body_type=pymunk.Body.STATIC)
+            wall = pymunk.Poly(body, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
             wall.collision_type = CollisionType.WALL
-            self._shape_label[wall] = ("wall", i)
-            shapes.append(wall)
-        for shape in shapes:
-            shape.friction = 0.0
-            shape.elasticity = 0.0
-        self.space.add(*shapes)
-        self._slot_shapes[slot] = shapes
+            bodies.append((body, [wall], _WALL, i))
+        for body, shapes, _, _ in bodies:
+            for shape in shapes:
+                shape.friction = 0.0
+                shape.elasticity = 0.0
+            self.space.add(body, *shapes)
+        ids = np.concatenate([self._static_ids, np.array([b.id for b, *_ in bodies], np.uintp)])
+        labels = np.concatenate([self._static_label, np.array([(k, i) for _, _, k, i in bodies], np.intp)])
+        order = np.argsort(ids)
+        self._static_ids, self._static_label = ids[order], labels[order]
+        self._tile_offset = np.vstack([self._tile_offset, [ox, oy]])
+        self._rows_dirty = True
+        return tile
 
     def set_world(self, slot: int, world: World) -> None:
-        """Replace the obstacles and walls of ``slot`` with those of ``world`` (robots stay put)."""
+        """Put ``slot`` in ``world`` (its robots keep their coordinates until :meth:`place`)."""
         if world is self.worlds[slot]:
             return
-        old = self._slot_shapes[slot]
-        self.space.remove(*old)
-        for shape in old:
-            del self._shape_label[shape]
-        self.worlds[slot] = world
-        self._add_static(slot, world)
-        for r in range(self.robots_per_slot):
-            shape = next(iter(self.bodies[slot * self.robots_per_slot + r].shapes))
-            if shape.radius != world.robot_radius:
-                shape.unsafe_set_radius(world.robot_radius)
-        self._index_bodies()
+        robots = np.arange(slot * self.robots_per_slot, (slot + 1) * self.robots_per_slot)
+        self._release(robots)
+        self._assign(slot, world)
 
-    def _index_bodies(self) -> None:
-        """Map pymunk.batch rows to our robots (rows are not in insertion order)."""
-        buf = self._buffer
-        buf.clear()
-        pymunk.batch.get_space_bodies(self.space, pymunk.batch.BodyFields.BODY_ID, buf)
-        ids = np.frombuffer(buf.int_buf(), dtype=np.uintp).copy()
-        index = {b.id: i for i, b in enumerate(self.bodies)}
-        self._row_robot = np.array([index.get(int(i), -1) for i in ids])
-        self._robot_rows = np.flatnonzero(self._row_robot >= 0)
-        self._robot_of_row = self._row_robot[self._robot_rows]
-        self._velocity_rows = np.zeros((len(ids), 2))
-        self._velocity_buffer = pymunk.batch.Buffer()  # shares memory with _velocity_rows
-        self._velocity_buffer.set_float_buf(self._velocity_rows.reshape(-1))
-
-    # -- control --------------------------------------------------------------------------
-    def _pair(self, arbiter: pymunk.Arbiter) -> tuple[int, str, int] | None:
-        a, b = arbiter.shapes
-        if a not in self._shape_label or b not in self._shape_label:
-            return None  # a shape being removed
-        _, robot = self._shape_label[a]
-        kind, other = self._shape_label[b]
-        return robot, kind, other
-
-    def _begin(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
-        pair = self._pair(arbiter)
-        if pair is not None:
-            self._touching.add(pair)
-            self._contacts.add(pair)
-
-    def _separate(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
-        pair = self._pair(arbiter)
-        if pair is not None:
-            self._touching.discard(pair)
-
-    def place(self, robots: Sequence[int] | np.ndarray, positions: np.ndarray) -> None:
-        """Teleport robots (global indices) to world-local ``positions`` and stop them."""
-        positions = np.asarray(positions, dtype=float).reshape(-1, 2)
-        robots = np.asarray(robots).ravel()
-        moved = set(int(r) for r in robots)
-        self._touching = {c for c in self._touching if c[0] not in moved and not (c[1] == "robot" and c[2] in moved)}
-        for r, p in zip(robots, positions):
-            body = self.bodies[int(r)]
-            body.position = (float(p[0] + self._robot_offsets[r, 0]), float(p[1] + self._robot_offsets[r, 1]))
-            body.velocity = (0.0, 0.0)
-            # Chipmunk keeps a hidden bias velocity from the last contact's position correction
-            # and adds it in the next step; a moved robot would carry it along (and runs would
-            # depend on when a reset came). Integrating zero time clears it and moves nothing.
-            _cp.cpBodyUpdatePosition(body._body, 0.0)
-            self.space.reindex_shapes_for_body(body)
-
-    @staticmethod
-    def _new_robot(radius: float) -> tuple[pymunk.Body, pymunk.Circle]:
+    # -- proxies ---------------------------------------------------------------------------
+    def _new_proxy(self, radius: float) -> int:
         body = pymunk.Body(1.0, math.inf)
         shape = pymunk.Circle(body, radius)
         shape.collision_type = CollisionType.ROBOT
         shape.friction = 0.0
         shape.elasticity = 0.0
-        return body, shape
+        if self.robots_per_slot == 1:
+            shape.filter = pymunk.ShapeFilter(group=_PROXY_GROUP)
+        k = len(self._proxy_body)
+        body.position = self._parking(k)
+        self.space.add(body, shape)
+        self._proxy_body.append(body)
+        self._proxy_robot = np.append(self._proxy_robot, -1)
+        self._proxy_dirty = np.append(self._proxy_dirty, False)
+        self._proxy_radius = np.append(self._proxy_radius, radius)
+        self._proxy_ids = np.append(self._proxy_ids, np.uintp(body.id))
+        self._rows_dirty = True
+        return k
+
+    @staticmethod
+    def _parking(k: int) -> tuple[float, float]:
+        """Where proxy ``k`` waits: far below every tile, 4 units from its neighbours."""
+        return (4.0 * k, -1000.0)
+
+    def _release(self, robots: np.ndarray) -> None:
+        """Take the proxies of ``robots`` back to the parking (dirty until pymunk steps once more)."""
+        proxies = self._robot_proxy[robots]
+        proxies = proxies[proxies >= 0]
+        if not len(proxies):
+            return
+        for k in proxies.tolist():
+            self._proxy_body[k].position = self._parking(k)   # its velocity is set when pymunk next steps
+        self._robot_proxy[self._proxy_robot[proxies]] = -1
+        self._proxy_robot[proxies] = -1
+        self._proxy_dirty[proxies] = True
+
+    def _lend(self, robots: np.ndarray) -> None:
+        """Give each of ``robots`` (none holding one) a clean proxy of its radius, placed where it is."""
+        if not len(robots):
+            return
+        radius = self._slot_radius[robots // self.robots_per_slot]
+        for r in np.unique(radius).tolist():
+            mine = robots[radius == r]
+            free = np.flatnonzero((self._proxy_robot < 0) & ~self._proxy_dirty & (self._proxy_radius == r))
+            while len(free) < len(mine):
+                free = np.append(free, self._new_proxy(r))
+            proxies = free[:len(mine)]
+            self._proxy_robot[proxies] = mine
+            self._robot_proxy[mine] = proxies
+            where = self._positions[mine] + self._tile_offset[self._slot_tile[mine // self.robots_per_slot]]
+            for k, (x, y) in zip(proxies.tolist(), where.tolist()):
+                self._proxy_body[k].position = (x, y)
+
+    def _index_rows(self) -> None:
+        """Map pymunk.batch rows to proxies (rows are not in insertion order)."""
+        buf = self._buffer
+        buf.clear()
+        pymunk.batch.get_space_bodies(self.space, pymunk.batch.BodyFields.BODY_ID, buf)
+        ids = np.frombuffer(buf.int_buf(), dtype=np.uintp).copy()
+        index = {b.id: k for k, b in enumerate(self._proxy_body)}
+        row_proxy = np.array([index.get(int(i), -1) for i in ids])
+        self._proxy_rows = np.flatnonzero(row_proxy >= 0)
+        self._proxy_of_row = row_proxy[self._proxy_rows]
+        self._velocity_rows = np.zeros((len(ids), 2))
+        self._velocity_buffer = pymunk.batch.Buffer()  # shares memory with _velocity_rows
+        self._velocity_buffer.set_float_buf(self._velocity_rows.reshape(-1))
+        self._proxy_order = np.argsort(self._proxy_ids)
+        self._rows_dirty = False
+
+    # -- control ---------------------------------------------------------------------------
+    def place(self, robots: Sequence[int] | np.ndarray, positions: np.ndarray) -> None:
+        """Teleport robots (global indices) to world-local ``positions`` and stop them."""
+        robots = np.asarray(robots, dtype=np.intp).ravel()
+        self._release(robots)
+        self._positions[robots] = np.asarray(positions, dtype=float).reshape(-1, 2)
 
     @property
     def positions(self) -> np.ndarray:
         """(N, 2) robot centres in each robot's own world coordinates."""
-        if self.num_robots <= _FEW:
-            return np.array([tuple(b.position) for b in self.bodies]) - self._robot_offsets
-        buf = self._buffer
-        buf.clear()
-        pymunk.batch.get_space_bodies(self.space, pymunk.batch.BodyFields.POSITION, buf)
-        rows = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 2)
-        out = np.empty((self.num_robots, 2))
-        out[self._robot_of_row] = rows[self._robot_rows]
-        return out - self._robot_offsets
+        return self._positions.copy()
 
-    def step(self, velocities: np.ndarray) -> ContactLog:
+    def needs_physics(self, moves: np.ndarray) -> np.ndarray:
+        """(N,) bool: robots whose ``moves`` this step might bring them into contact with anything.
+
+        Conservative: False guarantees that the robot's disc keeps more than
+        :data:`CONTACT_MARGIN` from every obstacle, the map's edge and the robots of its slot
+        during the whole move (each moving straight and uniformly), so that it moves exactly
+        as a free pymunk disc would.
+        """
+        # Clearance at the start, the middle and the end of each move: a 1-Lipschitz function
+        # sampled at both ends of a piece of length L/2 is at least (c_a + c_b − L/2) / 2 on it,
+        # so on the whole move at least (c_mid + min(c_start, c_end) − L/2) / 2.
+        samples = self._positions[:, None, :] + _THIRDS * moves[:, None, :]
+        c = self._atlas.sample(samples.reshape(-1, 2), self._sample_atlas).reshape(-1, 3)
+        half = 0.5 * np.hypot(moves[:, 0], moves[:, 1])
+        needs = c[:, 1] + np.minimum(c[:, 0], c[:, 2]) - half < 2 * self._free_above
+        m = self.robots_per_slot
+        if m > 1:
+            p = self._positions.reshape(-1, m, 2)
+            dp = moves.reshape(-1, m, 2)
+            close = _closest_approach(p, dp) < 2 * self._slot_radius[:, None, None] + CONTACT_MARGIN
+            close[:, np.arange(m), np.arange(m)] = False
+            needs |= close.any(axis=2).ravel()
+        return needs
+
+    def step(self, velocities: np.ndarray, active: np.ndarray | None = None) -> ContactLog:
         """Advance one control step with a velocity command per robot.
 
         Args:
             velocities: (N, 2) commanded velocities in units per control step; each is clipped to
-                ``max_speed``. Rows of robots that should not move must be zero.
+                ``max_speed``.
+            active: (N,) bool: the robots that take part (default all). The others are frozen
+                where they are: they neither move nor touch anything (their slot's episode is over).
 
         Returns:
-            The contacts seen during the step.
+            The contacts seen during the step (read-only).
         """
         v = np.asarray(velocities, dtype=float).reshape(self.num_robots, 2)
         speed = np.hypot(v[:, 0], v[:, 1])
-        too_fast = speed > self.max_speed
-        if np.any(too_fast):
+        if speed.max() > self.max_speed:
+            too_fast = speed > self.max_speed
             v = v.copy()
             v[too_fast] *= (self.max_speed / speed[too_fast])[:, None]
-        if self.num_robots <= _FEW:
-            for body, velocity in zip(self.bodies, (v / self.control_dt).tolist()):
-                body.velocity = velocity
-        else:
-            self._velocity_rows[self._robot_rows] = v[self._robot_of_row] / self.control_dt
-            pymunk.batch.set_space_bodies(self.space, pymunk.batch.BodyFields.VELOCITY, self._velocity_buffer)
+        moves = v * self.control_dt
+        simulate = self.needs_physics(moves)
+        if active is not None:
+            simulate &= active
+            moves = moves * active[:, None]
+        if not self._proxy_held and not simulate.any():
+            self._positions += moves
+            return self._touch_free
+        held = self._robot_proxy >= 0
+        self._release(np.flatnonzero(held & ~simulate))
+        self._lend(np.flatnonzero(simulate & ~held))
+        robots = np.flatnonzero(simulate)
+        pairs = self._simulate(robots, v) if len(robots) or self._proxy_dirty.any() else None
+        free = ~simulate
+        self._positions[free] += moves[free]
+        self._proxy_held = bool(len(robots))
+        return self._touch_free if pairs is None or not len(pairs) else self._log(pairs)
 
-        self._contacts = set(self._touching)
-        # Substeps call Chipmunk directly: pymunk's Space.step adds Python bookkeeping (deferred
-        # adds/removes, post-step callbacks) that nothing here uses, and it cost 3x the step itself.
-        space = self.space
-        space._locked = True
-        try:
-            cp_step, handle, dt = _cp.cpSpaceStep, space._space, self.dt
-            for _ in range(self.substeps):
-                cp_step(handle, dt)
-        finally:
-            space._locked = False
-        obstacle = np.zeros(self.num_robots, bool)
-        wall = np.zeros(self.num_robots, bool)
-        robot = np.zeros(self.num_robots, bool)
-        if not self._contacts:
-            return ContactLog(obstacle, wall, robot, [])
-        for r, kind, other in self._contacts:
-            if kind == "obstacle":
-                obstacle[r] = True
-            elif kind == "wall":
-                wall[r] = True
-            else:
-                robot[r] = robot[other] = True
-        return ContactLog(obstacle, wall, robot, [Contact(*c) for c in sorted(self._contacts)])
+    def _simulate(self, robots: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Step pymunk with the proxies of ``robots`` at their commanded velocities.
+
+        Returns:
+            (K, 2) body ids of the pairs that touched at some substep.
+        """
+        if self._rows_dirty:
+            self._index_rows()
+        proxies = self._robot_proxy[robots]
+        velocity = v[robots] / self.control_dt
+        if len(self._proxy_body) <= _FEW:
+            for k in range(len(self._proxy_body)):
+                self._proxy_body[k].velocity = (0.0, 0.0)
+            for k, (vx, vy) in zip(proxies.tolist(), velocity.tolist()):
+                self._proxy_body[k].velocity = (vx, vy)
+        else:
+            per_proxy = np.zeros((len(self._proxy_body), 2))
+            per_proxy[proxies] = velocity
+            self._velocity_rows[self._proxy_rows] = per_proxy[self._proxy_of_row]
+            pymunk.batch.set_space_bodies(self.space, pymunk.batch.BodyFields.VELOCITY, self._velocity_buffer)
+        touched = []
+        fields = pymunk.batch.ArbiterFields.BODY_A_ID | pymunk.batch.ArbiterFields.BODY_B_ID
+        for _ in range(self.substeps):
+            self.space.step(self.dt)
+            self._arbiters.clear()
+            pymunk.batch.get_space_arbiters(self.space, fields, self._arbiters)
+            ids = np.frombuffer(self._arbiters.int_buf(), dtype=np.uintp)
+            if len(ids):
+                touched.append(ids.reshape(-1, 2).copy())
+        self._proxy_dirty[:] = False
+        offsets = self._tile_offset[self._slot_tile[robots // self.robots_per_slot]]
+        if len(self._proxy_body) <= _FEW:
+            moved = np.array([tuple(self._proxy_body[k].position) for k in proxies.tolist()]).reshape(-1, 2)
+        else:
+            buf = self._buffer
+            buf.clear()
+            pymunk.batch.get_space_bodies(self.space, pymunk.batch.BodyFields.POSITION, buf)
+            rows = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 2)
+            per_proxy = np.empty((len(self._proxy_body), 2))
+            per_proxy[self._proxy_of_row] = rows[self._proxy_rows]
+            moved = per_proxy[proxies]
+        self._positions[robots] = moved - offsets
+        return np.unique(np.vstack(touched), axis=0) if touched else np.zeros((0, 2), np.uintp)
+
+    def _log(self, pairs: np.ndarray) -> ContactLog:
+        """The contact log of the touching body-id pairs."""
+        proxy_index = self._proxy_order[np.clip(np.searchsorted(self._proxy_ids[self._proxy_order], pairs), 0,
+                                                len(self._proxy_ids) - 1)]
+        is_proxy = self._proxy_ids[proxy_index] == pairs
+        robot_of = np.where(is_proxy, self._proxy_robot[proxy_index], -1)
+        static = np.clip(np.searchsorted(self._static_ids, pairs), 0, max(len(self._static_ids) - 1, 0))
+        rows = []
+        for a, b in ((0, 1), (1, 0)):   # an arbiter's bodies come in either order
+            robot = robot_of[:, a]
+            with_static = (robot >= 0) & ~is_proxy[:, b]
+            label = self._static_label[static[with_static, b]]
+            rows.append(np.column_stack([robot[with_static], label]))
+            with_robot = (robot >= 0) & (robot_of[:, b] >= 0)
+            rows.append(np.column_stack([robot[with_robot], np.full(with_robot.sum(), _ROBOT), robot_of[with_robot, b]]))
+        table = np.unique(np.vstack(rows).astype(np.intp), axis=0)
+        flags = np.zeros((3, self.num_robots), bool)
+        flags[table[:, 1], table[:, 0]] = True
+        return ContactLog(flags[_OBSTACLE], flags[_WALL], flags[_ROBOT], table)
+
+
+def _closest_approach(p: np.ndarray, dp: np.ndarray) -> np.ndarray:
+    """(S, m, m) least distance between robots i and j of each slot moving by ``dp`` over the step."""
+    r0 = p[:, :, None, :] - p[:, None, :, :]
+    dr = dp[:, :, None, :] - dp[:, None, :, :]
+    a = np.sum(dr * dr, axis=-1)
+    t = np.clip(np.where(a > 0, -np.sum(r0 * dr, axis=-1) / np.where(a > 0, a, 1.0), 0.0), 0.0, 1.0)
+    closest = r0 + t[..., None] * dr
+    return np.sqrt(np.sum(closest * closest, axis=-1))

@@ -1,36 +1,72 @@
-"""Run a planner from a batch of starts through the physics and decide how each episode ends.
+"""Run a planner from a batch of starts through the engine: episodes of single robots or formations.
 
-All starts of a world run at once: one physics slot per start, one ``space.step`` per
-substep for all of them.
+All starts of a world run at once, one :class:`~apf_physics.engine.Stepper` slot per start.
+The planner steers each slot's leader; in a formation the followers follow by their own rule
+(:class:`~apf_physics.formation.FormationTeam`). How an episode ends is the stepper's
+decision (reached, collision, trapped, timeout), with the planner's trap rule.
 """
 
 from __future__ import annotations
 
-import dataclasses
-from collections import deque
 from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
 
-from apf_physics.physics import Physics
+from apf_physics.engine import Outcome, Stepper, TrapDetector
+from apf_physics.formation import FormationTeam, formation_spec
 from apf_physics.planners.base import Planner
 from apf_physics.world import World
 
-OUTCOMES = ("reached", "collision", "trapped", "timeout")
+
+@dataclass
+class FormationRecord:
+    """What a formation did in an episode, beside its leader's :class:`Episode`.
+
+    Attributes:
+        positions: ``(steps + 1, m, 2)`` every robot's positions, the leader first.
+        comm_range: The formation's communication range.
+        followed: For each follower, the robot it follows.
+        robot_robot_collisions: Control steps in which two robots touched.
+        robot_obstacle_collisions: Control steps in which a robot touched an obstacle or the edge.
+        link_in_range: Per link (follower i and the robot it follows), the share of steps within range.
+    """
+
+    positions: np.ndarray
+    comm_range: float
+    followed: list[int]
+    robot_robot_collisions: int
+    robot_obstacle_collisions: int
+    link_in_range: list[float]
+
+    @property
+    def min_robot_distance(self) -> float:
+        p = self.positions
+        n = p.shape[1]
+        if n < 2:
+            return float("inf")
+        diff = p[:, :, None, :] - p[:, None, :, :]
+        d = np.sqrt(np.sum(diff * diff, axis=-1))
+        return float(d[:, ~np.eye(n, dtype=bool)].min())
+
+    def final_links_in_range(self) -> list[bool]:
+        last = self.positions[-1]
+        return [bool(np.hypot(*(last[i + 1] - last[j])) <= self.comm_range) for i, j in enumerate(self.followed)]
 
 
 @dataclass
 class Episode:
-    """One robot's run from one start.
+    """One run from one start: a robot's, or a formation's (its leader's path, and :attr:`formation`).
 
     Attributes:
         world: The world's name.
-        start: Start position.
+        start: The (leader's) start position.
         outcome: ``"reached"``, ``"collision"``, ``"trapped"`` or ``"timeout"``.
         steps: Control steps taken.
-        path: ``(steps + 1, 2)`` positions, the start first.
-        contacts: What the robot touched when it collided (``"obstacle"``, ``"wall"``, ``"robot"``).
+        path: ``(steps + 1, 2)`` the (leader's) positions, the start first.
+        contacts: What was touched when the episode ended in a collision (``"obstacle"``,
+            ``"wall"``, ``"robot"``).
+        formation: The formation's record, for a formation's episode.
     """
 
     world: str
@@ -39,80 +75,45 @@ class Episode:
     steps: int
     path: np.ndarray
     contacts: list[str] = field(default_factory=list)
+    formation: FormationRecord | None = None
 
     @property
     def success(self) -> bool:
-        return self.outcome == "reached"
+        """Reached; for a formation, also every follower within range of the robot it follows at the end."""
+        reached = self.outcome == "reached"
+        return reached and (self.formation is None or all(self.formation.final_links_in_range()))
 
     @property
     def path_length(self) -> float:
         return float(np.sum(np.hypot(*np.diff(self.path, axis=0).T))) if len(self.path) > 1 else 0.0
 
     def to_dict(self) -> dict:
-        return {
+        data = {
             "world": self.world,
             "start": [float(v) for v in self.start],
             "success": self.success,
             "collision": self.outcome == "collision",
+            "collision_with": list(self.contacts),
             "trapped": self.outcome == "trapped",
             "outcome": self.outcome,
             "steps": int(self.steps),
             "path_length": round(self.path_length, 4),
             "final_position": [round(float(v), 4) for v in self.path[-1]],
         }
-
-
-@dataclass(frozen=True)
-class TrapDetector:
-    """Decides when a robot is stuck, from its recent history.
-
-    Attributes:
-        window: Control steps looked back over.
-        radius: Oscillating: every position of the window lies within this distance of their mean.
-        min_drop: ``"descent"`` rule only: trapped when the lowest potential of the window is not
-            at least this much below the lowest potential before it.
-    """
-
-    window: int = 10
-    radius: float = 1.5
-    min_drop: float = 1e-3
-
-    def watch(self, rule: str, starts: np.ndarray, potentials: np.ndarray, window: int | None = None) -> TrapWatch:
-        """Follow a batch of robots from their starts (and the potential there).
-
-        ``window`` replaces :attr:`window` when given (a planner's own, :attr:`Planner.trap_window`).
-        """
-        detector = self if window is None else dataclasses.replace(self, window=int(window))
-        return TrapWatch(detector, rule, starts, potentials)
-
-
-class TrapWatch:
-    """Per-robot recent history for :class:`TrapDetector`: constant work per step, however long the episode."""
-
-    def __init__(self, detector: TrapDetector, rule: str, starts: np.ndarray, potentials: np.ndarray):
-        self.detector, self.rule = detector, rule
-        w = detector.window
-        self.recent = [deque([np.asarray(p, float)], maxlen=w) for p in starts]
-        self.recent_u = [deque([float(u)], maxlen=w) for u in potentials]
-        self.earlier_min_u = [np.inf] * len(starts)   # lowest potential before the window
-        self.length = [1] * len(starts)
-
-    def step(self, i: int, position: np.ndarray, potential: float) -> bool:
-        """Record robot ``i``'s new position; True when it is trapped."""
-        d = self.detector
-        if len(self.recent_u[i]) == d.window:  # the oldest entry leaves the window
-            self.earlier_min_u[i] = min(self.earlier_min_u[i], self.recent_u[i][0])
-        self.recent[i].append(np.asarray(position, float))
-        self.recent_u[i].append(float(potential))
-        self.length[i] += 1
-        if self.length[i] <= d.window:
-            return False
-        recent = np.array(self.recent[i])
-        if np.max(np.hypot(*(recent - recent.mean(axis=0)).T)) < d.radius:
-            return True
-        if self.rule == "descent":
-            return min(self.recent_u[i]) > self.earlier_min_u[i] - d.min_drop
-        return False
+        f = self.formation
+        if f is not None:
+            links = f.final_links_in_range()
+            reached = self.outcome == "reached"
+            roles = ["leader"] + [f"follower{i + 1}" for i in range(len(f.followed))]
+            data["robots"] = [
+                {"role": role, "success": reached if k == 0 else reached and links[k - 1],
+                 "final_position": [round(float(v), 4) for v in f.positions[-1, k]]}
+                for k, role in enumerate(roles)]
+            data["min_robot_distance"] = round(f.min_robot_distance, 4)
+            data["robot_robot_collisions"] = f.robot_robot_collisions
+            data["robot_obstacle_collisions"] = f.robot_obstacle_collisions
+            data["link_in_range"] = [round(v, 4) for v in f.link_in_range]
+        return data
 
 
 def default_max_steps(world: World) -> int:
@@ -121,60 +122,79 @@ def default_max_steps(world: World) -> int:
 
 
 def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | np.ndarray,
-            max_steps: int | None = None, trap: TrapDetector = TrapDetector()) -> list[Episode]:
-    """Run ``planner`` from every start in ``world``, all at once, through the physics.
+            max_steps: int | None = None, trap: TrapDetector = TrapDetector(), formation: bool = False) -> list[Episode]:
+    """Run ``planner`` from every start in ``world``, all at once, through the engine.
 
-    An episode ends when the robot's centre comes within ``world.goal_tolerance`` of a target
-    (reached), when it touches an obstacle or the map's edge (collision), when the trap rule
-    fires (trapped), or after ``max_steps`` control steps (timeout).
+    Args:
+        world: The world.
+        planner: Steers the robots (the leaders, in formations).
+        starts: (n, 2) start positions (of the leaders).
+        max_steps: Step limit (default :func:`default_max_steps`).
+        trap: Trap detection; its rule and window are replaced by the planner's
+            (:attr:`Planner.trap_rule`, :attr:`Planner.trap_window`).
+        formation: Run the world's formation (:func:`~apf_physics.formation.formation_spec`):
+            followers placed behind each leader, moved by their own rule.
+
+    Returns:
+        One episode per start, in order.
+
+    Raises:
+        UserError: A formation's followers find no free position near a start.
     """
     starts = np.asarray(starts, dtype=float).reshape(-1, 2)
     n = len(starts)
     if n == 0:
         return []
     max_steps = default_max_steps(world) if max_steps is None else int(max_steps)
-    physics = Physics([world] * n)
-    physics.place(np.arange(n), starts)
+    team = FormationTeam(formation_spec(world), n) if formation else None
+    m = 1 if team is None else team.robots
+    detector = TrapDetector(planner.trap_rule, planner.trap_window or trap.window, trap.radius, trap.min_drop)
+    stepper = Stepper([world], n, m, max_steps=max_steps, trap=detector)
+    slots = np.arange(n)
+    initial = starts[:, None, :] if team is None else team.starts(world, starts)
+    stepper.start(slots, initial)
+    if team is not None:
+        team.reset(slots, [world] * n, initial)
     planner.reset(world, starts.copy())
+    stepper.finish(slots[stepper.distance() <= world.goal_tolerance], Outcome.REACHED)
 
-    paths = [[s.copy()] for s in starts]
-    watch = trap.watch(planner.trap_rule, starts, world.potential(starts), planner.trap_window)
-    outcome: list[str | None] = [None] * n
+    history = [initial.copy()]
     contacts: list[list[str]] = [[] for _ in range(n)]
-    steps = np.zeros(n, int)
-    active = np.ones(n, bool)
-    positions = starts.copy()
-    at_target = np.min(np.linalg.norm(starts[:, None, :] - world.targets[None], axis=2), axis=1) <= world.goal_tolerance
-    for i in np.flatnonzero(at_target):
-        outcome[i] = "reached"
-        active[i] = False
-    for _ in range(max_steps):
-        if not active.any():
-            break
-        command = planner.act(positions, active)
-        command[~active] = 0.0
+    robot_steps = np.zeros(n, int)
+    obstacle_steps = np.zeros(n, int)
+    in_range = np.zeros((n, max(m - 1, 0)))
+    while stepper.running.any():
+        active = stepper.running
+        positions = stepper.positions
+        leader = planner.act(positions[:, 0], active)
         gave_up = planner.stuck()
-        if gave_up is not None:
-            for i in np.flatnonzero(gave_up & active):
-                outcome[i] = "trapped"
-                active[i] = False
-            command[~active] = 0.0
-        log = physics.step(command)
-        positions = physics.positions
-        # Robots whose episode ended stay where they are, whatever the solver did to them.
-        u = world.potential(positions)
-        dist = np.min(np.linalg.norm(positions[:, None, :] - world.targets[None], axis=2), axis=1)
-        for i in np.flatnonzero(active):
-            steps[i] += 1
-            paths[i].append(positions[i].copy())
-            if log.any[i]:
-                outcome[i] = "collision"
-                contacts[i] = sorted({c.kind for c in log.contacts if c.robot == i})
-            elif dist[i] <= world.goal_tolerance:
-                outcome[i] = "reached"
-            elif watch.step(i, positions[i], u[i]):
-                outcome[i] = "trapped"
-            if outcome[i] is not None:
-                active[i] = False
-    return [Episode(world.name, starts[i], outcome[i] or "timeout", int(steps[i]), np.asarray(paths[i]), contacts[i])
-            for i in range(n)]
+        gave_up = active & gave_up if gave_up is not None else np.zeros(n, bool)
+        moving = active & ~gave_up
+        if team is None:
+            commands = np.where(moving[:, None], leader, 0.0)[:, None, :]
+        else:
+            commands = team.commands(positions, leader, moving)
+        report = stepper.step(commands, gave_up)
+        history.append(report.positions)
+        touched = report.contacts
+        for slot in np.flatnonzero(report.collided).tolist():
+            mine = range(slot * m, (slot + 1) * m)
+            contacts[slot] = sorted({c.kind for c in touched.contacts if c.robot in mine})
+        if team is not None:
+            moved = report.moved
+            robot_steps += moved & touched.robot.reshape(n, m).any(axis=1)
+            obstacle_steps += moved & (touched.obstacle | touched.wall).reshape(n, m).any(axis=1)
+            in_range += moved[:, None] & (team.links(report.positions) <= team.spec.comm_range)
+
+    trajectory = np.stack(history)                                     # (T, n, m, 2)
+    episodes = []
+    for i in range(n):
+        steps = int(stepper.steps[i])
+        positions = trajectory[: steps + 1, i]
+        record = None
+        if team is not None:
+            record = FormationRecord(positions, team.spec.comm_range, team.followed, int(robot_steps[i]),
+                                     int(obstacle_steps[i]), list(in_range[i] / max(steps, 1)))
+        episodes.append(Episode(world.name, starts[i], Outcome(stepper.outcome[i]).label, steps,
+                                positions[:, 0].copy(), contacts[i], record))
+    return episodes

@@ -14,7 +14,7 @@ import gymnasium as gym
 import numpy as np
 
 from apf_physics.actions import ACTIONS
-from apf_physics.world import FieldParams
+from apf_physics.field import FieldParams
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ def test_unknown_planner(worlds_dir, capsys):
 
 
 def test_model_for_another_field_is_refused(worlds_dir, capsys):
-    from apf_physics.planners.dqn import SHIPPED
+    from apf_physics.models import SHIPPED
 
     assert main(["eval", str(worlds_dir / "local_minimum.yaml"), "--planner", "dqn",
                  "--model", str(SHIPPED["thesis-fixed"])]) == 2

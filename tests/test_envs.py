@@ -34,7 +34,7 @@ def test_sb3_env_checker(fixed20):
 
 def test_observation_is_the_potential_window(fixed20):
     env = gym.make("apf_physics/Navigate-v0", world=fixed20)
-    obs, info = env.reset(seed=0)
+    obs, info = env.reset(seed=0, options={"start": 0})
     world = env.unwrapped.world
     assert obs.shape == (1, 11, 11) and obs.dtype == np.float32
     x, y = info["position"]

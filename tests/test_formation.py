@@ -6,9 +6,9 @@ import pytest
 
 import apf_physics  # noqa: F401
 from apf_physics import UserError, load_world, world_from_dict
-from apf_physics.formation import rollout_formation
 from apf_physics.planners import make_planner
-from apf_physics.planners.follower import formation_offsets, initial_followers, swept_distance
+from apf_physics.formation import formation_offsets, initial_followers, swept_distance
+from apf_physics.rollout import rollout
 from apf_physics.world import FormationSpec
 from conftest import simple_world_dict
 
@@ -17,22 +17,24 @@ from conftest import simple_world_dict
                                            ("three_targets", "gradient")])
 def test_followers_never_collide_and_stay_in_range(worlds_dir, name, planner):
     world = load_world(worlds_dir / f"{name}.yaml")
-    episodes = rollout_formation(world, make_planner(planner), world.starts)
+    episodes = rollout(world, make_planner(planner), world.starts, formation=True)
     for e in episodes:
-        assert e.robot_robot_collisions == 0 and e.robot_obstacle_collisions == 0
+        f = e.formation
+        assert f.robot_robot_collisions == 0 and f.robot_obstacle_collisions == 0
         assert e.outcome != "collision"
-        assert e.min_robot_distance >= 2 * world.robot_radius
-        assert e.positions.shape == (e.steps + 1, 3, 2)
-        assert min(e.link_in_range) >= 0.8
+        assert f.min_robot_distance >= 2 * world.robot_radius
+        assert f.positions.shape == (e.steps + 1, 3, 2)
+        np.testing.assert_array_equal(f.positions[:, 0], e.path)
+        assert min(f.link_in_range) >= 0.8
     # with a leader that goes around obstacles (A*), every link stays in range all the time
     if planner == "astar":
-        assert all(min(e.link_in_range) == 1.0 for e in episodes)
+        assert all(min(e.formation.link_in_range) == 1.0 for e in episodes)
         assert all(e.success for e in episodes)
 
 
 def test_trapped_leader_is_a_failure(worlds_dir):
     world = load_world(worlds_dir / "local_minimum.yaml")
-    (e,) = rollout_formation(world, make_planner("gradient"), world.starts)
+    (e,) = rollout(world, make_planner("gradient"), world.starts, formation=True)
     assert e.outcome == "trapped"
     assert not e.success
     d = e.to_dict()
@@ -61,9 +63,10 @@ def test_wedge_shape_and_example_world(worlds_dir):
     assert world.formation.shape == "wedge" and world.formation.followers == 4
     offsets = formation_offsets(world.formation)
     np.testing.assert_allclose(offsets, [[1, 1], [1, -1], [2, 2], [2, -2]])
-    episodes = rollout_formation(world, make_planner("escape"), world.starts)
-    assert all(e.robot_robot_collisions == 0 and e.robot_obstacle_collisions == 0 for e in episodes)
-    assert all(e.positions.shape[1] == 5 for e in episodes)
+    episodes = rollout(world, make_planner("escape"), world.starts, formation=True)
+    assert all(e.formation.robot_robot_collisions == 0 and e.formation.robot_obstacle_collisions == 0
+               for e in episodes)
+    assert all(e.formation.positions.shape[1] == 5 for e in episodes)
     assert sum(e.success for e in episodes) >= 4
 
 
@@ -104,7 +107,7 @@ def test_eval_formation_json(worlds_dir, tmp_path):
 
     out = tmp_path / "f.json"
     assert main(["eval", str(worlds_dir / "local_minimum.yaml"), "--planner", "astar", "--formation", "--json", str(out)]) == 0
-    (episode,) = json.loads(out.read_text())["episodes"]
+    ((episode,),) = [ev["episodes"] for ev in json.loads(out.read_text())]
     assert {"robots", "min_robot_distance", "robot_robot_collisions", "robot_obstacle_collisions",
             "link_in_range"} <= set(episode)
     assert [r["role"] for r in episode["robots"]] == ["leader", "follower1", "follower2"]

@@ -89,7 +89,7 @@ def test_smoke_run_writes_best_and_csv_and_resumes(tmp_path):
     assert first.global_step >= 400 and first.updates > 0
     for name in ("best.pt", "last.pt", "train.csv"):
         assert (tmp_path / name).is_file()
-    from apf_physics.rl.checkpoint import load_model
+    from apf_physics.models.files import load_model
 
     model = load_model(tmp_path / "best.pt", expect_obs_shape=(1, 11, 11))
     assert model.meta["training"]["validation"]["success"] == first.best_validation["success"]
@@ -118,7 +118,7 @@ def test_config_round_trips_through_dict():
 def _shipped_on_test_worlds():
     from apf_physics.evaluate import evaluate
     from apf_physics.planners import make_planner
-    from apf_physics.world import load_world
+    from apf_physics.worldfile import load_world
 
     worlds = [load_world(ROOT / "worlds" / "thesis" / f"test{i}.yaml") for i in range(1, 5)]
     episodes = evaluate(make_planner("dqn"), worlds).episodes
@@ -128,8 +128,8 @@ def _shipped_on_test_worlds():
 
 @pytest.mark.skipif(not SHIPPED.is_file(), reason="no shipped general model")
 def test_shipped_general_model_loads_and_runs_the_test_worlds_without_collisions():
-    from apf_physics.rl.checkpoint import load_model
-    from apf_physics.world import FIELD_PRESETS
+    from apf_physics.models.files import load_model
+    from apf_physics.field import FIELD_PRESETS
 
     model = load_model(SHIPPED, expect_obs_shape=(2, 11, 11), expect_field=FIELD_PRESETS["thesis-general"])
     assert model.meta["config"]["preset"] == "general-memory"

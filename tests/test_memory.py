@@ -13,8 +13,8 @@ from apf_physics import load_world
 from apf_physics.envs import NavigateEnv, NavigateVectorEnv
 from apf_physics.observation import VisitMemory, WindowSampler
 from apf_physics.planners.dqn import DQNPlanner, observe
-from apf_physics.rl.checkpoint import model_meta, save_model
-from apf_physics.rl.network import QNetwork, relative_log
+from apf_physics.models.files import model_meta, save_model
+from apf_physics.models.network import QNetwork, relative_log
 
 
 @pytest.fixture
@@ -147,7 +147,7 @@ def test_dqn_planner_runs_a_memory_model(tmp_path, fixed20):
 def test_general_memory_presets_train_a_two_channel_network(tmp_path, name):
     from apf_physics.envs.reward import reward_weights
     from apf_physics.errors import UserError
-    from apf_physics.rl.checkpoint import load_model
+    from apf_physics.models.files import load_model
     from apf_physics.rl.general import DEFAULT_PRESET, GeneralConfig, general_preset, train_general
 
     weights = reward_weights(general_preset(name).dqn.reward)

@@ -8,7 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from apf_physics import world_from_dict
-from apf_physics.physics import Physics, triangulate
+from apf_physics.physics import Physics
+from apf_physics.geometry import triangulate
 from apf_physics.geometry import polygon_area
 from conftest import simple_world_dict
 

@@ -63,7 +63,7 @@ def test_eval_command_writes_json(worlds_dir, tmp_path, capsys):
 
     out = tmp_path / "sub" / "eval.json"
     assert main(["eval", str(worlds_dir / "fixed20.yaml"), "--planner", "gradient", "--json", str(out)]) == 0
-    data = json.loads(out.read_text())
+    (data,) = json.loads(out.read_text())      # one object per planner, always in a list
     assert data["planner"] == "gradient"
     assert data["summary"]["episodes"] == 40
     assert len(data["episodes"]) == 40

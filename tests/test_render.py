@@ -3,8 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import os
 import re
+import struct
+import subprocess
+import sys
+from pathlib import Path
 
+import av
 import cv2
 import numpy as np
 import pytest
@@ -17,6 +23,7 @@ from apf_physics.render import (
     VideoWriter,
     draw_field_plot,
     draw_frame,
+    field_figure,
     formation_roles,
     plot_field,
     render_trajectory,
@@ -26,7 +33,9 @@ from apf_physics.render import (
     write_png,
     write_video,
 )
-from apf_physics.render.drawing import BLACK, BLUE, RED, YELLOW
+from apf_physics.render.drawing import BLACK, BLUE, RED, YELLOW, heatmap
+from apf_physics.render.field_plot import figure_map_origin
+from apf_physics.render.video import choose_codec
 
 
 def make_world(size=(20, 20), **overrides):
@@ -159,10 +168,44 @@ def test_stack_paths_holds_the_last_position():
     assert np.array_equal(stacked[4, 0], [0.0, 0.0])
 
 
-@pytest.mark.parametrize("suffix, codec", [(".mp4", None), (".avi", None), (".webm", None), (".mp4", "h264")])
-def test_video_reads_back_with_frame_count_and_size(world, tmp_path, suffix, codec):
-    if codec == "h264":
-        pytest.importorskip("imageio_ffmpeg")
+def read_with_pyav(path):
+    """(codec name, pix_fmt, decoded frames, duration in s, RGB frames) of a video file."""
+    with av.open(str(path)) as container:
+        stream = container.streams.video[0]
+        frames = [frame.to_ndarray(format="rgb24") for frame in container.decode(stream)]
+        duration = container.duration / av.time_base
+        return stream.codec_context.name, stream.codec_context.pix_fmt, len(frames), duration, frames
+
+
+@pytest.mark.parametrize("suffix, codec, expected", [(".mp4", None, "h264"), (".webm", None, "vp9")])
+def test_browser_video_is_h264_or_vp9_yuv420p_with_frames_and_duration(world, tmp_path, suffix, codec, expected):
+    trajectory = np.linspace([2.0, 2.0], [10.0, 15.0], 12)
+    out = tmp_path / f"run{suffix}"
+    written = write_video(render_trajectory(world, trajectory, long_side=256), out, fps=10, codec=codec)
+    assert written == 12
+    name, pix_fmt, count, duration, frames = read_with_pyav(out)
+    assert (name, pix_fmt, count) == (expected, "yuv420p", 12)
+    assert duration == pytest.approx(1.2, abs=0.05)
+    assert frames[0].shape == (256, 256, 3)
+
+
+def test_h264_mp4_has_its_index_first(world, tmp_path):
+    # +faststart: the moov atom comes before the media data, so a browser can start at once.
+    out = tmp_path / "run.mp4"
+    write_video(render_trajectory(world, np.linspace([2.0, 2.0], [10.0, 15.0], 5), long_side=128), out)
+    data = out.read_bytes()
+    assert data.index(b"moov") < data.index(b"mdat")
+
+
+def test_odd_frame_sizes_are_padded_for_yuv420p(tmp_path):
+    frames = [np.full((33, 47, 3), 200, np.uint8)] * 3
+    write_video(frames, tmp_path / "odd.mp4")
+    _, _, count, _, decoded = read_with_pyav(tmp_path / "odd.mp4")
+    assert count == 3 and decoded[0].shape == (34, 48, 3)
+
+
+@pytest.mark.parametrize("suffix, codec", [(".avi", None), (".mp4", "mp4v")])
+def test_opencv_video_reads_back_with_frame_count_and_size(world, tmp_path, suffix, codec):
     trajectory = np.linspace([2.0, 2.0], [10.0, 15.0], 12)
     out = tmp_path / f"run{suffix}"
     written = write_video(render_trajectory(world, trajectory, long_side=256), out, fps=10, codec=codec)
@@ -178,19 +221,85 @@ def test_video_reads_back_with_frame_count_and_size(world, tmp_path, suffix, cod
         count += 1
     capture.release()
     assert count == 12
+    assert read_with_pyav(out)[0] == {".avi": "mjpeg", ".mp4": "mpeg4"}[suffix]
 
 
-def test_video_frame_colours_survive_encoding(world, tmp_path):
-    image = FieldImage.from_world(world, 256)
-    position = np.array([3.0, 3.0])
-    frames = [draw_frame(image, Snapshot(position[None], ("single",)))] * 3
-    out = tmp_path / "colour.avi"
-    write_video(frames, out, fps=5)
-    ok, bgr = cv2.VideoCapture(str(out)).read()
-    assert ok
-    col, row = image.pixel_of(position)[0]
-    rgb = bgr[row, col, ::-1].astype(int)
-    assert np.abs(rgb - np.array(BLUE)).max() < 40   # lossy codec: close to blue, not exact
+def test_codec_choice_by_extension_and_mismatches():
+    assert choose_codec("a.mp4").name == "h264"
+    assert choose_codec("a.webm").name == "vp9"
+    assert choose_codec("a.avi").name == "mjpg"
+    assert choose_codec("a.mp4", "mp4v").browsers is False
+    with pytest.raises(UserError, match=r"H\.264 needs a \.mp4 file"):
+        choose_codec("a.webm", "h264")
+    with pytest.raises(UserError, match="unknown codec 'x265'"):
+        choose_codec("a.mp4", "x265")
+
+
+def test_writing_videos_prints_no_codec_warnings(tmp_path):
+    # OpenCV's FFMPEG backend printed "tag ... is not supported" for every .webm; FFmpeg and
+    # x264 print statistics unless their log is off. Nothing may reach the terminal.
+    script = f"""
+import numpy as np
+from apf_physics.render import write_video
+frames = [np.full((64, 64, 3), i * 20, np.uint8) for i in range(5)]
+for name, codec in [("a.mp4", None), ("b.webm", None), ("c.avi", None), ("d.mp4", "mp4v")]:
+    write_video(frames, {str(tmp_path)!r} + "/" + name, codec=codec)
+print("done")
+"""
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "done"
+    assert result.stderr == ""
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.mp4", "b.webm", "c.avi", "d.mp4"]
+
+
+def test_video_colours_survive_h264(tmp_path):
+    # BT.709 limited range, tagged in the stream: a decoder shows the colours that were drawn
+    # (decoding as BT.601 shifts the red by 23 levels; flat quadrants keep 4:2:0 out of it).
+    colours = np.array([BLUE, YELLOW, RED, (235, 235, 235)], np.uint8)
+    frame = np.empty((128, 128, 3), np.uint8)
+    for i, colour in enumerate(colours):
+        frame[64 * (i // 2): 64 * (i // 2 + 1), 64 * (i % 2): 64 * (i % 2 + 1)] = colour
+    write_video([frame] * 3, tmp_path / "colour.mp4", fps=5)
+    decoded = read_with_pyav(tmp_path / "colour.mp4")[4][0].astype(int)
+    for i, colour in enumerate(colours):
+        centre = decoded[64 * (i // 2) + 32, 64 * (i % 2) + 32]
+        assert np.abs(centre - colour).max() <= 4, (colour, centre)
+
+
+def test_failed_render_leaves_the_old_video_and_no_temporary_file(world, tmp_path):
+    out = tmp_path / "run.mp4"
+    out.write_bytes(b"the old video")
+
+    def frames_then_failure():
+        yield from render_trajectory(world, np.linspace([2.0, 2.0], [10.0, 15.0], 5), long_side=128)
+        raise KeyboardInterrupt  # a render stopped half-way
+
+    with pytest.raises(KeyboardInterrupt):
+        write_video(frames_then_failure(), out)
+    assert out.read_bytes() == b"the old video"
+    assert [p.name for p in tmp_path.iterdir()] == ["run.mp4"]
+    write_video(render_trajectory(world, np.linspace([2.0, 2.0], [10.0, 15.0], 5), long_side=128), out)
+    assert read_with_pyav(out)[2] == 5
+    assert [p.name for p in tmp_path.iterdir()] == ["run.mp4"]
+
+
+def test_videos_and_pngs_refuse_to_replace_what_is_not_a_regular_file(tmp_path):
+    target = tmp_path / "real.mp4"
+    target.write_bytes(b"keep")
+    link = tmp_path / "link.mp4"
+    link.symlink_to(target)
+    fifo = tmp_path / "pipe.mp4"
+    os.mkfifo(fifo)
+    with pytest.raises(UserError, match="link.mp4: it is a symbolic link"):
+        VideoWriter(link, 10, (64, 64))
+    with pytest.raises(UserError, match="pipe.mp4: it is a FIFO"):
+        VideoWriter(fifo, 10, (64, 64))
+    png_link = tmp_path / "final.png"
+    png_link.symlink_to(target)
+    with pytest.raises(UserError, match="final.png: it is a symbolic link"):
+        write_png(np.zeros((8, 8, 3), np.uint8), png_link)
+    assert target.read_bytes() == b"keep" and link.is_symlink() and fifo.exists()
 
 
 def test_unwritable_video_path_names_the_path(world, tmp_path):
@@ -247,6 +356,33 @@ def test_field_plot_draws_yellow_paths_blue_starts_and_rings_for_traps(world, tm
     assert out.is_file() and cv2.imread(str(out)).shape == written.shape
 
 
+def test_field_figure_keeps_the_map_clear_and_adds_a_colour_bar(world):
+    image = FieldImage.from_world(world, 512)
+    paths = [np.linspace([2.0, 2.0], world.targets[0], 20)]
+    plot = draw_field_plot(world, paths, image=image)
+    figure = field_figure(world, paths, title=["render-test", "1 start"], image=image)
+    row, col = figure_map_origin(2, image)
+    # The map is pasted whole: no title, legend or colour bar drawn over the data.
+    assert np.array_equal(figure[row: row + 512, col: col + 512], plot)
+    assert figure.shape[1] > 512 + 150 and row > 0
+    # The colour bar: the heatmap's top colour (shade 1) above its bottom colour (shade 0).
+    panel = figure[row:, 512:]
+    top, bottom = heatmap(np.array([[1.0]], np.float32))[0, 0], heatmap(np.array([[0.0]], np.float32))[0, 0]
+    top_rows = np.argwhere(np.abs(panel.astype(int) - top).max(axis=2) <= 3)[:, 0]
+    bottom_rows = np.argwhere(np.abs(panel.astype(int) - bottom).max(axis=2) <= 3)[:, 0]
+    assert len(top_rows) > 20 and len(bottom_rows) > 20
+    assert top_rows.max() < bottom_rows.min()
+
+
+@pytest.mark.parametrize("scaling", ["log", "rank"])
+def test_colour_scale_runs_from_the_lowest_potential_upwards(world, scaling):
+    image = FieldImage.from_world(world, 128, scaling=scaling)
+    scale = image.shade_potential
+    assert np.all(np.diff(scale) >= 0) and scale[-1] > scale[0]
+    lowest = world.raster(4).values.min()
+    assert scale[0] == pytest.approx(lowest, rel=1e-6, abs=1e-6) if scaling == "log" else scale[0] >= lowest
+
+
 def test_plot_field_command(world, tmp_path, capsys):
     from apf_physics.commands import plot_field as command
 
@@ -254,34 +390,119 @@ def test_plot_field_command(world, tmp_path, capsys):
     save_world(world, world_file)
     parser = argparse.ArgumentParser()
     command.add_parser(parser.add_subparsers())
-    out = tmp_path / "field.png"
+    out = tmp_path / "new" / "field.png"
     args = parser.parse_args(["plot-field", str(world_file), "--out", str(out), "--size", "256"])
     assert args.func(args) == 0
-    assert cv2.imread(str(out)).shape == (256, 256, 3)
+    height, width = cv2.imread(str(out)).shape[:2]
+    assert height >= 256 and width > 256       # the map, a title above and the colour bar beside it
     assert "2 starts" in capsys.readouterr().out
-    bad = parser.parse_args(["plot-field", str(world_file), "--out", str(tmp_path / "x" / "f.png")])
-    with pytest.raises(UserError, match="f.png"):
+    bad = parser.parse_args(["plot-field", str(world_file), "--out", str(tmp_path / "f.jpg")])
+    with pytest.raises(UserError, match="f.jpg"):
         bad.func(bad)
 
 
-def test_render_command_writes_video_and_png(world, tmp_path):
+def test_render_command_writes_h264_and_png_into_a_new_folder(world, tmp_path, capsys):
     from apf_physics.commands import render as command
 
     world_file = tmp_path / "w.yaml"
     save_world(world, world_file)
     parser = argparse.ArgumentParser()
     command.add_parser(parser.add_subparsers())
-    out, png = tmp_path / "run.mp4", tmp_path / "final.png"
+    out, png = tmp_path / "new" / "dir" / "run.mp4", tmp_path / "final.png"
     args = parser.parse_args(["render", str(world_file), "--planner", "gradient", "--all-starts", "--out", str(out),
                               "--png", str(png), "--size", "128", "--hold", "0", "--no-progress"])
     assert args.func(args) == 0
-    capture = cv2.VideoCapture(str(out))
-    frames = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
-    assert frames >= 2
+    name, pix_fmt, frames, _, _ = read_with_pyav(out)
+    assert (name, pix_fmt) == ("h264", "yuv420p") and frames >= 2
+    assert f"wrote {out} (H.264;" in capsys.readouterr().out
     assert cv2.imread(str(png)).shape == (128, 128, 3)
     bad = parser.parse_args(["render", str(world_file), "--start", "7", "--out", str(out), "--no-progress"])
     with pytest.raises(UserError, match="--start 7"):
         bad.func(bad)
+    mp4v = parser.parse_args(["render", str(world_file), "--out", str(tmp_path / "old.mp4"), "--codec", "mp4v",
+                              "--hold", "0", "--size", "64", "--no-progress"])
+    assert mp4v.func(mp4v) == 0
+    assert "mp4v, which browsers do not play" in capsys.readouterr().out
+
+
+def test_render_refuses_a_symlink_before_any_work(tmp_path):
+    from apf_physics.cli import main
+
+    target = tmp_path / "kept.mp4"
+    target.write_bytes(b"keep")
+    (tmp_path / "link.mp4").symlink_to(target)
+    # The world does not exist: the output is checked first, so that is not what is reported.
+    with pytest.raises(UserError, match="link.mp4: it is a symbolic link"):
+        from apf_physics.commands import render as command
+
+        parser = argparse.ArgumentParser()
+        command.add_parser(parser.add_subparsers())
+        args = parser.parse_args(["render", str(tmp_path / "missing.yaml"), "--out", str(tmp_path / "link.mp4")])
+        args.func(args)
+    assert main(["render", str(tmp_path / "missing.yaml"), "--out", str(tmp_path / "link.mp4")]) == 2
+    assert target.read_bytes() == b"keep"
+
+
+def run_with_terminal_stderr(command: list[str]) -> tuple[int, bytes]:
+    """Run ``command`` with stderr on a pseudo-terminal; returns (exit status, what reached stderr)."""
+    pty = pytest.importorskip("pty")
+    fcntl, termios = pytest.importorskip("fcntl"), pytest.importorskip("termios")
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 80, 0, 0))  # a new pty is 0x0: no room for a bar
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=slave)
+    os.close(slave)
+    received = b""
+    while True:
+        try:
+            chunk = os.read(master, 4096)
+        except OSError:  # EIO: the process closed its end
+            break
+        if not chunk:
+            break
+        received += chunk
+    os.close(master)
+    return process.wait(timeout=120), received
+
+
+@pytest.mark.parametrize("flags, shown", [((), True), (("--no-progress",), False)])
+def test_render_progress_bar_only_on_a_terminal_and_not_with_no_progress(world, tmp_path, flags, shown):
+    world_file = tmp_path / "w.yaml"
+    save_world(world, world_file)
+    command = [sys.executable, "-m", "apf_physics.cli", "render", str(world_file), "--all-starts", "--size", "64",
+               "--out", str(tmp_path / "run.mp4"), *flags]
+    status, terminal = run_with_terminal_stderr(command)
+    assert status == 0
+    assert (b"frame" in terminal) is shown, terminal
+    piped = subprocess.run(command[:-len(flags) or None], capture_output=True, text=True, timeout=120)
+    assert piped.returncode == 0 and piped.stderr == ""   # stderr not a terminal: no bar
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux's /proc, a folder that takes no new files")
+def test_plot_curve_to_an_unwritable_place_fails_with_one_line(tmp_path):
+    csv = tmp_path / "train.csv"
+    csv.write_text("global_step,success_rate,mean_return,eval_success\n0,0,-5,\n100,0.5,-2,0.4\n")
+    result = subprocess.run([sys.executable, "-m", "apf_physics.cli", "plot-curve", str(csv), "--out", "/proc/c.png"],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2
+    assert "wrote" not in result.stdout
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("apf-physics: error: cannot write /proc/c.png")
+    ok = subprocess.run([sys.executable, "-m", "apf_physics.cli", "plot-curve", str(csv), "--out",
+                         str(tmp_path / "new" / "c.png")], capture_output=True, text=True, timeout=120)
+    assert ok.returncode == 0 and cv2.imread(str(tmp_path / "new" / "c.png")).shape == (480, 720, 3)
+
+
+def test_plot_curve_legend_stays_outside_the_axes(tmp_path):
+    from apf_physics.rl.plot import plot_training_curve
+
+    # No data: whatever is drawn inside the axes boxes can only be the legend.
+    csv = tmp_path / "train.csv"
+    csv.write_text("global_step,success_rate,mean_return,eval_success\n")
+    image = plot_training_curve(csv)
+    for top, height in ((30, 190), (260, 190)):   # the two panels' boxes
+        inside = image[top + 2: top + height - 1, 72: image.shape[1] - 22]
+        assert np.all(inside == 255)
+    assert np.any(image[:28, 360:] != 255)       # the legend, on the title line
 
 
 def test_formation_roles_and_colours():
@@ -296,19 +517,23 @@ def test_formation_roles_and_colours():
 def test_render_clips_single_robots_together_and_formations_in_turn():
     from types import SimpleNamespace
 
-    from apf_physics.render.episodes import episode_clips as _clips
+    from apf_physics.render.episodes import episode_clips, is_formation
 
-    def episode(path, outcome="reached"):
-        path = np.asarray(path, dtype=float)
-        return SimpleNamespace(path=path, positions=path, start=path[0].reshape(-1, 2)[0], outcome=outcome,
-                               steps=len(path) - 1)
+    def episode(positions, outcome="reached"):
+        # A rollout's episode: the (leader's) path; a formation's also its record of every robot.
+        positions = np.asarray(positions, dtype=float)
+        path = positions if positions.ndim == 2 else positions[:, 0]
+        record = None if positions.ndim == 2 else SimpleNamespace(positions=positions)
+        return SimpleNamespace(path=path, formation=record, start=path[0], outcome=outcome, steps=len(path) - 1)
 
     singles = [episode(np.linspace([1, 1], [5, 5], 4)), episode(np.linspace([1, 9], [5, 9], 7), "trapped")]
-    (trajectory, roles, lines, final), = _clips(singles, ("world w",), False, None)
+    assert not is_formation(singles)
+    (trajectory, roles, lines, final), = episode_clips(singles, ("world w",), False, None)
     assert trajectory.shape == (7, 2, 2) and roles == ("single", "single")
     assert "reached 1, trapped 1" in final[0]
     line = np.linspace([1, 1], [5, 5], 5)
     formation = [episode(np.stack([line, line - 0.5, line - 1.0], axis=1)) for _ in range(2)]
-    clips = list(_clips(formation, ("world w",), True, None))
+    assert is_formation(formation)
+    clips = list(episode_clips(formation, ("world w",), True, None))
     assert len(clips) == 2
     assert clips[0][0].shape == (5, 3, 2) and clips[0][1] == ("leader", "follower1", "follower2")

@@ -25,7 +25,7 @@ from apf_physics.rl import (
     relative_log,
     train,
 )
-from apf_physics.rl.checkpoint import MAGIC, read_file, write_file
+from apf_physics.models.files import MAGIC, read_file, write_file
 from apf_physics.rl.dqn import CSV_COLUMNS, DQNConfig, load_checkpoint_config
 from rl_stub_env import StubVectorEnv, StubWorld, stub_env_factory
 

@@ -8,9 +8,11 @@ import pytest
 from apf_physics import load_world, world_from_dict
 from apf_physics.curriculum import load_curriculum, rehearsal_worlds
 from apf_physics.errors import UserError, WorldError
-from apf_physics.generate import FAMILIES, generate_set, generate_world
+from apf_physics.generate import FAMILIES, generate_world
+from apf_physics.worldsets import generate_set
 from apf_physics.planners import GradientPlanner, make_planner
-from apf_physics.planners.astar import AStarPlanner, reachable, shortest_path, shortest_path_length
+from apf_physics.planners.astar import AStarPlanner
+from apf_physics.search import reachable, shortest_path, shortest_path_length
 from apf_physics.planners.escape import EscapePlanner
 from apf_physics.rollout import rollout
 

@@ -11,22 +11,25 @@ from hypothesis import strategies as st
 from apf_physics import load_world
 from apf_physics.actions import ACTIONS, SAFETY, move_clearance
 from apf_physics.envs import NavigateVectorEnv
-from apf_physics.envs.reward import REWARD_PRESETS, RewardWeights
+from apf_physics.envs.reward import REWARD_PRESETS, TERMS, RewardWeights
+from apf_physics.observation import ObserverConfig
 from apf_physics.planners import make_planner
 from apf_physics.planners.base import Planner
 from apf_physics.planners.dqn import DQNPlanner, shielded_argmax
-from apf_physics.rollout import TrapDetector, rollout
-from apf_physics.world import world_from_dict
+from apf_physics.engine import TrapDetector
+from apf_physics.rollout import rollout
+from apf_physics.worldfile import world_from_dict
 
 from conftest import simple_world_dict
 
 
 class ConstantPolicy:
-    """A stand-in for :class:`~apf_physics.rl.policy.DQNPolicy` that always ranks the moves the same way."""
+    """A stand-in for :class:`~apf_physics.models.policy.DQNPolicy` that always ranks the moves the same way."""
 
     def __init__(self, preference: np.ndarray, channels: int = 1, size: int = 5):
         self.preference = np.asarray(preference, np.float32)
         self.obs_shape = (channels, size, size)
+        self.observer = ObserverConfig(size=size, channels=("potential", "memory")[:channels])
 
     def q_values(self, obs: np.ndarray) -> np.ndarray:
         return np.tile(self.preference, (len(obs), 1))
@@ -115,8 +118,8 @@ def test_a_memory_model_gets_the_long_trap_window(world):
 
 def test_revisit_term_counts_earlier_visits_up_to_the_cap(worlds_dir):
     weights = RewardWeights(w1=-1000, w2=1000, w3=-1, beta=-4, revisit=-10)
-    env = NavigateVectorEnv(world=str(worlds_dir / "fixed20.yaml"), num_envs=2, reward=weights, starts="random",
-                            max_episode_steps=50)
+    env = NavigateVectorEnv(world=str(worlds_dir / "fixed20.yaml"), num_envs=2, reward=weights,
+                            starts=[[10.3, 17.6]], max_episode_steps=50)
     assert env.single_observation_space.shape[0] == 1   # counted without showing the memory channel
     env.reset(seed=4)
     seen = []
@@ -124,7 +127,7 @@ def test_revisit_term_counts_earlier_visits_up_to_the_cap(worlds_dir):
         _, reward, terminated, truncated, info = env.step(np.array([8, 3 if t % 2 == 0 else 2]))
         assert not (terminated.any() or truncated.any())
         terms = info["reward_terms"]
-        np.testing.assert_allclose(reward, sum(terms.values()), rtol=1e-5)
+        np.testing.assert_allclose(reward, sum(terms[name] for name in TERMS), rtol=1e-5)
         seen.append(terms["revisit"])
     seen = np.array(seen)
     # the start cell was counted at reset: staying there has been seen 1, 2, 3, then 4 (the cap) times
@@ -142,14 +145,22 @@ def test_thesis_rewards_have_no_revisit_term(worlds_dir):
     np.testing.assert_array_equal(info["reward_terms"]["revisit"], 0.0)
 
 
-def test_formation_env_refuses_a_revisit_term(worlds_dir):
+def test_formation_env_has_the_leaders_memory_and_revisit_term(worlds_dir):
     import gymnasium as gym
 
     import apf_physics  # noqa: F401
 
-    with pytest.raises(ValueError, match="visit memory"):
-        gym.make("apf_physics/Formation-v0", world=str(worlds_dir / "fixed20.yaml"),
-                 reward=dict(w1=-1, w2=1, w3=-1, beta=-1, revisit=-1))
+    env = gym.make("apf_physics/Formation-v0", world=str(worlds_dir / "fixed20.yaml"), memory=True,
+                   reward=dict(w1=-1, w2=1, w3=-1, beta=0, revisit=-1))
+    obs, _ = env.reset(options={"start": [10.3, 17.6]})
+    assert obs.shape == (2, 11, 11) and obs[1, 5, 5] == 0.25     # the leader's start cell, counted once
+    revisits = []
+    for action in (8, 8, 3):                                      # stay twice, then a new cell
+        obs, reward, terminated, truncated, info = env.step(action)
+        assert not terminated
+        revisits.append(info["reward_terms"]["revisit"])
+    assert revisits == [-1, -2, 0]
+    assert obs[1, 5, 4] == 0.75                                   # the cell left behind: seen three times
 
 
 def test_shielded_shipped_model_is_no_worse_on_fixed20(worlds_dir):
@@ -170,4 +181,4 @@ def test_length_term_charges_the_distance_moved_and_shaping_discounts_the_next_p
     np.testing.assert_allclose(terms["length"], [-20, -20 * np.sqrt(2), 0], atol=0.05)
     after = world.potential(np.array([[11.0, 16.0], [11.0, 17.0], [10.0, 16.0]]))
     np.testing.assert_allclose(terms["potential"], -4 * (0.9 * after - before), rtol=1e-3, atol=0.5)
-    np.testing.assert_allclose(reward, sum(terms.values()), rtol=1e-5)
+    np.testing.assert_allclose(reward, sum(terms[name] for name in TERMS), rtol=1e-5)

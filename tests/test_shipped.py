@@ -5,13 +5,13 @@ from __future__ import annotations
 import pytest
 
 from apf_physics import load_world
-from apf_physics.planners.dqn import SHIPPED
+from apf_physics.models import SHIPPED
 
 pytestmark = pytest.mark.skipif(not SHIPPED["thesis-fixed"].exists(), reason="no shipped fixed20 model")
 
 
 def test_shipped_fixed20_model_loads_and_fits_the_world(worlds_dir):
-    from apf_physics.rl import load_model
+    from apf_physics.models import load_model
 
     world = load_world(worlds_dir / "fixed20.yaml")
     model = load_model(SHIPPED["thesis-fixed"], expect_obs_shape=(1, 11, 11), expect_field=world.field.as_dict())

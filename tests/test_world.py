@@ -7,7 +7,7 @@ import pytest
 import yaml
 
 from apf_physics import WorldError, load_world, world_from_dict
-from apf_physics.world import dump_world_yaml, load_worlds
+from apf_physics.worldfile import dump_world_yaml, load_worlds
 from conftest import simple_world_dict
 
 

@@ -2,10 +2,11 @@
 """Benchmark rendering: frames per second drawing 512×512 frames, and drawing + writing videos.
 
 Prints one table: the background build once per world, then frames per second for drawing
-only, writing pre-drawn frames only, and drawing + writing, per container/codec. The scene
-is a 20×20 world (``worlds/fixed20.yaml`` if present) with a three-robot formation whose
-trails grow over 200-step episodes, and overlay text (the rollout's default step limit there is 160), and a
-50×50 world for the background build. Medians over ``--repeats`` runs.
+only, and per codec side by side (H.264 and VP9 through PyAV, mp4v and MJPG through OpenCV)
+writing pre-drawn frames only and drawing + writing. The scene is the bundled 20×20 world
+``fixed20`` with a three-robot formation whose trails grow over 200-step episodes, and
+overlay text (the rollout's default step limit there is 160), and a 50×50 world for the
+background build. Medians over ``--repeats`` runs.
 
 Example::
 
@@ -24,10 +25,9 @@ from pathlib import Path
 import numpy as np
 
 from apf_physics import load_world, world_from_dict
-from apf_physics.render import (FieldImage, draw_frame, formation_roles, render_trajectory, trajectory_snapshots,
-                                write_video)
-
-ROOT = Path(__file__).resolve().parent.parent
+from apf_physics.bundled import bundled_dir
+from apf_physics.render import (CODECS, FieldImage, draw_frame, formation_roles, render_trajectory,
+                                trajectory_snapshots, write_video)
 
 WORLD_50 = {
     "name": "bench50", "size": [50, 50], "robot_radius": 0.25, "field": "thesis-general",
@@ -93,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--size", type=int, default=512, help="pixels along the longer side (default 512)")
     args = parser.parse_args(argv)
 
-    seed = ROOT / "worlds" / "fixed20.yaml"
+    seed = bundled_dir() / "fixed20.yaml"
     world20 = load_world(seed) if seed.is_file() else world_from_dict(WORLD_20)
     world50 = world_from_dict(WORLD_50)
     trajectory = formation_trajectory()
@@ -116,29 +116,16 @@ def main(argv: list[str] | None = None) -> int:
     predrawn = list(frames(world20, image, trajectory, n))
 
     with tempfile.TemporaryDirectory() as tmp:
-        try:
-            import imageio_ffmpeg  # noqa: F401
-            has_ffmpeg = True
-        except ImportError:
-            has_ffmpeg = False
-        cases = [(".mp4", None, n), (".avi", None, n), (".webm", None, max(60, n // 5))]
-        if has_ffmpeg:
-            cases.append((".mp4", "h264", n))
-        for suffix, codec, count in cases:
-            out = Path(tmp) / f"bench{'_h264' if codec else ''}{suffix}"
-            label = {".mp4": "mp4v .mp4", ".avi": "MJPG .avi", ".webm": "VP80 .webm"}[suffix]
-            if codec:
-                label = "H.264 .mp4 (imageio-ffmpeg)"
-            write_s = timed(lambda: write_video(predrawn[:count], out, 10, codec=codec), args.repeats)
-            both_s = timed(lambda: write_video(frames(world20, image, trajectory, count), out, 10, codec=codec),
+        for name in ("h264", "vp9", "mp4v", "mjpg"):
+            codec = CODECS[name]
+            out = Path(tmp) / f"bench{codec.extension}"
+            write_s = timed(lambda: write_video(predrawn, out, 10, codec=name), args.repeats)
+            both_s = timed(lambda: write_video(frames(world20, image, trajectory, n), out, 10, codec=name),
                            args.repeats)
             kib = out.stat().st_size / 1024
-            rows.append((f"write only, {label}",
-                         f"{count / write_s:8.0f} fps  ({count} frames)"))
-            rows.append((f"draw + write, {label}",
-                         f"{count / both_s:8.0f} fps  ({kib / count:.1f} KiB/frame)"))
-        if not has_ffmpeg:
-            rows.append(("H.264 .mp4", "skipped (imageio-ffmpeg not installed)"))
+            via = "PyAV" if codec.pyav else "OpenCV"
+            rows.append((f"{codec.label} {codec.extension} ({via}): write only / draw + write",
+                         f"{n / write_s:8.0f} / {n / both_s:4.0f} fps  ({kib / n:.1f} KiB/frame)"))
 
     width = max(len(label) for label, _ in rows)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")

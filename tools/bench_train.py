@@ -63,7 +63,7 @@ def bench_sb3(world, seconds: float, seed: int, num_envs: int = 16, eval_every: 
             self.first = net.hidden[0]
 
         def forward(self, obs):
-            from apf_physics.rl.network import max_pool_2x2_stride1, relative_log
+            from apf_physics.models.network import max_pool_2x2_stride1, relative_log
             import torch.nn.functional as F
 
             x = relative_log(obs)

@@ -11,7 +11,7 @@ through the physics exactly as ``apf-physics eval`` runs them.
 
 Trap labels and A* lengths come from the directory's ``manifest.json`` (written by
 ``apf-physics generate``); for world files without one they are computed here
-(:func:`apf_physics.generate.label_starts`).
+(:func:`apf_physics.worldsets.label_starts`).
 
 Usage::
 
@@ -36,9 +36,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from apf_physics.evaluate import evaluate  # noqa: E402
-from apf_physics.generate import label_starts  # noqa: E402
+from apf_physics.worldsets import label_starts  # noqa: E402
 from apf_physics.planners import make_planner  # noqa: E402
-from apf_physics.world import load_world  # noqa: E402
+from apf_physics.worldfile import load_world  # noqa: E402
 
 
 def lattice_reachable(world, start) -> bool:

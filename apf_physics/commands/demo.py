@@ -2,7 +2,9 @@
 
 Runs the fixed 20×20 world's three-robot formation with the shipped fixed-world DQN as
 leader, and the thesis's general test worlds with the shipped general DQN, beside gradient
-descent; writes videos and PNGs into a folder and prints the summary table.
+descent; prints the summary table and writes a results page (``index.html``: the table,
+field figures and browser-playable videos) into a folder. The worlds are the bundled ones,
+so the demo runs from any folder.
 """
 
 from __future__ import annotations
@@ -11,70 +13,106 @@ import argparse
 import time
 from pathlib import Path
 
-WORLDS = Path(__file__).resolve().parent.parent.parent / "worlds"
+GENERAL_WORLDS = tuple(f"thesis/test{i}.yaml" for i in range(1, 5))
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser("demo", help="run the shipped models: fixed-world formation and general worlds, "
-                                           "with videos, PNGs and a summary table",
+    p = subparsers.add_parser("demo", help="run the shipped models: fixed-world formation and general worlds; "
+                                           "write a results page with figures and videos, print the table",
                               description=__doc__.splitlines()[0])
-    p.add_argument("--out", default="apf-demo", help="folder for the videos and PNGs (default: apf-demo)")
-    p.add_argument("--worlds", default=str(WORLDS), help="the project's worlds folder (default: %(default)s)")
-    p.add_argument("--no-video", action="store_true", help="only evaluate and print the table")
+    p.add_argument("--out", default="apf-demo",
+                   help="folder for the results page, figures and videos (default: apf-demo)")
+    p.add_argument("--worlds", default=None, metavar="DIR",
+                   help="a worlds folder with fixed20.yaml and thesis/test1-4.yaml (default: the bundled worlds)")
+    p.add_argument("--no-video", action="store_true", help="skip the videos (the page keeps the table and figures)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from apf_physics import load_world
+    from apf_physics.bundled import bundled_dir
     from apf_physics.errors import UserError
     from apf_physics.evaluate import evaluate, format_table, write_json
-    from apf_physics.formation import evaluate_formation
     from apf_physics.planners import make_planner
-    from apf_physics.world import load_world
+    from apf_physics.render.output import check_writable, write_text
+    from apf_physics.render.page import PAGE, Section, write_media, write_page
+    from apf_physics.render.video import progress_bar
 
     began = time.perf_counter()
-    worlds_dir = Path(args.worlds)
+    worlds_dir = Path(args.worlds) if args.worlds is not None else bundled_dir()
     fixed_path = worlds_dir / "fixed20.yaml"
-    general_paths = [worlds_dir / "thesis" / f"test{i}.yaml" for i in range(1, 5)]
+    general_paths = [worlds_dir / name for name in GENERAL_WORLDS]
     for path in [fixed_path, *general_paths]:
-        if not path.exists():
-            raise UserError(f"{path}: demo world missing (run from the project folder or pass --worlds)")
+        if not path.is_file():
+            raise UserError(f"{path}: demo world missing (--worlds needs fixed20.yaml and thesis/test1-4.yaml)")
     out = Path(args.out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise UserError(f"{out}: cannot create the demo folder ({exc.strerror})") from None
+    check_writable(out / PAGE, create_parent=True)
 
     fixed = load_world(fixed_path)
     general = [load_world(p) for p in general_paths]
-    evaluations = [
-        evaluate(make_planner("gradient"), [fixed]),
-        evaluate(make_planner("dqn"), [fixed]),
-        evaluate_formation(make_planner("dqn"), [fixed]),
-        evaluate(make_planner("gradient"), general),
-        evaluate(make_planner("dqn"), general),
+    runs = [
+        ("gradient", lambda: evaluate(make_planner("gradient"), [fixed])),
+        ("dqn", lambda: evaluate(make_planner("dqn"), [fixed])),
+        ("dqn formation", lambda: evaluate(make_planner("dqn"), [fixed], formation=True)),
+        ("gradient, general", lambda: evaluate(make_planner("gradient"), general)),
+        ("dqn, general", lambda: evaluate(make_planner("dqn"), general)),
         # what a hand-made escape and the grid-search oracle do on the same worlds
-        evaluate(make_planner("escape"), general),
-        evaluate(make_planner("astar"), general),
+        ("escape, general", lambda: evaluate(make_planner("escape"), general)),
+        ("astar, general", lambda: evaluate(make_planner("astar"), general)),
     ]
-    table = format_table(evaluations)
-    print(table)
-    (out / "summary.txt").write_text(table + "\n", encoding="utf-8")
-    write_json(evaluations, out / "summary.json")
+    media = 2 * (1 + len(general)) + (0 if args.no_video else 1)
+    with progress_bar(len(runs) + media, "demo", "step", not args.no_progress) as bar:
+        evaluations = []
+        for name, run_planner in runs:
+            bar.set_postfix_str(name)
+            evaluations.append(run_planner())
+            bar.update(1)
+        table = format_table(evaluations)
+        write_text(out / "summary.txt", table + "\n")
+        write_json(evaluations, out / "summary.json")
 
-    if not args.no_video:
-        from apf_physics.render.episodes import write_episode_video
+        def media_for(world, evaluation, stem, caption, video, episodes=None):
+            bar.set_postfix_str(stem)
+            episodes = [e for e in evaluation.episodes if e.world == world.name] if episodes is None else episodes
+            figure, clip = write_media(out, world, episodes, stem, caption, video=video,
+                                       overlay=(f"world {world.name}", caption))
+            bar.update(1)
+            return figure, clip
 
-        # The formation from four starts where gradient descent is trapped (the interesting ones).
-        trapped = [e.start for e in evaluations[0].episodes if e.outcome == "trapped"][:4]
-        formation_eps = [e for e in evaluations[2].episodes if any((e.start == s).all() for s in trapped)]
-        write_episode_video(fixed, formation_eps, out / "fixed20_formation.mp4", png=out / "fixed20_formation.png",
-                            overlay=("world fixed20", "leader dqn (shipped)"), formation=True, progress=False)
-        write_episode_video(fixed, evaluations[1].episodes, out / "fixed20_dqn.mp4", png=out / "fixed20_dqn.png",
-                            overlay=("world fixed20", "planner dqn (shipped)"), progress=False)
+        sections = []
+        gradient, dqn, formation, gradient_general, dqn_general = evaluations[:5]
+        section = Section("fixed20: thesis §6.2's fixed world, 40 starts")
+        section.figures.append(media_for(fixed, gradient, "fixed20_gradient", "gradient descent", False)[0])
+        figure, clip = media_for(fixed, dqn, "fixed20_dqn", "dqn (shipped)", not args.no_video)
+        section.figures.append(figure)
+        if not args.no_video:
+            section.videos.append(clip)
+            # The formation from four starts where gradient descent is trapped (the interesting ones).
+            trapped = [e.start for e in gradient.episodes if e.outcome == "trapped"][:4]
+            chosen = [e for e in formation.episodes if any((e.start == s).all() for s in trapped)]
+            figure, clip = media_for(fixed, formation, "fixed20_formation", "leader dqn (shipped), 2 followers",
+                                     True, chosen)
+            section.figures.append(figure)
+            section.videos.append(clip)
+        sections.append(section)
         for world in general:
-            eps = [e for e in evaluations[4].episodes if e.world == world.name]
-            write_episode_video(world, eps, out / f"{world.name}_dqn.mp4", png=out / f"{world.name}_dqn.png",
-                                overlay=(f"world {world.name}", "planner dqn (shipped)"), progress=False)
-    print(f"wrote {out}/ (summary.txt, summary.json{'' if args.no_video else ', videos and PNGs'}) "
-          f"in {time.perf_counter() - began:.1f} s")
+            section = Section(f"{world.name}: a thesis general test world")
+            section.figures.append(media_for(world, gradient_general, f"{world.name}_gradient",
+                                             "gradient descent", False)[0])
+            figure, clip = media_for(world, dqn_general, f"{world.name}_dqn", "dqn (shipped)", not args.no_video)
+            section.figures.append(figure)
+            if clip is not None:
+                section.videos.append(clip)
+            sections.append(section)
+        page = write_page(out, "apf-physics demo: the shipped models", evaluations, sections,
+                          notes=["Gradient descent beside the shipped DQN planners, on the fixed 20×20 world "
+                                 "(single robot and three-robot formation) and the thesis's four general test "
+                                 "worlds; yellow paths, blue starts, blue rings where a robot stopped short."],
+                          files=["summary.txt", "summary.json"])
+    print(table)
+    videos = sum(len(s.videos) for s in sections)
+    figures = sum(len(s.figures) for s in sections)
+    print(f"wrote {page} (open it in a browser): the table, {figures} field figures, {videos} videos; "
+          f"and summary.txt, summary.json in {time.perf_counter() - began:.1f} s")
     return 0

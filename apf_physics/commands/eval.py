@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import numpy as np
 
@@ -21,6 +22,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed for --random-starts (default 0)")
     p.add_argument("--max-steps", type=int, help="step limit per episode (default: 4 x (width + height))")
     p.add_argument("--json", metavar="OUT", help="write the episodes and summary as JSON")
+    p.add_argument("--html", metavar="DIR",
+                   help="write a results page DIR/index.html: the table, a field figure and a video per planner "
+                        "and world (viewable offline; DIR is created)")
     p.set_defaults(func=run)
 
 
@@ -38,8 +42,13 @@ def random_starts(world, count: int, seed: int) -> np.ndarray:
 def run(args: argparse.Namespace) -> int:
     from apf_physics.evaluate import evaluate, format_table, write_json
     from apf_physics.planners import make_planner
-    from apf_physics.world import load_worlds
+    from apf_physics.worldfile import load_worlds
 
+    if args.html:
+        from apf_physics.render.output import check_writable
+        from apf_physics.render.page import PAGE
+
+        check_writable(Path(args.html) / PAGE, create_parent=True)
     worlds = load_worlds(args.worlds)
     starts = None
     if args.random_starts is not None:
@@ -48,13 +57,15 @@ def run(args: argparse.Namespace) -> int:
     evaluations = []
     for name in names:
         planner = make_planner(name, model=args.model)
-        if args.formation:
-            from apf_physics.formation import evaluate_formation
-            evaluations.append(evaluate_formation(planner, worlds, starts, max_steps=args.max_steps))
-        else:
-            evaluations.append(evaluate(planner, worlds, starts, max_steps=args.max_steps))
+        evaluations.append(evaluate(planner, worlds, starts, max_steps=args.max_steps, formation=args.formation))
     print(format_table(evaluations))
     if args.json:
         write_json(evaluations, args.json)
         print(f"wrote {args.json}")
+    if args.html:
+        from apf_physics.render.page import write_results
+
+        page = write_results(args.html, evaluations, worlds, title=f"apf-physics eval: {', '.join(names)}",
+                             progress=not getattr(args, "no_progress", False))
+        print(f"wrote {page} (open it in a browser)")
     return 0

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 
+from apf_physics.errors import UserError
+from apf_physics.generate import FAMILIES
+from apf_physics.worldsets import generate_set
+
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    from apf_physics.generate import FAMILIES
-
     p = subparsers.add_parser(
         "generate", help="generate random worlds where gradient descent tends to be trapped",
         description="Generate random worlds whose obstacles lie between the starts and the target, with "
@@ -27,8 +29,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from apf_physics.errors import UserError
-    from apf_physics.generate import FAMILIES, generate_set
 
     families = [f.strip() for f in args.family.split(",") if f.strip()]
     for family in families:

@@ -11,9 +11,10 @@ def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
         "plot-field",
         help="draw a world's potential field with gradient-descent paths to a PNG",
-        description="Draw the world's potential (log-scaled heatmap, level lines), its obstacles and "
-                    "targets, and the gradient-descent path from each of the world's starts "
-                    "(thesis Fig. 22-23: yellow paths, blue starts, blue rings where a robot got stuck).",
+        description="Draw the world's potential (log-scaled heatmap, level lines, a colour bar with U's "
+                    "scale), its obstacles and targets, and the gradient-descent path from each of the "
+                    "world's starts (thesis Fig. 22-23: yellow paths, blue starts, blue rings where a robot "
+                    "got stuck), with a legend beside the map.",
     )
     add_arguments(parser)
     parser.set_defaults(func=run)
@@ -21,8 +22,8 @@ def add_parser(subparsers) -> None:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The subcommand's options, on any parser (the CLI's subparser or a standalone script's)."""
-    parser.add_argument("world", help="world file (.yaml)")
-    parser.add_argument("--out", required=True, help="output image (.png)")
+    parser.add_argument("world", help="world file (.yaml), or a bundled world's name (fixed20, thesis/test1)")
+    parser.add_argument("--out", required=True, help="output image (.png); a missing folder is created")
     parser.add_argument("--size", type=int, default=512, help="pixels along the world's longer side (default 512)")
     parser.add_argument("--no-paths", action="store_true", help="draw the field only, without paths")
     parser.add_argument("--scaling", choices=("log", "rank"), default="log",
@@ -37,9 +38,9 @@ def run(args: argparse.Namespace) -> int:
     from apf_physics.errors import UserError
     from apf_physics.render.drawing import FieldImage
     from apf_physics.render.field_plot import plot_field
-    from apf_physics.render.video import check_writable
+    from apf_physics.render.output import check_writable
 
-    out = check_writable(args.out, (".png",))
+    out = check_writable(args.out, (".png",), create_parent=True)
     if args.size < 16:
         raise UserError(f"--size must be at least 16 pixels, got {args.size}")
     world = load_world(args.world)

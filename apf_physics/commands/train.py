@@ -61,7 +61,7 @@ def parse_overrides(pairs: list[str]) -> dict:
 def run(args: argparse.Namespace) -> int:
     from apf_physics.errors import UserError
     from apf_physics.rl.dqn import load_checkpoint_config, preset, train
-    from apf_physics.world import load_world
+    from apf_physics.worldfile import load_world
 
     overrides = parse_overrides(args.set)
     if args.curriculum:

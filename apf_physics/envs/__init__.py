@@ -1,5 +1,7 @@
 """Gymnasium environments: ``apf_physics/Navigate-v0`` (and its vectorised version) and ``apf_physics/Formation-v0``."""
 
+from gymnasium.envs.registration import register, registry
+
 from apf_physics.envs.navigate import ACTIONS, NavigateEnv
 from apf_physics.envs.formation import FormationEnv
 from apf_physics.envs.vector import NavigateVectorEnv
@@ -7,8 +9,6 @@ from apf_physics.envs.vector import NavigateVectorEnv
 
 def register_envs() -> None:
     """Register the ``apf_physics/...`` ids (safe to call more than once)."""
-    from gymnasium.envs.registration import register, registry
-
     if "apf_physics/Navigate-v0" not in registry:
         register(
             id="apf_physics/Navigate-v0",

@@ -8,10 +8,12 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from apf_physics.actions import ACTIONS, ACTION_NAMES
-from apf_physics.envs.batch import NavigationBatch
-from apf_physics.envs.options import StartChooser, WorldSpec, check_starts, resolve_worlds
+from apf_physics.actions import ACTION_NAMES, ACTIONS
+from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, resolve_worlds
 from apf_physics.envs.reward import TERMS, reward_weights
+from apf_physics.envs.task import NavigationTask
+from apf_physics.observation import ObserverConfig
+from apf_physics.render.drawing import Snapshot, draw_frame, field_image
 
 __all__ = ["ACTIONS", "ACTION_NAMES", "NavigateEnv"]
 
@@ -30,37 +32,46 @@ class NavigateEnv(gym.Env):
 
     ``Discrete(9)``, in the thesis's order (Table 1): 0 up (0,+1), 1 down (0,−1), 2 left
     (−1,0), 3 right (+1,0), 4 left-up (−1,+1), 5 left-down (−1,−1), 6 right-up (+1,+1),
-    7 right-down (+1,−1), 8 stay. Each becomes a velocity command held for one control step.
+    7 right-down (+1,−1), 8 stay (``apf_physics.actions.ACTION_NAMES``). Each becomes a
+    velocity command held for one control step.
 
     ## Observation Space
 
     ``Box(-inf, inf, (1, k, k), float32)``: the potential U sampled bilinearly from the
     world's cached raster at spacing 1 around the robot's centre; element ``[0, i, j]`` is
     the point ``(x + j − k//2, y + k//2 − i)`` (row 0 at the top). Points inside obstacles or
-    outside the map read ``world.u_wall``, the map's highest potential. Raw values, not
-    normalised (learners scale them).
+    outside the map read ``world.u_wall``, the map's highest potential. Raw values by default
+    (the package's networks scale them themselves); ``obs_scale="log"`` gives a bounded
+    ``Box(-1, 1)``: ``sign(d)·log(1 + |d|) / log(1 + D)`` with ``d = U − U(robot)`` and
+    ``D`` the world's range of U, so the robot's own point reads 0, downhill is negative
+    and walls read close to 1.
 
-    With ``memory=True`` the space is ``Box(-inf, inf, (2, k, k), float32)``: channel 0 is
-    the potential window above and channel 1 the robot's visit memory over the same points,
-    ``min(n, 4) / 4`` where ``n`` counts the control steps (and the reset) that ended with the
-    robot's centre in the point's 1×1 cell of the map; points outside the map read 1. The
-    counts are cleared at every reset (:class:`~apf_physics.observation.VisitMemory`). A
-    reactive policy sees where it has been and can learn to leave a potential well.
+    With ``memory=True`` there is a second channel, ``(2, k, k)``: the robot's visit memory
+    over the same points, ``min(n, 4) / 4`` where ``n`` counts the control steps (and the
+    reset) that ended with the robot's centre in the point's 1×1 cell of the map; points
+    outside the map read 1. The counts are cleared at every reset
+    (:class:`~apf_physics.observation.VisitMemory`). A reactive policy sees where it has been
+    and can learn to leave a potential well.
 
     ## Rewards
 
-    ``R = W1 + W2 + W3 + W4`` (SPEC eq. 15–16), returned by name in ``info["reward_terms"]``:
-    ``collision`` W1 when touching an obstacle or the edge, ``target`` W2 on reaching the
-    target, ``step`` W3 every step, ``potential`` W4 = β·(U(P_{n+1}) − U(P_n)). Presets:
-    ``"thesis-fixed"`` (Table 3: −1000, 1000, −1, β −4) and ``"thesis-general"`` (Table 4:
-    −10, 10, −0.2, β −20), or a dict ``{w1, w2, w3, beta}``.
+    ``R = W1 + W2 + W3 + W4 (+ W5 + W6)`` (SPEC eq. 15–16), returned by name in
+    ``info["reward_terms"]``: ``collision`` W1 when touching an obstacle or the edge,
+    ``target`` W2 on reaching the target, ``step`` W3 every step, ``potential``
+    W4 = β·(U(P_{n+1}) − U(P_n)), and the project's ``revisit`` W5 and ``length`` W6
+    (:class:`~apf_physics.envs.reward.RewardWeights`). Presets: ``"thesis-fixed"`` (Table 3:
+    −1000, 1000, −1, β −4), ``"thesis-general"`` (Table 4: −10, 10, −0.2, β −20) and
+    ``"general"`` (Table 3's plus W5 = −50, W6 = −40), or a dict of the weights.
 
     ## Starting State
 
-    ``starts="world"``: the world's start positions in turn (random if it has none);
-    ``"random"``: a uniformly drawn free position; or an explicit ``(S, 2)`` array, in turn.
-    With a list of worlds, one is drawn per reset. ``reset(seed=...)`` makes everything
-    that follows deterministic.
+    ``starts="world"``: one of the world's start positions (random free positions if it has
+    none); ``"random"``: a uniformly drawn free position farther than the goal tolerance from
+    the targets; or an explicit ``(S, 2)`` array of starts. Each reset draws the start (and,
+    with a list of worlds, the world) from the environment's ``np_random``: ``reset(seed=k)``
+    makes the episode and all that follow reproducible, and different seeds give different
+    starts. ``reset(options={"start": i})`` takes start row ``i`` instead,
+    ``options={"start": [x, y]}`` a position, ``options={"world": j}`` world ``j``.
 
     ## Episode End
 
@@ -71,68 +82,68 @@ class NavigateEnv(gym.Env):
     ## Arguments
 
     ```python
-    gymnasium.make("apf_physics/Navigate-v0", world="worlds/fixed20.yaml", obs_size=11,
+    gymnasium.make("apf_physics/Navigate-v0", world="fixed20", obs_size=11,
                    reward="thesis-fixed", starts="world", render_mode=None)
     ```
 
-    - ``world``: a world file path, a :class:`~apf_physics.world.World`, or a list of them.
+    - ``world``: a world file path, a bundled world's name, a :class:`~apf_physics.world.World`,
+      or a list of them.
     - ``obs_size``: the window side k (odd; 11 in Table 3, 9 in Table 4).
     - ``reward``: a preset name or weights (see Rewards).
     - ``starts``: see Starting State.
     - ``resolution``: raster nodes per unit for the observation (default 4).
-    - ``render_mode``: ``"rgb_array"`` for OpenCV-drawn frames.
     - ``memory``: add the visit-memory channel (see Observation Space; default False).
+    - ``obs_scale``: ``"raw"`` (default) or ``"log"`` (see Observation Space).
+    - ``observer``: an :class:`~apf_physics.observation.ObserverConfig` (or its dict) instead
+      of ``obs_size``, ``resolution``, ``memory`` and ``obs_scale``, e.g. a model's.
+    - ``render_mode``: ``"rgb_array"`` for OpenCV-drawn frames.
+
+    ``info`` holds ``position``, ``world`` (its name) and ``distance`` (to the nearest target)
+    after every reset and step, and after a step also ``reward_terms``, ``success`` and
+    ``collision``.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
     def __init__(self, world: WorldSpec | None = None, obs_size: int = 11, reward: Any = "thesis-fixed",
                  starts: Any = "world", resolution: int = 4, render_mode: str | None = None,
-                 memory: bool = False):
+                 memory: bool = False, obs_scale: str = "raw", observer: ObserverConfig | dict | None = None):
         self.worlds = resolve_worlds(world)
-        self.obs_size = int(obs_size)
+        self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer)
         self.weights = reward_weights(reward)
-        self.chooser = StartChooser(check_starts(starts))
+        self.chooser = StartChooser(starts, self.worlds)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         self.render_mode = render_mode
         self.action_space = spaces.Discrete(len(ACTIONS))
-        self.memory = bool(memory)
-        channels = 2 if self.memory else 1
-        self.observation_space = spaces.Box(-np.inf, np.inf, (channels, self.obs_size, self.obs_size), np.float32)
-        self._batch = NavigationBatch(self.worlds, 1, self.obs_size, self.weights, resolution, memory=self.memory)
-        self._episode = 0
+        low, high = self.observer.bounds
+        self.observation_space = spaces.Box(low, high, self.observer.shape, np.float32)
+        self._task = NavigationTask(self.worlds, 1, self.observer, self.weights)
         self._trail: list[np.ndarray] = []
         self._steps = 0
 
     @property
     def world(self):
         """The world of the current episode."""
-        return self.worlds[self._batch.world_of[0]]
+        return self.worlds[self._task.world_of[0]]
 
     @property
     def position(self) -> np.ndarray:
-        return self._batch.positions[0].copy()
+        return self._task.positions[0, 0].copy()
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        if seed is not None:
-            self._episode = 0
-        w, start = self.chooser.choose(self.worlds, self.np_random, self._episode)
-        if options and "start" in options:
-            start = np.asarray(options["start"], dtype=float)
-        self._episode += 1
-        self._batch.set_world(0, w)
-        self._batch.place(np.array([0]), start[None])
+        w, start = self.chooser.choose(self.np_random, options)
+        self._task.start(np.array([0]), np.array([w]), start[None])
         self._trail = [start.copy()]
         self._steps = 0
-        return self._batch.observation()[0], self._get_info()
+        return self._task.observation()[0], self._get_info()
 
     def step(self, action):
-        result = self._batch.step(np.array([int(action)]))
+        result = self._task.step(np.array([int(action)]))
         self._steps += 1
         if self.render_mode is not None:  # the trail is only drawn
-            self._trail.append(self._batch.positions[0].copy())
+            self._trail.append(self.position)
         info = self._get_info()
         info["reward_terms"] = {name: float(result.terms[name][0]) for name in TERMS}
         info["success"] = bool(result.reached[0])
@@ -140,14 +151,11 @@ class NavigateEnv(gym.Env):
         return result.observation[0], float(result.reward[0]), bool(result.terminated[0]), False, info
 
     def _get_info(self) -> dict:
-        return {"position": self._batch.positions[0].copy(), "world": self.world.name,
-                "distance": float(self._batch.distance[0])}
+        return {"position": self.position, "world": self.world.name, "distance": float(self._task.distance()[0])}
 
     def render(self):
         if self.render_mode != "rgb_array":
             return None
-        from apf_physics.render.drawing import Snapshot, draw_frame, field_image
-
-        snap = Snapshot(self._batch.positions[:1], ("single",), (np.asarray(self._trail),),
+        snap = Snapshot(self._task.positions[0, :1], ("single",), (np.asarray(self._trail),),
                         (f"{self.world.name}  step {self._steps}",))
         return draw_frame(field_image(self.world), snap)

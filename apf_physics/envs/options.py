@@ -1,61 +1,99 @@
-"""Options shared by the navigation environments, and how an episode's world and start are chosen."""
+"""Options shared by the environments: which worlds, how each episode's world and start are chosen."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence, Union
+from typing import Any, Sequence, Union
 
 import numpy as np
 
-from apf_physics.world import World, load_world
+from apf_physics.errors import UserError
+from apf_physics.observation import ObserverConfig
+from apf_physics.world import World
+from apf_physics.worldfile import load_world
 
 WorldSpec = Union[str, Path, World, Sequence[Union[str, Path, World]]]
 
 
 def resolve_worlds(world: WorldSpec | None) -> list[World]:
-    """A path, a :class:`World`, or a list of them, as a list of worlds."""
+    """A path (or a bundled world's name), a :class:`World`, or a list of them, as a list of worlds."""
     if world is None:
-        from apf_physics.errors import UserError
         raise UserError("the environment needs world=<path or World or list of them>")
     items = [world] if isinstance(world, (str, Path, World)) else list(world)
     if not items:
-        raise ValueError("world= is an empty list")
+        raise UserError("world= is an empty list")
     return [w if isinstance(w, World) else load_world(w) for w in items]
 
 
-@dataclass(frozen=True)
+def observer_config(obs_size: int, resolution: int, memory: bool, obs_scale: str,
+                    observer: ObserverConfig | dict | None) -> ObserverConfig:
+    """The environment's :class:`ObserverConfig`: ``observer`` if given, else built from the keyword options."""
+    if observer is not None:
+        return observer if isinstance(observer, ObserverConfig) else ObserverConfig.from_dict(observer)
+    channels = ("potential", "memory") if memory else ("potential",)
+    return ObserverConfig(size=int(obs_size), resolution=int(resolution), channels=channels, scale=obs_scale)
+
+
 class StartChooser:
     """Picks each episode's world and start.
 
-    Attributes:
-        starts: ``"world"``: the world's own starts in turn (random free positions if it has
+    Args:
+        starts: ``"world"``: one of the world's own starts (random free positions if it has
             none); ``"random"``: a random free position farther than the goal tolerance from
-            every target; or an ``(S, 2)`` array used in turn.
+            every target; or an ``(S, 2)`` array of starts.
+        worlds: The worlds; with several, each episode draws one uniformly.
+
+    Every choice is drawn from the generator it is given (the environment's ``np_random``),
+    so ``reset(seed=k)`` makes it reproducible and different seeds give different starts.
+    ``options={"start": i}`` picks row ``i`` of the starts, ``options={"start": [x, y]}`` a
+    position, and ``options={"world": j}`` the world.
     """
 
-    starts: str | np.ndarray = "world"
+    def __init__(self, starts: Any, worlds: Sequence[World]):
+        self.worlds = list(worlds)
+        if isinstance(starts, str):
+            if starts not in ("world", "random"):
+                raise UserError(f"starts must be 'world', 'random' or an array of points, got {starts!r}")
+            self.kind, self.points = starts, None
+        else:
+            arr = np.asarray(starts, dtype=float)
+            if arr.ndim != 2 or arr.shape[1] != 2 or len(arr) == 0:
+                raise UserError(f"starts must be an (S, 2) array of points, got shape {arr.shape}")
+            self.kind, self.points = "array", arr
+        # per world: the list starts are drawn from, or None for the free cells away from the targets
+        self._lists = [self.points if self.kind == "array" else
+                       world.starts if self.kind == "world" and len(world.starts) else None for world in self.worlds]
+        self._cells = [world.start_cells() if listed is None else None
+                       for world, listed in zip(self.worlds, self._lists)]
 
-    def choose(self, worlds: Sequence[World], rng: np.random.Generator, episode: int) -> tuple[int, np.ndarray]:
-        w = int(rng.integers(len(worlds))) if len(worlds) > 1 else 0
-        world = worlds[w]
-        if isinstance(self.starts, str) and self.starts == "world" and len(world.starts):
-            return w, world.starts[episode % len(world.starts)].copy()
-        if not isinstance(self.starts, str):
-            return w, np.asarray(self.starts, dtype=float).reshape(-1, 2)[episode % len(self.starts)].copy()
-        for _ in range(100):
-            p = world.random_free_positions(rng, 1)[0]
-            if np.min(np.hypot(*(world.targets - p).T)) > world.goal_tolerance:
-                return w, p
-        raise RuntimeError(f"{world.name}: no free start away from the targets")
-
-
-def check_starts(starts) -> str | np.ndarray:
-    if isinstance(starts, str):
-        if starts not in ("world", "random"):
-            raise ValueError(f"starts must be 'world', 'random' or an array of points, got {starts!r}")
-        return starts
-    arr = np.asarray(starts, dtype=float)
-    if arr.ndim != 2 or arr.shape[1] != 2 or len(arr) == 0:
-        raise ValueError(f"starts must be an (S, 2) array of points, got shape {arr.shape}")
-    return arr
+    def choose(self, rng: np.random.Generator, options: dict | None = None) -> tuple[int, np.ndarray]:
+        """``(world index, start)`` of a new episode."""
+        u = rng.random(4)  # one call: world, start row or cell, and the position within the cell
+        if not options:
+            w = int(u[0] * len(self.worlds))
+            listed = self._lists[w]
+            if listed is not None:
+                return w, listed[int(u[1] * len(listed))].copy()
+            cells = self._cells[w]
+            if len(cells):
+                return w, cells[int(u[1] * len(cells))] + (u[2:] - 0.5) * 0.25
+        options = options or {}
+        w = int(options.get("world", int(u[0] * len(self.worlds))))
+        if not 0 <= w < len(self.worlds):
+            raise UserError(f"options['world'] = {w} is not among the {len(self.worlds)} worlds")
+        world = self.worlds[w]
+        listed = self._lists[w]
+        if "start" in options:
+            start = np.asarray(options["start"], dtype=float)
+            if start.shape == ():
+                if listed is None or not 0 <= int(start) < len(listed):
+                    raise UserError(f"options['start'] = {int(start)}: there are "
+                                    f"{0 if listed is None else len(listed)} starts to choose from")
+                return w, listed[int(start)].copy()
+            return w, start.reshape(2).copy()
+        if listed is not None:
+            return w, listed[int(u[1] * len(listed))].copy()
+        cells = self._cells[w]
+        if not len(cells):
+            raise UserError(f"{world.label}: no free start away from the targets")
+        return w, cells[int(u[1] * len(cells))] + (u[2:] - 0.5) * 0.25

@@ -1,11 +1,16 @@
 """``NavigateVectorEnv``: N copies of ``Navigate-v0`` stepped as one batch.
 
-Every copy's world is tiled in one pymunk space, so a step is one physics call for all
-copies; observations are sampled with one batched gather. Autoreset follows Gymnasium ≥ 1.0
+Every copy is a slot of one :class:`~apf_physics.envs.task.NavigationTask`, so a step is
+one physics call and one observation call for all copies. Autoreset follows Gymnasium ≥ 1.0
 (``NEXT_STEP``): the step after an episode ends returns that copy's reset observation with
 reward 0 and ``terminated = truncated = False``, ignoring its action. Copy ``i`` seeded with
 ``seed + i`` gives the same observations, rewards and positions as a ``Navigate-v0`` reset
 with ``seed + i`` and driven by the same actions.
+
+``info`` has the keys and ``_key`` masks that Gymnasium's ``SyncVectorEnv`` would give for
+N ``Navigate-v0`` copies: at an autoreset step a copy's entries are those of its reset
+(``position``, ``world``, ``distance``: the new episode's), and its ``success``,
+``collision`` and ``reward_terms`` masks are False.
 """
 
 from __future__ import annotations
@@ -19,16 +24,18 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from apf_physics.actions import ACTIONS
-from apf_physics.envs.batch import NavigationBatch
-from apf_physics.envs.options import StartChooser, WorldSpec, check_starts, resolve_worlds
+from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, resolve_worlds
 from apf_physics.envs.reward import reward_weights
+from apf_physics.envs.task import NavigationTask
+from apf_physics.observation import ObserverConfig
+from apf_physics.render.drawing import Snapshot, draw_frame, field_image
 
 
 class NavigateVectorEnv(VectorEnv):
-    """N navigation environments in one physics space (see :class:`~apf_physics.envs.navigate.NavigateEnv`).
+    """N navigation environments in one physics (see :class:`~apf_physics.envs.navigate.NavigateEnv`).
 
     Args:
-        world: A world file path, a World, or a list of them (one drawn per reset).
+        world: A world file path or bundled name, a World, or a list of them (one drawn per reset).
         num_envs: Number of copies.
         obs_size: Window side k.
         reward: Reward preset name or weights.
@@ -36,11 +43,9 @@ class NavigateVectorEnv(VectorEnv):
         max_episode_steps: Truncation limit ``tt`` (100 in the thesis).
         resolution: Raster nodes per unit for the observation.
         render_mode: ``"rgb_array"`` renders copy 0.
-        memory: Add a second observation channel, the copy's visit memory (see
-            ``NavigateEnv``); observations are then ``(N, 2, k, k)``.
-
-    With a list of starts (``"world"`` or an array of S rows), copy ``i`` takes row
-    ``(i + e·N) mod S`` in its ``e``-th episode, so N copies share out the list.
+        memory: Add the visit-memory channel (see ``NavigateEnv``).
+        obs_scale: ``"raw"`` or ``"log"`` (see ``NavigateEnv``).
+        observer: An observer configuration instead of the four options above.
 
     Also reachable as ``gymnasium.make_vec("apf_physics/Navigate-v0", num_envs=N,
     vectorization_mode="vector_entry_point", world=...)``.
@@ -50,40 +55,35 @@ class NavigateVectorEnv(VectorEnv):
 
     def __init__(self, world: WorldSpec | None = None, num_envs: int = 8, obs_size: int = 11,
                  reward: Any = "thesis-fixed", starts: Any = "world", max_episode_steps: int = 100,
-                 resolution: int = 4, render_mode: str | None = None, memory: bool = False):
+                 resolution: int = 4, render_mode: str | None = None, memory: bool = False,
+                 obs_scale: str = "raw", observer: ObserverConfig | dict | None = None):
         self.worlds = resolve_worlds(world)
         self.num_envs = int(num_envs)
-        self.obs_size = int(obs_size)
+        self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer)
         self.weights = reward_weights(reward)
-        self.chooser = StartChooser(check_starts(starts))
+        self.chooser = StartChooser(starts, self.worlds)
         self.max_episode_steps = int(max_episode_steps)
         self.render_mode = render_mode
         self.single_action_space = spaces.Discrete(len(ACTIONS))
-        self.memory = bool(memory)
-        channels = 2 if self.memory else 1
-        self.single_observation_space = spaces.Box(-np.inf, np.inf, (channels, self.obs_size, self.obs_size), np.float32)
+        low, high = self.observer.bounds
+        self.single_observation_space = spaces.Box(low, high, self.observer.shape, np.float32)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self._batch = NavigationBatch(self.worlds, self.num_envs, self.obs_size, self.weights, resolution,
-                                        memory=self.memory)
+        self._task = NavigationTask(self.worlds, self.num_envs, self.observer, self.weights,
+                                    max_steps=self.max_episode_steps)
         self._rngs = [seeding.np_random(None)[0] for _ in range(self.num_envs)]
-        self._episode = np.zeros(self.num_envs, int)
-        self._steps = np.zeros(self.num_envs, int)
         self._needs_reset = np.zeros(self.num_envs, bool)
         self._trail: list[np.ndarray] = []
+        self._all = np.ones(self.num_envs, bool)
 
-    def _start(self, slots: np.ndarray) -> None:
-        starts = np.empty((len(slots), 2))
-        for j, i in enumerate(slots):
-            # Copy i's e-th episode takes start row i + e·N: the copies share out the list.
-            w, starts[j] = self.chooser.choose(self.worlds, self._rngs[i], int(i + self._episode[i] * self.num_envs))
-            self._episode[i] += 1
-            self._batch.set_world(int(i), w)
-        self._batch.place(slots, starts)
-        self._steps[slots] = 0
+    def _start(self, slots: np.ndarray, options: dict | None = None) -> None:
+        chosen = [self.chooser.choose(self._rngs[i], options) for i in slots.tolist()]
+        worlds = np.array([w for w, _ in chosen], np.intp)
+        starts = np.array([s for _, s in chosen], float).reshape(-1, 2)
+        self._task.start(slots, worlds, starts)
         self._needs_reset[slots] = False
         if 0 in slots:
-            self._trail = [self._batch.positions[0].copy()]
+            self._trail = [starts[0].copy()]
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
         if seed is not None:
@@ -91,38 +91,37 @@ class NavigateVectorEnv(VectorEnv):
             if len(seeds) != self.num_envs:
                 raise ValueError(f"{len(seeds)} seeds for {self.num_envs} environments")
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
-            self._episode[:] = 0
-        self._start(np.arange(self.num_envs))
-        return self._batch.observation(), self._info()
+        self._start(np.arange(self.num_envs), options)
+        info = self._info()
+        return self._task.observation(), info
 
     def step(self, actions):
         actions = np.asarray(actions).reshape(self.num_envs)
         restarting = np.flatnonzero(self._needs_reset)
-        moving = ~self._needs_reset
-        result = self._batch.step(actions, moving)
-        self._steps[moving] += 1
-        reward = np.where(moving, result.reward, 0.0).astype(np.float32)
-        terminated = result.terminated & moving
-        truncated = moving & ~terminated & (self._steps >= self.max_episode_steps)
-        info = self._info()
-        info["reward_terms"] = {k: np.where(moving, v, 0.0) for k, v in result.terms.items()}
-        info["success"] = result.reached & moving
-        info["collision"] = result.collided & moving
+        result = self._task.step(actions)
         if len(restarting):
             self._start(restarting)
-        if moving[0] and self.render_mode is not None:  # the trail is only drawn
-            self._trail.append(self._batch.positions[0].copy())
-        self._needs_reset = terminated | truncated
-        return self._batch.observation(), reward, terminated, truncated, info
+        if self.render_mode is not None and not self._needs_reset[0]:  # the trail is only drawn
+            self._trail.append(self._task.positions[0, 0].copy())
+        self._needs_reset = result.terminated | result.truncated
+        stepped = result.moved
+        info = self._info()
+        info["reward_terms"] = {k: np.where(stepped, v, 0.0) for k, v in result.terms.items()}
+        info["reward_terms"].update({f"_{k}": stepped for k in result.terms})
+        info["_reward_terms"] = stepped
+        info["success"], info["_success"] = result.reached & stepped, stepped
+        info["collision"], info["_collision"] = result.collided & stepped, stepped
+        return self._task.observation(), result.reward.astype(np.float32), result.terminated, result.truncated, info
 
     def _info(self) -> dict:
-        return {"position": self._batch.positions.copy(), "episode_step": self._steps.copy()}
+        names = np.array([w.name for w in self.worlds], dtype=object)
+        return {"position": self._task.positions[:, 0].copy(), "_position": self._all,
+                "world": names[self._task.world_of], "_world": self._all,
+                "distance": self._task.distance(), "_distance": self._all}
 
     def render(self):
         if self.render_mode != "rgb_array":
             return None
-        from apf_physics.render.drawing import Snapshot, draw_frame, field_image
-
-        world = self.worlds[self._batch.world_of[0]]
-        snap = Snapshot(self._batch.positions[:1], ("single",), (np.asarray(self._trail),), (world.name,))
+        world = self.worlds[self._task.world_of[0]]
+        snap = Snapshot(self._task.positions[0, :1], ("single",), (np.asarray(self._trail),), (world.name,))
         return draw_frame(field_image(world), snap)

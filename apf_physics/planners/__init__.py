@@ -1,11 +1,27 @@
-"""Planners: policies that turn robot positions into velocity commands."""
+"""Planners: policies that turn robot positions into velocity commands.
+
+Planners are found by name through :data:`PLANNERS` (string entry points, as Gymnasium
+registers environments), so that naming ``gradient`` never loads torch for ``dqn``.
+"""
 
 from __future__ import annotations
 
+import importlib
+
+from apf_physics.errors import UserError
 from apf_physics.planners.base import Planner
 from apf_physics.planners.gradient import GradientPlanner
 
-PLANNERS = ("gradient", "dqn", "dqn-unshielded", "astar", "escape")
+PLANNERS = {
+    "gradient": ("apf_physics.planners.gradient:GradientPlanner", {}),
+    "dqn": ("apf_physics.planners.dqn:DQNPlanner", {"shield": True}),
+    "dqn-unshielded": ("apf_physics.planners.dqn:DQNPlanner", {"shield": False}),
+    "astar": ("apf_physics.planners.astar:AStarPlanner", {}),
+    "escape": ("apf_physics.planners.escape:EscapePlanner", {}),
+}
+"""Command-line name → (``module:class``, keyword arguments)."""
+LEARNED = ("dqn", "dqn-unshielded")
+"""Planners that take a model file."""
 
 
 def make_planner(name: str, model: str | None = None) -> Planner:
@@ -17,21 +33,17 @@ def make_planner(name: str, model: str | None = None) -> Planner:
             world's field is used when None. ``dqn`` never picks a move that would touch an
             obstacle (:class:`~apf_physics.planners.dqn.DQNPlanner`'s shield);
             ``dqn-unshielded`` takes the network's choice as it is.
+
+    Raises:
+        UserError: An unknown name.
     """
-    from apf_physics.errors import UserError
-
-    if name == "gradient":
-        return GradientPlanner()
-    if name in ("dqn", "dqn-unshielded"):
-        from apf_physics.planners.dqn import DQNPlanner
-        return DQNPlanner(model, shield=name == "dqn")
-    if name == "astar":
-        from apf_physics.planners.astar import AStarPlanner
-        return AStarPlanner()
-    if name == "escape":
-        from apf_physics.planners.escape import EscapePlanner
-        return EscapePlanner()
-    raise UserError(f"--planner: unknown planner {name!r} (known: {', '.join(PLANNERS)})")
+    if name not in PLANNERS:
+        raise UserError(f"--planner: unknown planner {name!r} (known: {', '.join(PLANNERS)})")
+    entry, kwargs = PLANNERS[name]
+    module, cls = entry.split(":")
+    if name in LEARNED:
+        kwargs = {**kwargs, "model": model}
+    return getattr(importlib.import_module(module), cls)(**kwargs)
 
 
-__all__ = ["GradientPlanner", "Planner", "PLANNERS", "make_planner"]
+__all__ = ["GradientPlanner", "LEARNED", "PLANNERS", "Planner", "make_planner"]

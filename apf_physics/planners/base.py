@@ -1,19 +1,19 @@
 """The planner interface: a policy that turns robot positions into velocity commands.
 
 Planners know nothing of the physics. :func:`apf_physics.rollout.rollout` asks a planner
-for one displacement per robot each control step, hands it to the physics as a velocity
-command, and decides when an episode ends.
+for one displacement per robot each control step and hands it to the engine
+(:class:`~apf_physics.engine.Stepper`) as a velocity command; the engine decides when an
+episode ends.
 """
 
 from __future__ import annotations
 
-from typing import ClassVar, Literal
+from typing import ClassVar
 
 import numpy as np
 
+from apf_physics.engine import TrapRule
 from apf_physics.world import World
-
-TrapRule = Literal["descent", "oscillation"]
 
 
 class Planner:
@@ -26,7 +26,7 @@ class Planner:
             descent). ``"oscillation"``: only when the robot stays within a small region
             over a window (planners that may climb the potential on purpose).
         trap_window: Control steps the trap rule looks back over; None: the rollout's
-            detector's own (:class:`~apf_physics.rollout.TrapDetector`, 10). A planner that
+            detector's own (:class:`~apf_physics.engine.TrapDetector`, 10). A planner that
             remembers where it has been sets a longer one: for it, circling one spot for a
             while is part of getting out, not proof of being stuck.
     """

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from apf_physics.planners.astar import segments_clear
 from apf_physics.planners.base import Planner
 from apf_physics.planners.gradient import GradientPlanner
 from apf_physics.world import World
@@ -100,7 +99,7 @@ class EscapePlanner(Planner):
         return self.world.targets[np.argmin(d, axis=1)]
 
     def _safe(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        return segments_clear(self.world, a, b, self.world.robot_radius + self.safety_margin, spacing=0.1)
+        return self.world.path_clearance(a, b, 0.1) >= self.world.robot_radius + self.safety_margin
 
     # -- descent ----------------------------------------------------------------------------
     def _descend(self, positions: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -57,6 +57,8 @@ EXTRA_FOLLOWER_COLOURS: tuple[RGB, ...] = (
 ROLES = ("single", "leader", "follower1", "follower2", "follower")
 _ROLE_PATTERN = re.compile(r"^(single|leader|follower\d*)$")
 
+SHADE_SAMPLES = 101        # points of the shade → potential table (the colour bar's scale)
+
 _SHIFT = 4                 # fractional bits for cv2 drawing: sub-pixel positions, smooth motion
 _ONE = 1 << _SHIFT
 _FONT = cv2.FONT_HERSHEY_SIMPLEX
@@ -162,6 +164,11 @@ class FieldImage:
         font_scale: OpenCV font scale of the overlay text.
         targets: ``(T, 2)`` target positions in world coordinates, redrawn over trails.
         target_radius: Radius of a target's dot in pixels.
+        scaling: How the potential maps to colour: ``"log"`` or ``"rank"``.
+        shade_potential: ``(SHADE_SAMPLES,)`` the potential U at shades ``0, 1/(n-1), ..., 1``
+            of the heatmap (increasing; the last is where the colour scale saturates): the
+            colour bar's scale.
+        levels: Number of bands between level lines.
     """
 
     background: np.ndarray
@@ -173,6 +180,9 @@ class FieldImage:
     font_scale: float
     targets: np.ndarray
     target_radius: float
+    scaling: str
+    shade_potential: np.ndarray
+    levels: int
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -220,16 +230,17 @@ class FieldImage:
             raster_resolution = int(np.clip(np.ceil(scale / 2), 4, 16))
         raster = world.raster(raster_resolution)
 
-        shade = _shade(raster, world, scale, rows, cols, scaling)
-        image = _heatmap(shade)
-        _draw_level_lines(image, shade, levels, thickness=max(1, round(unit)))
+        shade, shade_potential = _shade(raster, world, scale, rows, cols, scaling)
+        shade_potential.setflags(write=False)
+        image = heatmap(shade)
+        draw_level_lines(image, shade, levels, thickness=max(1, round(unit)))
 
         image_cv = np.ascontiguousarray(image)
         robot_px = max(world.robot_radius * scale, min_px)
         targets = np.array(world.targets, dtype=float).reshape(-1, 2)
         targets.setflags(write=False)
         mapping = cls(image_cv, scale, (width, height), robot_px, line_width, halo_width, 0.45 * unit,
-                      targets, robot_px)
+                      targets, robot_px, scaling, shade_potential, levels)
         mapping._draw_obstacles(image_cv, world.obstacles, min_px)
         mapping._draw_tolerance(image_cv, world.goal_tolerance)
         mapping.draw_targets(image_cv)
@@ -352,8 +363,10 @@ class FieldImage:
             cv2.putText(image, line, (pad, y), _FONT, self.font_scale, WHITE, thickness, cv2.LINE_AA)
 
 
-def _shade(raster, world: World, scale: float, rows: int, cols: int, scaling: str) -> np.ndarray:
-    """The potential mapped monotonically to [0, 1] at every pixel centre, ``(rows, cols)`` float32.
+def _shade(raster, world: World, scale: float, rows: int, cols: int,
+           scaling: str) -> tuple[np.ndarray, np.ndarray]:
+    """The potential mapped monotonically to [0, 1] at every pixel centre, ``(rows, cols)`` float32,
+    and the inverse map: U at :data:`SHADE_SAMPLES` evenly spaced shades, ``(SHADE_SAMPLES,)``.
 
     ``"log"``: ``log(1 + (U − U_min)/s)`` with ``s`` a fifth of the median of ``U − U_min``
     over free space, normalised by its 99th percentile there. The log compresses the steep
@@ -366,15 +379,19 @@ def _shade(raster, world: World, scale: float, rows: int, cols: int, scaling: st
     values = raster.values
     free = ~_obstacle_mask(world, raster.grid)
     reference = values[free] if free.any() else values.ravel()
+    samples = np.linspace(0.0, 1.0, SHADE_SAMPLES)
     if scaling == "rank":
         ordered = np.sort(reference)
         shade = np.searchsorted(ordered, values, side="right") / len(ordered)
+        potential = np.quantile(ordered, samples)
     elif scaling == "log":
-        lifted = values - values.min()
+        lowest = float(values.min())
+        lifted = values - lowest
         spread = max(float(np.median(lifted[free] if free.any() else lifted)), 1e-9)
         logged = np.log1p(lifted / (0.2 * spread))
         top = float(np.percentile(logged[free] if free.any() else logged, 99))
         shade = logged / top if top > 0 else np.zeros_like(logged)
+        potential = lowest + 0.2 * spread * np.expm1(samples * top)
     else:
         raise ValueError(f"scaling must be 'log' or 'rank', got {scaling!r}")
     shade = np.clip(shade, 0.0, 1.0).astype(np.float32)
@@ -385,7 +402,7 @@ def _shade(raster, world: World, scale: float, rows: int, cols: int, scaling: st
     index = raster.grid.to_index(np.column_stack([gx.ravel(), gy.ravel()])).astype(np.float32)
     map_x = np.ascontiguousarray(index[:, 0].reshape(rows, cols))
     map_y = np.ascontiguousarray(index[:, 1].reshape(rows, cols))
-    return cv2.remap(shade, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return cv2.remap(shade, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE), potential
 
 
 def _obstacle_mask(world: World, grid) -> np.ndarray:
@@ -406,7 +423,7 @@ def _obstacle_mask(world: World, grid) -> np.ndarray:
     return mask.astype(bool)
 
 
-def _heatmap(shade: np.ndarray) -> np.ndarray:
+def heatmap(shade: np.ndarray) -> np.ndarray:
     """RGB heatmap of a [0, 1] shade: a colour map washed towards white so robots stand out."""
     grey = np.clip(shade * 255.0, 0, 255).astype(np.uint8)
     bgr = cv2.applyColorMap(grey, cv2.COLORMAP_VIRIDIS)
@@ -415,7 +432,7 @@ def _heatmap(shade: np.ndarray) -> np.ndarray:
     return cv2.addWeighted(rgb, 0.45, np.full_like(rgb, 255), 0.55, 0.0)
 
 
-def _draw_level_lines(image: np.ndarray, shade: np.ndarray, levels: int, thickness: int) -> None:
+def draw_level_lines(image: np.ndarray, shade: np.ndarray, levels: int, thickness: int) -> None:
     """Mark the edges between bands of equal quantised shade (level lines of log U), in place.
 
     Band edges rather than ``cv2.findContours`` per level: the same lines, without spurious

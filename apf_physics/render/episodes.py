@@ -1,4 +1,4 @@
-"""Videos of rollout episodes: the clips of single robots and formations, written to a file."""
+"""Videos and field figures of rollout episodes: single robots and formations, written to files."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-PROGRESS_MIN_FRAMES = 300  # shorter renders take well under a second: no progress bar
+from apf_physics.render.drawing import FieldImage, formation_roles
+from apf_physics.render.video import render_trajectory, stack_paths, write_png, write_video
 
 
 def write_episode_video(world, episodes: Sequence, out: str | Path, png: str | Path | None = None, fps: float = 10.0,
@@ -17,11 +18,10 @@ def write_episode_video(world, episodes: Sequence, out: str | Path, png: str | P
     """Render rollout episodes of one world to a video (and the last frame to a PNG).
 
     Single robots from several starts share one clip (all move at once); each formation
-    episode is a clip of its own. Returns the number of frames written.
+    episode is a clip of its own. ``codec`` is a name from
+    :data:`~apf_physics.render.video.CODECS` (default: the extension's); ``progress`` shows
+    a bar of frames on stderr when it is a terminal. Returns the number of frames written.
     """
-    from apf_physics.render.drawing import FieldImage
-    from apf_physics.render.video import render_trajectory, write_png, write_video
-
     image = FieldImage.from_world(world, size)
     hold_frames = max(0, int(round(hold * fps)))
     clips = list(episode_clips(episodes, overlay, formation, start_index))
@@ -36,8 +36,7 @@ def write_episode_video(world, episodes: Sequence, out: str | Path, png: str | P
                 yield frame
         last.append(frame)
 
-    written = write_video(frames(), out, fps, codec=codec, progress=progress and total >= PROGRESS_MIN_FRAMES,
-                          total=total)
+    written = write_video(frames(), out, fps, codec=codec, progress=progress, total=total)
     if png is not None:
         write_png(last[-1], png)
     return written
@@ -50,10 +49,7 @@ def episode_clips(episodes: Sequence, overlay: tuple[str, ...], formation: bool,
     Single robots from several starts share one clip (all move at once); each formation
     episode is a clip of its own, one after another.
     """
-    from apf_physics.render.drawing import formation_roles
-    from apf_physics.render.video import stack_paths
-
-    paths = [np.asarray(getattr(episode, "positions", episode.path), dtype=float) for episode in episodes]
+    paths = [robot_positions(episode) for episode in episodes]
     if not formation and all(p.ndim == 2 for p in paths):
         counts = Counter(episode.outcome for episode in episodes)
         if len(episodes) == 1:
@@ -72,3 +68,15 @@ def episode_clips(episodes: Sequence, overlay: tuple[str, ...], formation: bool,
         lines = (*overlay, f"formation, {where}({episode.start[0]:g}, {episode.start[1]:g})")
         yield (trajectory, formation_roles(trajectory.shape[1]), lines,
                (f"outcome {episode.outcome} after {episode.steps} steps",))
+
+
+def robot_positions(episode) -> np.ndarray:
+    """Where an episode's robots were: ``(T, R, 2)`` for a formation's episode (the leader
+    first, from its :attr:`formation` record), ``(T, 2)`` for a single robot's (its path)."""
+    record = getattr(episode, "formation", None)
+    return np.asarray(episode.path if record is None else record.positions, dtype=float)
+
+
+def is_formation(episodes: Sequence) -> bool:
+    """Whether the episodes are a formation's (they carry every robot's positions)."""
+    return any(getattr(episode, "formation", None) is not None for episode in episodes)

@@ -5,16 +5,25 @@ The writer wraps the pure drawing function the way Gymnasium's ``RecordVideo`` w
 :func:`~apf_physics.render.drawing.draw_frame`, :func:`write_video` streams any iterable
 of frames to a file.
 
-Containers and codecs, chosen by the file's extension (what OpenCV's headless wheel can
-write here, see MEASURED.md): ``.mp4`` MPEG-4 Part 2 (``mp4v``: desktop players such as
-VLC play it, web browsers do not), ``.webm`` VP8 (browsers play it, but it encodes about
-ten times slower), ``.avi`` Motion-JPEG. ``codec="h264"`` writes browser-playable H.264
-MP4 through the ffmpeg binary that the optional ``imageio-ffmpeg`` wheel ships.
+Codecs (see :data:`CODECS`); the file's extension picks the default:
+
+- ``.mp4``: H.264 (``h264``), yuv420p, the index at the front (``+faststart``): every
+  browser plays it. Written through PyAV, whose wheels carry FFmpeg's libx264.
+- ``.webm``: VP9 (``vp9``, libvpx through PyAV); browsers play it too.
+- ``.avi``: Motion-JPEG (``mjpg``, OpenCV).
+- ``mp4v`` (MPEG-4 Part 2 in ``.mp4``, OpenCV) only on request or when PyAV is missing:
+  desktop players such as VLC play it, web browsers do not.
+
+Every file is written to a temporary file beside it and renamed over it at the end (see
+:mod:`~apf_physics.render.output`). FFmpeg's log stays off (PyAV's default), so encoding
+prints nothing.
 """
 
 from __future__ import annotations
 
-import os
+import sys
+from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterable, Iterator, Sequence
 
@@ -23,53 +32,104 @@ import numpy as np
 
 from apf_physics.errors import UserError
 from apf_physics.render.drawing import FieldImage, Snapshot, TrailLayer, draw_frame, field_image
+from apf_physics.render.output import Replacement, check_writable, write_bytes
 
 if TYPE_CHECKING:
     from apf_physics.world import World
 
-#: File extension → OpenCV fourcc.
-FOURCC_BY_EXTENSION = {".mp4": "mp4v", ".webm": "VP80", ".avi": "MJPG"}
+try:
+    import av
+except ImportError:  # a stated fallback: .mp4 becomes mp4v (see choose_codec)
+    av = None
 
 
-def check_writable(path: str | Path, extensions: Sequence[str] | None = None) -> Path:
-    """Fail early, before any work, if an output file cannot be written.
+@dataclass(frozen=True)
+class Codec:
+    """A way to write a video.
+
+    Attributes:
+        name: The name users pass (``--codec``).
+        extension: The file extension it needs.
+        label: How messages name it.
+        encoder: FFmpeg encoder (PyAV) or OpenCV fourcc.
+        pyav: Written through PyAV (else OpenCV).
+        browsers: Web browsers play it.
+    """
+
+    name: str
+    extension: str
+    label: str
+    encoder: str
+    pyav: bool
+    browsers: bool
+
+
+CODECS = {
+    "h264": Codec("h264", ".mp4", "H.264", "libx264", True, True),
+    "vp9": Codec("vp9", ".webm", "VP9", "libvpx-vp9", True, True),
+    "mp4v": Codec("mp4v", ".mp4", "mp4v", "mp4v", False, False),
+    "mjpg": Codec("mjpg", ".avi", "MJPG", "MJPG", False, False),
+}
+
+#: File extension → default codec name.
+DEFAULT_CODEC = {".mp4": "h264", ".webm": "vp9", ".avi": "mjpg"}
+VIDEO_EXTENSIONS = tuple(DEFAULT_CODEC)
+
+# Encoder settings. x264 "veryfast" keeps draw + encode of 512x512 frames above 300 frames/s
+# on one core at CRF 23 (see BENCHMARKS.md); VP9's realtime mode is the only one near that.
+_PYAV_SETTINGS = {
+    "h264": ("mp4", {"preset": "veryfast", "crf": "23"}, {"movflags": "+faststart"}),
+    "vp9": ("webm", {"deadline": "realtime", "cpu-used": "8", "crf": "32", "b": "0", "row-mt": "1"}, {}),
+}
+
+
+def choose_codec(path: str | Path, codec: str | None = None) -> Codec:
+    """The codec a video file will be written with.
 
     Args:
-        path: The output file.
-        extensions: Allowed suffixes (lower case, with the dot); ``None`` for any.
-
-    Returns:
-        ``path`` as a :class:`~pathlib.Path`.
+        path: The output file; its extension gives the default codec.
+        codec: A name from :data:`CODECS`, or ``None`` for the extension's default. Without
+            PyAV the default for ``.mp4`` falls back to ``mp4v`` (check ``Codec.browsers``).
 
     Raises:
-        UserError: naming the path, when the suffix is not allowed, the path is a directory,
-            or its directory is missing or read-only.
+        UserError: an unknown codec or extension, a codec that does not fit the extension,
+            or a PyAV codec when PyAV is not installed.
     """
     path = Path(path)
-    if extensions is not None and path.suffix.lower() not in extensions:
-        raise UserError(f"cannot write {path}: unsupported extension {path.suffix or '(none)'!r} "
-                        f"(use {', '.join(extensions)})")
-    parent = path.parent if str(path.parent) else Path(".")
-    if path.is_dir():
-        raise UserError(f"cannot write {path}: it is a directory")
-    if not parent.is_dir():
-        raise UserError(f"cannot write {path}: directory {parent} does not exist")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise UserError(f"cannot write {path}: directory {parent} is not writable")
-    return path
+    suffix = path.suffix.lower()
+    if suffix not in DEFAULT_CODEC:
+        raise UserError(f"cannot write {path}: unsupported video extension {suffix or '(none)'!r} "
+                        f"(use {', '.join(VIDEO_EXTENSIONS)})")
+    if codec is not None and codec not in CODECS:
+        raise UserError(f"cannot write {path}: unknown codec {codec!r} (known: {', '.join(CODECS)})")
+    chosen = CODECS[codec or DEFAULT_CODEC[suffix]]
+    if chosen.extension != suffix:
+        raise UserError(f"cannot write {path}: {chosen.label} needs a {chosen.extension} file")
+    if chosen.pyav and av is None:
+        if codec is None and suffix == ".mp4":
+            return CODECS["mp4v"]
+        raise UserError(f"cannot write {path}: {chosen.label} needs PyAV (pip install av)")
+    return chosen
 
 
 class VideoWriter:
     """Append RGB frames to a video file; a context manager.
 
+    The file appears (or replaces an old one) only when the writer closes without error.
+
     Args:
-        path: Output file; its extension picks the codec (see :data:`FOURCC_BY_EXTENSION`).
+        path: Output file; its extension picks the default codec (see :func:`choose_codec`).
         fps: Frames per second of the video.
-        frame_size: ``(width, height)`` of every frame in pixels.
-        codec: ``None`` (by extension) or ``"h264"`` (``.mp4`` only, needs ``imageio-ffmpeg``).
+        frame_size: ``(width, height)`` of every frame in pixels. yuv420p needs even sizes:
+            H.264 and VP9 frames of odd size get one replicated column or row.
+        codec: A name from :data:`CODECS`, or ``None`` for the extension's default.
+
+    Attributes:
+        codec: The :class:`Codec` in use.
+        frames: Frames written so far.
 
     Raises:
-        UserError: the extension is not supported, or the file cannot be opened for writing
+        UserError: the extension or codec is not supported, or the file cannot be written
             (the message names the path).
     """
 
@@ -77,91 +137,153 @@ class VideoWriter:
         self.path = Path(path)
         self.frame_size = (int(frame_size[0]), int(frame_size[1]))
         self.frames = 0
-        suffix = self.path.suffix.lower()
         if fps <= 0:
             raise UserError(f"cannot write {self.path}: fps must be positive, got {fps:g}")
-        if codec not in (None, "h264"):
-            raise UserError(f"cannot write {self.path}: unknown codec {codec!r} (expected h264 or none)")
-        if suffix not in FOURCC_BY_EXTENSION:
-            raise UserError(f"cannot write {self.path}: unsupported video extension {suffix or '(none)'!r} "
-                            f"(use {', '.join(FOURCC_BY_EXTENSION)})")
-        if codec == "h264" and suffix != ".mp4":
-            raise UserError(f"cannot write {self.path}: H.264 needs an .mp4 file")
+        self.codec = choose_codec(self.path, codec)
         check_writable(self.path)
-        self._cv: cv2.VideoWriter | None = None
-        self._ffmpeg = None
-        if codec == "h264":
-            self._open_ffmpeg(fps)
-        else:
-            fourcc = cv2.VideoWriter_fourcc(*FOURCC_BY_EXTENSION[suffix])
-            self._cv = cv2.VideoWriter(str(self.path), fourcc, float(fps), self.frame_size)
-            if not self._cv.isOpened():
-                raise UserError(f"cannot write {self.path}: OpenCV could not open a "
-                                f"{FOURCC_BY_EXTENSION[suffix]} video writer for it")
-
-    def _open_ffmpeg(self, fps: float) -> None:
+        self._replacement = Replacement(self.path)
         try:
-            import imageio_ffmpeg
-        except ImportError:
-            raise UserError(f"cannot write {self.path} as H.264: install imageio-ffmpeg "
-                            "(pip install imageio-ffmpeg), or drop the H.264 option to write mp4v") from None
-        # yuv420p needs even sizes; frames are padded by at most one pixel (see write()).
-        w, h = self.frame_size
-        self._padded = (w + w % 2, h + h % 2)
-        self._ffmpeg = imageio_ffmpeg.write_frames(
-            str(self.path), self._padded, fps=float(fps), codec="libx264", pix_fmt_in="rgb24",
-            pix_fmt_out="yuv420p", macro_block_size=1, quality=7, ffmpeg_log_level="error")
-        try:
-            self._ffmpeg.send(None)  # starts ffmpeg
-        except (OSError, RuntimeError) as exc:
-            raise UserError(f"cannot write {self.path}: ffmpeg failed to start ({exc})") from None
+            if self.codec.pyav:
+                self._encoder: _PyAVEncoder | _OpenCVEncoder | None = _PyAVEncoder(
+                    self._replacement.temporary, self.codec, fps, self.frame_size)
+            else:
+                self._encoder = _OpenCVEncoder(self._replacement.temporary, self.codec, fps, self.frame_size)
+        except BaseException:
+            self._replacement.discard()
+            raise
 
     def write(self, frame: np.ndarray) -> None:
         """Append one ``(H, W, 3)`` uint8 RGB frame of the writer's size."""
         if frame.shape != (self.frame_size[1], self.frame_size[0], 3) or frame.dtype != np.uint8:
             raise ValueError(f"expected a ({self.frame_size[1]}, {self.frame_size[0]}, 3) uint8 frame, "
                              f"got {frame.shape} {frame.dtype}")
-        if self._cv is not None:
-            self._cv.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
-        elif self._ffmpeg is not None:
-            w, h = self.frame_size
-            if (w, h) != self._padded:
-                frame = cv2.copyMakeBorder(frame, 0, self._padded[1] - h, 0, self._padded[0] - w,
-                                           cv2.BORDER_REPLICATE)
-            try:
-                self._ffmpeg.send(np.ascontiguousarray(frame))
-            except (OSError, RuntimeError) as exc:
-                raise UserError(f"cannot write {self.path}: ffmpeg stopped ({exc})") from None
-        else:
+        if self._encoder is None:
             raise ValueError(f"{self.path}: the writer is closed")
+        self._encoder.write(frame)
         self.frames += 1
 
     def close(self) -> None:
-        """Finish the file. Safe to call twice.
+        """Finish the file and move it into place. Safe to call twice.
 
         Raises:
-            UserError: the finished file is missing or empty.
+            UserError: the encoder failed, or the finished file is empty.
+            ValueError: no frame was written (nothing replaces the old file).
         """
-        if self._cv is not None:
-            self._cv.release()
-            self._cv = None
-        elif self._ffmpeg is not None:
-            try:
-                self._ffmpeg.close()
-            except (OSError, RuntimeError) as exc:
-                raise UserError(f"cannot write {self.path}: ffmpeg failed ({exc})") from None
-            finally:
-                self._ffmpeg = None
-        else:
+        if self._encoder is None:
             return
-        if self.frames and (not self.path.is_file() or self.path.stat().st_size == 0):
-            raise UserError(f"cannot write {self.path}: the video file is empty after writing")
+        encoder, self._encoder = self._encoder, None
+        try:
+            encoder.close()
+            if not self.frames:
+                raise ValueError(f"{self.path}: no frames were written")
+            if encoder.path.stat().st_size == 0:
+                raise UserError(f"cannot write {self.path}: the video file is empty after writing")
+        except BaseException:
+            self._replacement.discard()
+            raise
+        self._replacement.commit()
+
+    def abort(self) -> None:
+        """Stop without writing: the temporary file goes, an old file at ``path`` stays."""
+        if self._encoder is None:
+            return
+        encoder, self._encoder = self._encoder, None
+        try:
+            encoder.close()
+        except Exception:
+            pass  # the half-written file is thrown away; its encoder's complaints do not matter
+        finally:
+            self._replacement.discard()
 
     def __enter__(self) -> VideoWriter:
         return self
 
-    def __exit__(self, *exc_info) -> None:
-        self.close()
+    def __exit__(self, exc_type, exc, traceback) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+
+class _PyAVEncoder:
+    """H.264 or VP9 through PyAV: RGB frames to limited-range BT.601 yuv420p, tagged as such
+    in the stream (with sRGB primaries and transfer, what was drawn), so that browsers and
+    players show the colours that were drawn."""
+
+    def __init__(self, path: Path, codec: Codec, fps: float, frame_size: tuple[int, int]):
+        self.path = path
+        container_format, codec_options, container_options = _PYAV_SETTINGS[codec.name]
+        w, h = frame_size
+        self.padded = (w + w % 2, h + h % 2)
+        self.rate = Fraction(fps).limit_denominator(100_000)
+        self.index = 0
+        try:
+            self.container = av.open(str(path), "w", format=container_format, options=container_options)
+            self.stream = self.container.add_stream(codec.encoder, rate=self.rate)
+        except (av.FFmpegError, ValueError) as exc:
+            raise UserError(f"cannot write {path}: PyAV could not open a {codec.label} writer ({exc})") from None
+        self.stream.width, self.stream.height = self.padded
+        self.stream.pix_fmt = "yuv420p"
+        # The tags that say how to turn the samples back into the drawn sRGB colours: the
+        # matrix of OpenCV's RGB→I420 (BT.601, limited range), BT.709 (= sRGB) primaries, sRGB transfer.
+        context = self.stream.codec_context
+        context.colorspace = 6          # SMPTE 170M (BT.601)
+        context.color_range = 1         # limited ("MPEG"): 16-235
+        context.color_primaries = 1     # BT.709
+        context.color_trc = 13          # IEC 61966-2-1 (sRGB)
+        self.stream.options = codec_options
+
+    def write(self, frame: np.ndarray) -> None:
+        w, h = frame.shape[1], frame.shape[0]
+        if (w, h) != self.padded:
+            frame = cv2.copyMakeBorder(frame, 0, self.padded[1] - h, 0, self.padded[0] - w, cv2.BORDER_REPLICATE)
+        # OpenCV's conversion costs a seventh of FFmpeg's swscale here (0.16 against 1.2 ms at 512x512).
+        picture = av.VideoFrame.from_ndarray(cv2.cvtColor(frame, cv2.COLOR_RGB2YUV_I420), format="yuv420p")
+        picture.pts = self.index
+        picture.time_base = 1 / self.rate
+        self.index += 1
+        self._mux(picture)
+
+    def _mux(self, picture) -> None:
+        try:
+            self.container.mux(self.stream.encode(picture))
+        except av.FFmpegError as exc:
+            raise UserError(f"cannot write {self.path}: the encoder failed ({exc})") from None
+
+    def close(self) -> None:
+        try:
+            self._mux(None)  # flush the encoder's delayed frames
+        finally:
+            self.container.close()
+
+
+class _OpenCVEncoder:
+    """mp4v or MJPG through OpenCV's video writer (BGR frames)."""
+
+    def __init__(self, path: Path, codec: Codec, fps: float, frame_size: tuple[int, int]):
+        self.path = path
+        self.writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*codec.encoder), float(fps), frame_size)
+        if not self.writer.isOpened():
+            raise UserError(f"cannot write {path}: OpenCV could not open a {codec.label} video writer for it")
+
+    def write(self, frame: np.ndarray) -> None:
+        self.writer.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
+
+    def close(self) -> None:
+        self.writer.release()
+
+
+def progress_bar(total: int | None, description: str, unit: str, enabled: bool = True):
+    """A tqdm bar on stderr, shown only when ``enabled`` and stderr is a terminal.
+
+    A disabled bar is still a tqdm object (``update``, ``set_postfix_str`` and ``close`` do
+    nothing), so callers need no branches.
+    """
+    from tqdm import tqdm
+
+    shown = enabled and sys.stderr.isatty()
+    return tqdm(total=total, desc=description, unit=unit, file=sys.stderr, leave=False, dynamic_ncols=True,
+                disable=not shown)
 
 
 def write_video(
@@ -178,10 +300,10 @@ def write_video(
     Args:
         frames: ``(H, W, 3)`` uint8 RGB frames, e.g. from :func:`render_trajectory`; a
             generator is consumed lazily, so long videos never sit in memory.
-        path: ``.mp4`` (mp4v), ``.webm`` (VP8) or ``.avi`` (MJPG).
+        path: ``.mp4`` (H.264), ``.webm`` (VP9) or ``.avi`` (MJPG); see :func:`choose_codec`.
         fps: Frames per second.
-        codec: ``None`` or ``"h264"`` (see :class:`VideoWriter`).
-        progress: Show a tqdm progress bar on stderr.
+        codec: A name from :data:`CODECS`, or ``None`` for the extension's default.
+        progress: Show a tqdm progress bar on stderr (when it is a terminal).
         total: Number of frames, for the progress bar (taken from ``len(frames)`` if it has one).
 
     Returns:
@@ -198,17 +320,11 @@ def write_video(
         raise ValueError(f"{path}: no frames to write") from None
     if total is None and hasattr(frames, "__len__"):
         total = len(frames)  # type: ignore[arg-type]
-    bar = None
-    if progress:
-        from tqdm import tqdm
-        bar = tqdm(total=total, unit="frame", desc=Path(path).name, leave=False)
-    with VideoWriter(path, fps, (first.shape[1], first.shape[0]), codec) as writer:
-        for frame in _chain(first, iterator):
-            writer.write(frame)
-            if bar is not None:
+    with progress_bar(total, Path(path).name, "frame", progress) as bar:
+        with VideoWriter(path, fps, (first.shape[1], first.shape[0]), codec) as writer:
+            for frame in _chain(first, iterator):
+                writer.write(frame)
                 bar.update(1)
-    if bar is not None:
-        bar.close()
     return writer.frames
 
 
@@ -218,14 +334,16 @@ def _chain(first: np.ndarray, rest: Iterator[np.ndarray]) -> Iterator[np.ndarray
 
 
 def write_png(frame: np.ndarray, path: str | Path) -> None:
-    """Write one RGB frame as a PNG file.
+    """Write one RGB frame as a PNG file (through a temporary file and a rename).
 
     Raises:
         UserError: the file cannot be written (the message names the path).
     """
     path = check_writable(path, (".png",))
-    if not cv2.imwrite(str(path), cv2.cvtColor(frame, cv2.COLOR_RGB2BGR)):
-        raise UserError(f"cannot write {path}: OpenCV could not write the PNG file")
+    ok, encoded = cv2.imencode(".png", cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise UserError(f"cannot write {path}: OpenCV could not encode the PNG image")
+    write_bytes(path, encoded.tobytes())
 
 
 def trajectory_snapshots(

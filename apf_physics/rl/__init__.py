@@ -11,7 +11,7 @@ Typical use::
 """
 
 from apf_physics.rl.buffer import ReplayBuffer, ReplayBufferSamples
-from apf_physics.rl.checkpoint import FORMAT_VERSION, SavedModel, load_model, save_model
+from apf_physics.models.files import FORMAT_VERSION, SavedModel, load_model, save_model
 from apf_physics.rl.dqn import (
     PRESETS,
     DQNConfig,
@@ -23,9 +23,9 @@ from apf_physics.rl.dqn import (
     preset,
     train,
 )
-from apf_physics.rl.network import QNetwork, max_pool_2x2_stride1, relative_log
+from apf_physics.models.network import QNetwork, max_pool_2x2_stride1, relative_log
 from apf_physics.rl.plot import plot_training_curve
-from apf_physics.rl.policy import DQNPolicy
+from apf_physics.models.policy import DQNPolicy
 
 __all__ = [
     "DQNConfig", "DQNPolicy", "EvalResult", "FORMAT_VERSION", "PRESETS", "QNetwork", "ReplayBuffer",

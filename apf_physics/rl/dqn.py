@@ -45,8 +45,8 @@ import torch.nn.functional as F
 
 from apf_physics.errors import UserError
 from apf_physics.rl.buffer import ReplayBuffer
-from apf_physics.rl.checkpoint import model_meta, read_file, save_model, write_file
-from apf_physics.rl.network import OBS_TRANSFORMS, QNetwork
+from apf_physics.models.files import model_meta, read_file, save_model, write_file
+from apf_physics.models.network import OBS_TRANSFORMS, QNetwork
 from apf_physics.rl.plot import plot_training_curve
 
 N_ACTIONS = 9

@@ -69,7 +69,7 @@ import torch
 from apf_physics.curriculum import Stage, load_curriculum
 from apf_physics.errors import UserError
 from apf_physics.generate import FAMILIES, generate_world
-from apf_physics.rl.checkpoint import model_meta, read_file, save_model, write_file
+from apf_physics.models.files import model_meta, read_file, save_model, write_file
 from apf_physics.rl.dqn import Collector, DQNConfig, Learner, epsilon_schedule, start_csv
 from apf_physics.rl.dqn import preset as dqn_preset
 from apf_physics.world import World
@@ -339,7 +339,7 @@ def validate(network: torch.nn.Module, validation: ValidationSet) -> dict[str, f
         figure for reaching the target by short paths.
     """
     from apf_physics.planners.dqn import DQNPlanner
-    from apf_physics.rl.policy import DQNPolicy
+    from apf_physics.models.policy import DQNPolicy
     from apf_physics.rollout import rollout
 
     was_training = network.training

@@ -38,7 +38,8 @@ def _panel(image: np.ndarray, top: int, height: int, x: np.ndarray, series: Sequ
     cv2.putText(image, title, (left, top - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.5, _BLACK, 1, cv2.LINE_AA)
     for value, y in ((hi, top + 12), (lo, top + height)):
         cv2.putText(image, f"{value:.3g}", (4, y), cv2.FONT_HERSHEY_SIMPLEX, 0.4, _BLACK, 1, cv2.LINE_AA)
-    for i, (values, colour, label, markers) in enumerate(series):
+    _legend(image, series, right, top - 8)
+    for values, colour, label, markers in series:
         keep = np.isfinite(values)
         px = left + x[keep] / x_hi * (right - left)
         py = top + height - (values[keep] - lo) / (hi - lo) * height
@@ -48,7 +49,23 @@ def _panel(image: np.ndarray, top: int, height: int, x: np.ndarray, series: Sequ
                 cv2.circle(image, tuple(int(v) for v in p), 3, colour, -1, cv2.LINE_AA)
         elif len(points) > 1:
             cv2.polylines(image, [points], False, colour, 2, cv2.LINE_AA)
-        cv2.putText(image, label, (right - 170, top + 18 + 16 * i), cv2.FONT_HERSHEY_SIMPLEX, 0.45, colour, 1, cv2.LINE_AA)
+
+
+def _legend(image: np.ndarray, series: Sequence, right: int, baseline: int) -> None:
+    """The series' names on the panel's title line, flush right: above the axes box, never on a curve."""
+    entries = []
+    for _, colour, label, markers in series:
+        (width, _), _ = cv2.getTextSize(label, cv2.FONT_HERSHEY_SIMPLEX, 0.45, 1)
+        entries.append((colour, label, markers, width))
+    x = right - sum(22 + width + 14 for *_, width in entries) + 14
+    for colour, label, markers, width in entries:
+        y = baseline - 4
+        if markers:
+            cv2.circle(image, (x + 9, y), 3, colour, -1, cv2.LINE_AA)
+        else:
+            cv2.line(image, (x, y), (x + 18, y), colour, 2, cv2.LINE_AA)
+        cv2.putText(image, label, (x + 22, baseline), cv2.FONT_HERSHEY_SIMPLEX, 0.45, colour, 1, cv2.LINE_AA)
+        x += 22 + width + 14
 
 
 def plot_training_curve(csv_path: str | os.PathLike, png_path: str | os.PathLike | None = None) -> np.ndarray:

@@ -34,7 +34,8 @@ import numpy as np
 import torch
 
 from apf_physics.errors import ModelError
-from apf_physics.rl.network import QNetwork
+from apf_physics.models.network import QNetwork
+from apf_physics.observation import ObserverConfig
 
 MAGIC = b"APF-PHYSICS-DQN\n"
 """First line of every model or checkpoint file."""
@@ -161,6 +162,7 @@ class SavedModel:
         network: The network, in eval mode, on CPU.
         obs_shape: (C, k, k) observation shape it expects.
         field: Field parameters of the world it was trained on.
+        observer: How its observations were built (:func:`observer_of`).
         meta: All metadata of the file (``kind``, ``arch``, ``config``, ``training``, ...).
     """
 
@@ -168,10 +170,24 @@ class SavedModel:
     network: QNetwork
     obs_shape: tuple[int, int, int]
     field: dict[str, float]
+    observer: ObserverConfig
     meta: dict
 
 
-def model_meta(network: QNetwork, field: Any, config: Mapping[str, Any], training: Mapping[str, Any]) -> dict:
+def observer_of(meta: Mapping[str, Any]) -> ObserverConfig:
+    """The observer configuration a model was trained with.
+
+    Files written before the configuration was recorded (the project's first models) had
+    windows of U at resolution 4, with the visit memory as a second channel if there was one.
+    """
+    if "observer" in meta:
+        return ObserverConfig.from_dict(meta["observer"])
+    channels, size, _ = (int(v) for v in meta["obs_shape"])
+    return ObserverConfig(size=size, resolution=4, channels=("potential", "memory")[:channels])
+
+
+def model_meta(network: QNetwork, field: Any, config: Mapping[str, Any], training: Mapping[str, Any],
+               observer: ObserverConfig) -> dict:
     """Metadata describing a network (the part shared by model and checkpoint files).
 
     Args:
@@ -179,6 +195,7 @@ def model_meta(network: QNetwork, field: Any, config: Mapping[str, Any], trainin
         field: Field parameters of the world trained on (dataclass or mapping).
         config: Training configuration (plain values).
         training: Training metadata (steps, episodes, evaluation, world name, ...).
+        observer: How the network's observations are built.
 
     Returns:
         JSON-serialisable metadata.
@@ -187,6 +204,7 @@ def model_meta(network: QNetwork, field: Any, config: Mapping[str, Any], trainin
         "arch": network.arch,
         "obs_shape": network.arch["obs_shape"],
         "obs_transform": network.arch["obs_transform"],
+        "observer": observer.to_dict(),
         "field": field_dict(field),
         "config": dict(config),
         "training": dict(training),
@@ -249,4 +267,8 @@ def load_model(
         if wrong:
             diffs = ", ".join(f"{k}={field[k]:g} (world: {expected[k]:g})" for k in wrong)
             raise ModelError(f"{path}: the model was trained in another field: {diffs}")
-    return SavedModel(path=path, network=network, obs_shape=obs_shape, field=field, meta=meta)
+    observer = observer_of(meta)
+    if observer.shape != obs_shape:
+        raise ModelError(f"{path}: the model's observer builds {observer.shape} observations, "
+                         f"but its network takes {obs_shape}")
+    return SavedModel(path=path, network=network, obs_shape=obs_shape, field=field, observer=observer, meta=meta)

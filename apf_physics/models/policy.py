@@ -8,8 +8,9 @@ from typing import Any, Sequence
 import numpy as np
 import torch
 
-from apf_physics.rl.checkpoint import SavedModel, load_model
-from apf_physics.rl.network import QNetwork
+from apf_physics.models.files import SavedModel, load_model, observer_of
+from apf_physics.models.network import QNetwork
+from apf_physics.observation import ObserverConfig
 
 
 class DQNPolicy:
@@ -17,14 +18,20 @@ class DQNPolicy:
 
     Args:
         network: The Q-network; it is put in eval mode.
+        observer: How its observations are built (default: the model file's, else windows of
+            U at resolution 4 with as many channels as the network takes).
         model: The file it came from, if any (see :meth:`load`).
     """
 
-    def __init__(self, network: QNetwork, model: SavedModel | None = None):
+    def __init__(self, network: QNetwork, observer: ObserverConfig | None = None, model: SavedModel | None = None):
         self.network = network.eval()
         self.model = model
         self.obs_shape: tuple[int, int, int] = tuple(network.arch["obs_shape"])
         """(C, k, k) observation shape expected by :meth:`act`."""
+        if observer is None:
+            observer = model.observer if model is not None else observer_of({"obs_shape": self.obs_shape})
+        self.observer = observer
+        """How the observations fed to :meth:`act` must be built."""
 
     @classmethod
     def load(
@@ -33,13 +40,13 @@ class DQNPolicy:
         expect_obs_shape: Sequence[int] | None = None,
         expect_field: Any = None,
     ) -> "DQNPolicy":
-        """Load a policy from a model file (see :func:`~apf_physics.rl.checkpoint.load_model`).
+        """Load a policy from a model file (see :func:`~apf_physics.models.files.load_model`).
 
         Raises:
             ModelError: The file is unusable or does not fit the expected shape or field.
         """
         model = load_model(path, expect_obs_shape=expect_obs_shape, expect_field=expect_field)
-        return cls(model.network, model)
+        return cls(model.network, model.observer, model)
 
     @property
     def field(self) -> dict[str, float] | None:

@@ -1,0 +1,258 @@
+"""The episode stepper: the one place where robots advance and episodes end.
+
+A :class:`Stepper` runs a batch of episodes ("slots"), each of one or several robots in a
+world: the single environment (a batch of one), the vector environment, ``eval``'s rollouts
+and formations all call it. Each control step it takes a velocity command per robot, moves
+every robot of the running slots through one :class:`~apf_physics.physics.Physics` call,
+and decides how each episode stands, with one definition for all callers:
+
+- **collision**: any robot of the slot touched an obstacle, the map's edge or another robot
+  during the step (every robot involved is flagged in :attr:`StepReport.contacts`);
+- **reached**: otherwise, the slot's leader (robot 0) ends the step within the goal
+  tolerance of a target;
+- **trapped**: otherwise, the caller's planner gave up (``gave_up``), or the
+  :class:`TrapDetector` given to the stepper sees the leader stuck;
+- **timeout**: otherwise, the episode has run ``max_steps`` control steps.
+
+An ended slot's robots stay where the episode ended until :meth:`Stepper.start` begins the
+slot's next episode.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import Literal, Sequence
+
+import numpy as np
+
+from apf_physics.physics import ContactLog, Physics
+from apf_physics.world import World
+
+TrapRule = Literal["descent", "oscillation"]
+
+
+class Outcome(IntEnum):
+    """How an episode stands."""
+
+    RUNNING = 0
+    REACHED = 1
+    COLLISION = 2
+    TRAPPED = 3
+    TIMEOUT = 4
+
+    @property
+    def label(self) -> str:
+        """``"running"``, ``"reached"``, ``"collision"``, ``"trapped"`` or ``"timeout"``."""
+        return self.name.lower()
+
+
+# The same as plain ints, for the arrays of the step loop (an IntEnum member costs a lookup each use).
+RUNNING, REACHED, COLLISION, TRAPPED, TIMEOUT = (int(o) for o in Outcome)
+
+
+@dataclass(frozen=True)
+class TrapDetector:
+    """Decides when a robot is stuck, from its recent history.
+
+    Attributes:
+        rule: ``"oscillation"``: trapped when every position of the last ``window`` steps lies
+            within ``radius`` of their mean. ``"descent"`` (gradient descent): also when the
+            lowest potential of the window is not at least ``min_drop`` below the lowest
+            potential before it.
+        window: Control steps looked back over.
+        radius: See ``rule`` [units].
+        min_drop: See ``rule``.
+    """
+
+    rule: TrapRule = "oscillation"
+    window: int = 10
+    radius: float = 1.5
+    min_drop: float = 1e-3
+
+
+class TrapWatch:
+    """Ring buffers of the last ``window`` leader positions (and potentials) of every slot."""
+
+    def __init__(self, detector: TrapDetector, num_slots: int):
+        self.detector = detector
+        w = detector.window
+        self.positions = np.zeros((num_slots, w, 2))
+        self.potentials = np.zeros((num_slots, w))
+        self.earlier_min = np.full(num_slots, np.inf)   # lowest potential before the window
+        self.length = np.zeros(num_slots, np.intp)      # entries recorded in this episode
+
+    def reset(self, slots: np.ndarray, positions: np.ndarray, potentials: np.ndarray) -> None:
+        self.length[slots] = 0
+        self.earlier_min[slots] = np.inf
+        self.record(slots, positions, potentials)
+
+    def record(self, slots: np.ndarray, positions: np.ndarray, potentials: np.ndarray) -> np.ndarray:
+        """Add one entry per slot of ``slots``; returns which of them are trapped now."""
+        d = self.detector
+        w = d.window
+        at = self.length[slots] % w
+        full = self.length[slots] >= w
+        leaving = self.potentials[slots, at]
+        self.earlier_min[slots] = np.where(full, np.minimum(self.earlier_min[slots], leaving), self.earlier_min[slots])
+        self.positions[slots, at] = positions
+        self.potentials[slots, at] = potentials
+        self.length[slots] += 1
+        judged = self.length[slots] > w
+        recent = self.positions[slots]
+        spread = np.max(np.hypot(*(recent - recent.mean(axis=1, keepdims=True)).transpose(2, 0, 1)), axis=1)
+        trapped = judged & (spread < d.radius)
+        if d.rule == "descent":
+            trapped |= judged & (self.potentials[slots].min(axis=1) > self.earlier_min[slots] - d.min_drop)
+        return trapped
+
+
+@dataclass
+class StepReport:
+    """What one control step did.
+
+    Attributes:
+        positions: (S, m, 2) every robot's position after the step (frozen for ended slots).
+        contacts: The physics' contact log, per robot (global index ``slot * m + r``).
+        moved: (S,) bool: the slots that were running at the start of the step.
+        collided: (S,) bool: a robot of a moved slot touched something.
+        reached: (S,) bool: the leader of a moved slot reached a target (and nothing collided).
+        ended: (S,) bool: episodes that ended at this step.
+        distance: (S,) leader's distance to the nearest target of its world.
+    """
+
+    positions: np.ndarray
+    contacts: ContactLog
+    moved: np.ndarray
+    collided: np.ndarray
+    reached: np.ndarray
+    ended: np.ndarray
+    distance: np.ndarray
+
+
+class Stepper:
+    """Episodes of robots in slots, advanced together through one physics.
+
+    Args:
+        worlds: The worlds episodes may use; slot ``s`` is in ``worlds[world_of[s]]``.
+        num_slots: Episodes run at once.
+        robots_per_slot: Robots per episode; robot 0 is the leader.
+        max_steps: An episode that has run this many control steps ends as ``timeout``
+            (None: never).
+        trap: Trap detection for the leaders (None: none).
+    """
+
+    def __init__(self, worlds: Sequence[World], num_slots: int, robots_per_slot: int = 1,
+                 max_steps: int | None = None, trap: TrapDetector | None = None):
+        self.worlds = list(worlds)
+        self.num_slots = int(num_slots)
+        self.robots_per_slot = int(robots_per_slot)
+        self.max_steps = max_steps
+        self.physics = Physics([self.worlds[0]] * self.num_slots, self.robots_per_slot)
+        self.world_of = np.zeros(self.num_slots, np.intp)
+        self.positions = np.zeros((self.num_slots, self.robots_per_slot, 2))
+        self.steps = np.zeros(self.num_slots, np.intp)
+        self.outcome = np.full(self.num_slots, TIMEOUT, np.int8)   # nothing runs before start()
+        n_targets = max(len(w.targets) for w in self.worlds)
+        self._targets = np.full((len(self.worlds), n_targets, 2), np.inf)
+        for i, w in enumerate(self.worlds):
+            self._targets[i, :len(w.targets)] = w.targets
+        self._tolerance = np.array([w.goal_tolerance for w in self.worlds])
+        self._slot_targets = self._targets[self.world_of]       # (S, T, 2): each slot's world's targets
+        self._slot_tolerance = self._tolerance[self.world_of]
+        self.trap = trap
+        self._watch = TrapWatch(trap, self.num_slots) if trap is not None else None
+        self._nobody = np.zeros(self.num_slots, bool)
+        self.last_distance = np.full(self.num_slots, np.inf)
+        """Each leader's distance to its nearest target, after the last start or step."""
+
+    @property
+    def running(self) -> np.ndarray:
+        """(S,) bool: slots whose episode is still going."""
+        return self.outcome == RUNNING
+
+    def world(self, slot: int) -> World:
+        return self.worlds[self.world_of[slot]]
+
+    def distance(self) -> np.ndarray:
+        """(S,) each leader's distance to the nearest target of its world."""
+        d = self.positions[:, 0, None, :] - self._slot_targets                  # (S, T, 2)
+        return np.hypot(d[..., 0], d[..., 1]).min(axis=1)
+
+    def _leader_potential(self, slots: np.ndarray) -> np.ndarray:
+        if self.trap is None or self.trap.rule != "descent":
+            return np.zeros(len(slots))
+        out = np.empty(len(slots))
+        for w in np.unique(self.world_of[slots]):
+            mine = self.world_of[slots] == w
+            out[mine] = self.worlds[w].potential(self.positions[slots[mine], 0])
+        return out
+
+    def start(self, slots: np.ndarray, positions: np.ndarray, world_ids: np.ndarray | None = None) -> None:
+        """Begin episodes in ``slots``: robots at ``positions`` (k, m, 2), in ``worlds[world_ids]`` (default 0)."""
+        slots = np.asarray(slots, np.intp).reshape(-1)
+        positions = np.asarray(positions, float).reshape(len(slots), self.robots_per_slot, 2)
+        if world_ids is not None:
+            self.world_of[slots] = world_ids
+            for s in slots.tolist():
+                self.physics.set_world(s, self.worlds[self.world_of[s]])
+            self._slot_targets[slots] = self._targets[self.world_of[slots]]
+            self._slot_tolerance[slots] = self._tolerance[self.world_of[slots]]
+        m = self.robots_per_slot
+        robots = (slots[:, None] * m + np.arange(m)[None]).ravel()
+        self.physics.place(robots, positions.reshape(-1, 2))
+        self.positions[slots] = positions
+        self.steps[slots] = 0
+        self.outcome[slots] = RUNNING
+        self.last_distance = self.distance()
+        if self._watch is not None:
+            self._watch.reset(slots, positions[:, 0], self._leader_potential(slots))
+
+    def finish(self, slots: np.ndarray, outcome: Outcome) -> None:
+        """End the running episodes among ``slots`` with ``outcome`` (e.g. a start already at its target)."""
+        slots = np.asarray(slots, np.intp).reshape(-1)
+        self.outcome[slots[self.outcome[slots] == RUNNING]] = int(outcome)
+
+    def step(self, commands: np.ndarray, gave_up: np.ndarray | None = None) -> StepReport:
+        """Advance every running slot by one control step.
+
+        Args:
+            commands: (S, m, 2) velocity commands (units per control step); those of slots that
+                are not running are ignored.
+            gave_up: (S,) bool: slots whose planner knows it is trapped; they end as ``trapped``
+                before moving.
+        """
+        if gave_up is not None and gave_up.any():
+            self.finish(np.flatnonzero(gave_up), Outcome.TRAPPED)
+        moved = self.outcome == RUNNING
+        everyone = moved.all()
+        commands = np.asarray(commands, float).reshape(-1, 2)
+        contacts = self.physics.step(commands, None if everyone else np.repeat(moved, self.robots_per_slot))
+        after = self.physics.positions.reshape(self.positions.shape)
+        if everyone:
+            self.positions = after
+            self.steps += 1
+        else:
+            self.positions[moved] = after[moved]
+            self.steps[moved] += 1
+        distance = self.distance()
+        reached = distance <= self._slot_tolerance
+        if not everyone:
+            reached &= moved
+        collided = self._nobody
+        if contacts.touched:
+            collided = contacts.any.reshape(self.num_slots, -1).any(axis=1) & moved
+            reached &= ~collided
+        ended = self._nobody
+        if contacts.touched or self._watch is not None or self.max_steps is not None or reached.any():
+            outcome = np.where(collided, COLLISION, np.where(reached, REACHED, RUNNING)).astype(np.int8)
+            if self._watch is not None:
+                judge = np.flatnonzero(moved & (outcome == RUNNING))
+                trapped = self._watch.record(judge, self.positions[judge, 0], self._leader_potential(judge))
+                outcome[judge[trapped]] = TRAPPED
+            if self.max_steps is not None:
+                outcome[moved & (outcome == RUNNING) & (self.steps >= self.max_steps)] = TIMEOUT
+            ended = moved & (outcome != RUNNING)
+            self.outcome[ended] = outcome[ended]
+        self.last_distance = distance
+        return StepReport(self.positions.copy(), contacts, moved, collided, reached, ended, distance)

@@ -1,0 +1,151 @@
+"""The navigation task for a batch of episodes: what every environment of the package steps.
+
+One step: actions → unit moves (SPEC Table 1) → followers' moves (formations) → one
+:class:`~apf_physics.engine.Stepper` step for the whole batch → observations (one
+:class:`~apf_physics.observation.Observer` call) and the reward's named terms. ``Navigate-v0``
+is a batch of one, :class:`~apf_physics.envs.vector.NavigateVectorEnv` a batch of N, and
+``Formation-v0`` a batch of one formation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from apf_physics.actions import ACTIONS
+from apf_physics.engine import TIMEOUT, Stepper
+from apf_physics.envs.reward import RewardWeights, reward_terms
+from apf_physics.formation import FormationTeam
+from apf_physics.observation import Observer, ObserverConfig
+from apf_physics.world import FormationSpec, World
+
+
+@dataclass(frozen=True)
+class TaskStep:
+    """One step of the batch (arrays over slots)."""
+
+    observation: np.ndarray    # (N, C, k, k) float32
+    reward: np.ndarray         # (N,) float64, 0 where nothing moved
+    terminated: np.ndarray     # (N,) bool: reached or collided
+    truncated: np.ndarray      # (N,) bool: the step limit
+    terms: dict                # name -> (N,) float64
+    reached: np.ndarray        # (N,) bool
+    collided: np.ndarray       # (N,) bool
+    moved: np.ndarray          # (N,) bool: slots that were running
+    robot_contact: np.ndarray  # (N,) bool: two robots of the slot touched
+
+
+class NavigationTask:
+    """N episodes of the navigation task, slot n in world ``worlds[world_of[n]]``.
+
+    Args:
+        worlds: The worlds episodes may use.
+        num: Batch size.
+        observer: How observations are built.
+        weights: Reward weights.
+        formation: Followers behind each leader (None: robots alone).
+        max_steps: Truncate episodes after this many steps (None: never; the single
+            environments leave it to Gymnasium's ``TimeLimit``).
+    """
+
+    def __init__(self, worlds: Sequence[World], num: int, observer: ObserverConfig, weights: RewardWeights,
+                 formation: FormationSpec | None = None, max_steps: int | None = None):
+        self.worlds = list(worlds)
+        self.num = int(num)
+        self.weights = weights
+        self.team = FormationTeam(formation, self.num) if formation is not None else None
+        robots = 1 if self.team is None else self.team.robots
+        self.stepper = Stepper(self.worlds, self.num, robots, max_steps=max_steps)
+        self.observer = Observer(observer, self.num, self.worlds, track_visits=bool(weights.revisit))
+        self._centre = observer.size // 2
+        self._obs = np.zeros((self.num, *observer.shape), np.float32)
+        self._u = np.zeros(self.num)     # the potential at each leader (its window's centre)
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(N, m, 2) every robot's position."""
+        return self.stepper.positions
+
+    @property
+    def world_of(self) -> np.ndarray:
+        return self.stepper.world_of
+
+    def start(self, slots: np.ndarray, world_ids: np.ndarray, leaders: np.ndarray) -> None:
+        """Begin episodes in ``slots``, leaders at ``leaders`` (k, 2) in ``worlds[world_ids]``.
+
+        Raises:
+            UserError: A formation's followers find no free position near its leader.
+        """
+        slots = np.asarray(slots, np.intp).reshape(-1)
+        world_ids = np.asarray(world_ids, np.intp).reshape(-1)
+        leaders = np.asarray(leaders, float).reshape(-1, 2)
+        worlds = [self.worlds[w] for w in world_ids.tolist()]
+        if self.team is None:
+            positions = leaders[:, None, :]
+        else:
+            positions = np.stack([self.team.starts(world, p[None])[0] for world, p in zip(worlds, leaders)])
+            self.team.reset(slots, worlds, positions)
+        self.stepper.start(slots, positions, world_ids)
+        self.observer.reset(slots, leaders, worlds)
+        self._observe(slots)
+
+    def _observe(self, slots: np.ndarray | None) -> None:
+        """Refresh the observations (and the potential at the leaders) of ``slots`` (None: all)."""
+        leaders = self.stepper.positions[:, 0] if slots is None else self.stepper.positions[slots, 0]
+        obs = self.observer.observe(leaders, slots)
+        if self.observer.config.scale == "raw":
+            u = obs[:, 0, self._centre, self._centre]
+        else:  # the scaled window reads 0 at the robot: take U from an unscaled sample
+            u = self.observer.potential_at(leaders, slots)
+        if slots is None:
+            self._obs, self._u = obs, u.astype(float)
+        else:  # copy on write: an array handed out by step() is never changed afterwards
+            self._obs = self._obs.copy()
+            self._obs[slots], self._u[slots] = obs, u
+
+    def observation(self, slots: np.ndarray | None = None) -> np.ndarray:
+        """(N, C, k, k) the current observations (or those of ``slots``); never changed afterwards."""
+        return self._obs if slots is None else self._obs[slots]
+
+    def step(self, actions: np.ndarray) -> TaskStep:
+        """Advance every running slot by its action (slots not running do not move)."""
+        moves = ACTIONS[np.asarray(actions, dtype=np.intp).reshape(self.num)]
+        before = self.stepper.positions[:, 0]
+        if self.team is None:
+            commands = moves[:, None, :]
+        else:
+            commands = self.team.commands(self.stepper.positions, moves, self.stepper.running)
+        report = self.stepper.step(commands)
+        moved = report.moved
+        everyone = bool(moved.all())
+        slots = None if everyone else np.flatnonzero(moved)
+        leaders = report.positions[:, 0]
+        revisits = None
+        if self.observer.memory is not None:
+            revisits = np.zeros(self.num)
+            revisits[moved] = self.observer.visit(leaders[moved], slots)
+        u_before = self._u
+        self._u = self._u.copy()
+        self._observe(slots)
+        walked = np.sqrt(np.sum((leaders - before) ** 2, axis=1)) if self.weights.length else None
+        terms = reward_terms(self.weights, report.collided, report.reached, u_before, self._u,
+                             revisits if self.weights.revisit else None, walked)
+        if not everyone:
+            terms = {name: np.where(moved, value, 0.0) for name, value in terms.items()}
+        reward = sum(terms.values())
+        ended = report.ended
+        if ended.any():
+            truncated = ended & (self.stepper.outcome == TIMEOUT)
+            terminated = ended & ~truncated
+        else:
+            truncated = terminated = ended
+        robot_contact = report.contacts.robot.reshape(self.num, -1).any(axis=1) if report.contacts.touched \
+            else ended & False
+        return TaskStep(self._obs, reward, terminated, truncated, terms, report.reached, report.collided, moved,
+                        robot_contact)
+
+    def distance(self) -> np.ndarray:
+        """(N,) each leader's distance to the nearest target of its world, after the last start or step."""
+        return self.stepper.last_distance

@@ -1,0 +1,41 @@
+"""Q-networks, their files, greedy policies, and the models shipped with the package.
+
+- :mod:`~apf_physics.models.network`: the thesis's Q-network and its observation transforms.
+- :mod:`~apf_physics.models.files`: self-describing, checksummed model and checkpoint files.
+- :mod:`~apf_physics.models.policy`: a loaded network as a greedy policy over observations.
+
+The shipped models (``*.pt`` beside this file; ``README.md`` says how each was trained and
+how to regenerate it) are found by the field they were trained for with
+:func:`shipped_model_for`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from apf_physics.errors import ModelError
+from apf_physics.models.files import FORMAT_VERSION, SavedModel, load_model, model_meta, save_model
+from apf_physics.models.network import QNetwork
+from apf_physics.models.policy import DQNPolicy
+from apf_physics.world import World
+
+MODELS = Path(__file__).resolve().parent
+SHIPPED = {"thesis-fixed": MODELS / "fixed20.pt", "thesis-general": MODELS / "general.pt"}
+"""Shipped models, by the field preset they were trained for."""
+
+
+def shipped_model_for(world: World) -> Path:
+    """The shipped model whose training field equals the world's field.
+
+    Raises:
+        ModelError: No shipped model was trained for this field.
+    """
+    for preset, path in SHIPPED.items():
+        if world.field.equals_preset(preset) and path.exists():
+            return path
+    raise ModelError(f"{world.label}: no shipped model for its field {world.field.as_dict()}; "
+                     f"train one with `apf-physics train` and pass --model")
+
+
+__all__ = ["DQNPolicy", "FORMAT_VERSION", "MODELS", "QNetwork", "SHIPPED", "SavedModel", "load_model", "model_meta",
+           "save_model", "shipped_model_for"]

@@ -1,0 +1,267 @@
+"""Shortest paths on a grid over the free space: the oracle for reachability and path length.
+
+The map is covered by a grid of nodes (``resolution`` per unit). A node is free when a robot
+centred there keeps ``robot_radius + margin`` from every obstacle and the map's edge (one
+vectorised :meth:`World.clearance` call for all nodes). Nodes are 8-connected with Euclidean
+edge costs. Because the clearance is 1-Lipschitz, every point of an edge between two free
+nodes keeps at least ``robot_radius + margin − 0.5·√2/resolution`` from everything, which is
+more than the robot's radius for the default ``margin`` (0.2 at 4 nodes per unit).
+
+One multi-source Dijkstra run from the nodes at the targets gives, for every node, the cost
+to go to the nearest reachable target and the next node on the way there; every start of a
+world is then served from that one search. The grid path is pulled taut by line-of-sight
+shortcuts (segments whose sampled clearance stays above ``robot_radius + los_margin``), so
+paths are not jagged and their length is close to the true shortest length.
+
+The A* planner (:class:`~apf_physics.planners.astar.AStarPlanner`) executes these paths
+through the physics; the world generator uses :func:`reachable` and
+:func:`shortest_path_length`.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+
+import cv2
+import numpy as np
+
+from apf_physics.field import Grid
+from apf_physics.world import World
+
+RESOLUTION = 4        # grid nodes per world unit
+MARGIN = 0.2          # safety margin on top of the robot's radius at grid nodes [units]
+LOS_MARGIN = 0.1      # safety margin on top of the robot's radius along shortcut segments [units]
+LOS_SPACING = 0.1     # sample spacing along a segment for line-of-sight checks [units]
+START_REACH = 1.0     # a start connects to free nodes at most this far away [units]
+
+# 8-connected neighbourhood: (row offset, column offset, cost in cells)
+_NEIGHBOURS = [(dr, dc, math.hypot(dr, dc)) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if dr or dc]
+
+
+class SearchGrid:
+    """The free-space grid of one world and the shortest paths to its targets.
+
+    Build it with :meth:`of` (cached per world and settings).
+
+    Attributes:
+        world: The world.
+        grid: Node positions (``Grid``: origin, resolution, shape).
+        clearance: (rows, cols) clearance at each node.
+        free: (rows, cols) True where a robot fits with the safety margin.
+        margin: The safety margin at nodes on top of the robot's radius.
+    """
+
+    def __init__(self, world: World, resolution: int = RESOLUTION, margin: float = MARGIN):
+        self.world = world
+        self.grid = Grid.covering((0.0, 0.0), world.size, resolution)
+        self.margin = float(margin)
+        self.clearance = world.clearance(self.grid.node_points()).reshape(self.grid.shape)
+        self.free = self.clearance >= world.robot_radius + self.margin
+        self._labels: np.ndarray | None = None
+        self._cost: np.ndarray | None = None
+        self._next: np.ndarray | None = None
+        self._goal_nodes: np.ndarray | None = None
+
+    @classmethod
+    def of(cls, world: World, resolution: int = RESOLUTION, margin: float = MARGIN) -> SearchGrid:
+        """The (cached) search grid of ``world``."""
+        return world.cached(("search_grid", int(resolution), float(margin)),
+                            lambda: cls(world, resolution, margin))
+
+    # -- nodes ------------------------------------------------------------------------------
+    def node_xy(self, flat: np.ndarray) -> np.ndarray:
+        """World coordinates of flat node indices (row-major)."""
+        rows, cols = np.divmod(np.asarray(flat, dtype=np.intp), self.grid.shape[1])
+        return self.grid.to_world(np.column_stack([cols, rows]))
+
+    def nodes_near(self, point: np.ndarray, reach: float) -> np.ndarray:
+        """Flat indices of the free nodes within ``reach`` of ``point``."""
+        rows, cols = self.grid.shape
+        c, r = self.grid.to_index(np.asarray(point, float).reshape(1, 2))[0]
+        k = int(math.ceil(reach * self.grid.resolution)) + 1
+        r0, r1 = max(0, int(math.floor(r)) - k), min(rows - 1, int(math.ceil(r)) + k)
+        c0, c1 = max(0, int(math.floor(c)) - k), min(cols - 1, int(math.ceil(c)) + k)
+        rr, cc = np.mgrid[r0:r1 + 1, c0:c1 + 1]
+        flat = (rr * cols + cc).ravel()
+        flat = flat[self.free.ravel()[flat]]
+        near = np.hypot(*(self.node_xy(flat) - point).T) <= reach
+        return flat[near]
+
+    @property
+    def goal_nodes(self) -> np.ndarray:
+        """Free nodes close enough to a target that a robot there has reached it."""
+        if self._goal_nodes is None:
+            reach = 0.8 * self.world.goal_tolerance
+            found = [self.nodes_near(t, reach) for t in self.world.targets]
+            self._goal_nodes = np.unique(np.concatenate(found)) if found else np.zeros(0, np.intp)
+        return self._goal_nodes
+
+    # -- reachability (connected components: cheap) -----------------------------------------
+    @property
+    def labels(self) -> np.ndarray:
+        """(rows*cols,) 8-connected component label of each node (0 = blocked)."""
+        if self._labels is None:
+            _, labels = cv2.connectedComponents(self.free.astype(np.uint8), connectivity=8)
+            self._labels = labels.ravel()
+        return self._labels
+
+    def entry_nodes(self, start: np.ndarray) -> np.ndarray:
+        """Free nodes a robot at ``start`` can move to in a straight line (within ``START_REACH``)."""
+        start = np.asarray(start, float)
+        nodes = self.nodes_near(start, START_REACH)
+        if not len(nodes):
+            return nodes
+        r = self.world.robot_radius
+        threshold = min(r + LOS_MARGIN, float(self.world.clearance(start[None])[0]))
+        xy = self.node_xy(nodes)
+        clear = self.world.path_clearance(np.broadcast_to(start, xy.shape), xy, 0.02) >= threshold
+        return nodes[clear]
+
+    def at_target(self, point: np.ndarray) -> bool:
+        return bool(np.min(np.hypot(*(self.world.targets - point).T)) <= self.world.goal_tolerance)
+
+    def reachable(self, start: np.ndarray) -> bool:
+        """Whether a target can be reached from ``start`` (connected components, no search)."""
+        if self.at_target(start):
+            return True
+        goals = self.goal_nodes
+        entries = self.entry_nodes(start)
+        if not len(goals) or not len(entries):
+            return False
+        return bool(np.intersect1d(self.labels[entries], self.labels[goals]).size)
+
+    # -- shortest paths (Dijkstra from the targets) ------------------------------------------
+    def _search(self) -> None:
+        """Multi-source Dijkstra from the goal nodes over the free nodes."""
+        rows, cols = self.grid.shape
+        # Pad with a ring of blocked nodes so neighbours need no bounds checks.
+        pc = cols + 2
+        padded = np.zeros((rows + 2, pc), bool)
+        padded[1:-1, 1:-1] = self.free
+        free = padded.ravel().tolist()
+        steps = [(dr * pc + dc, w / self.grid.resolution) for dr, dc, w in _NEIGHBOURS]
+        cost = [math.inf] * len(free)
+        nxt = [-1] * len(free)
+        r0, c0 = np.divmod(self.goal_nodes, cols)
+        heap = [(0.0, int(i)) for i in (r0 + 1) * pc + c0 + 1]
+        for _, i in heap:
+            cost[i] = 0.0
+        heapq.heapify(heap)
+        pop, push = heapq.heappop, heapq.heappush
+        while heap:
+            d, u = pop(heap)
+            if d > cost[u]:
+                continue
+            for off, w in steps:
+                v = u + off
+                if free[v]:
+                    nd = d + w
+                    if nd < cost[v]:
+                        cost[v] = nd
+                        nxt[v] = u
+                        push(heap, (nd, v))
+        cost_arr = np.asarray(cost).reshape(rows + 2, pc)[1:-1, 1:-1]
+        nxt_arr = np.asarray(nxt).reshape(rows + 2, pc)[1:-1, 1:-1]
+        # Back to unpadded flat indices.
+        nr, nc = np.divmod(nxt_arr, pc)
+        self._next = np.where(nxt_arr >= 0, (nr - 1) * cols + (nc - 1), -1).ravel()
+        self._cost = cost_arr.ravel()
+
+    @property
+    def cost_to_go(self) -> np.ndarray:
+        """(rows*cols,) grid path length from each node to the nearest reachable target (inf: none)."""
+        if self._cost is None:
+            self._search()
+        return self._cost
+
+    def path(self, start: np.ndarray) -> np.ndarray | None:
+        """Shortest path (shortcut waypoints) from ``start`` to the nearest reachable target.
+
+        Returns:
+            (K, 2) waypoints, ``start`` first and a target (or a node within reach of it) last;
+            None when no target is reachable.
+        """
+        start = np.asarray(start, float)
+        if self.at_target(start):
+            return start[None].copy()
+        entries = self.entry_nodes(start)
+        if not len(entries):
+            return None
+        cost = self.cost_to_go
+        total = cost[entries] + np.hypot(*(self.node_xy(entries) - start).T)
+        best = int(np.argmin(total))
+        if not math.isfinite(total[best]):
+            return None
+        chain = [int(entries[best])]
+        nxt = self._next
+        while nxt[chain[-1]] >= 0:
+            chain.append(int(nxt[chain[-1]]))
+        nodes = self.node_xy(np.asarray(chain))
+        nodes = self._shortcut(nodes)
+        end = nodes[-1]
+        target = self.world.targets[int(np.argmin(np.hypot(*(self.world.targets - end).T)))]
+        if self._clear(end, target, self.world.robot_radius + LOS_MARGIN):
+            if np.hypot(*(nodes[-1] - target)) > 1e-9:
+                nodes = np.vstack([nodes, target])
+            if len(nodes) >= 3 and self._clear(nodes[-3], target, self.world.robot_radius + LOS_MARGIN):
+                nodes = np.vstack([nodes[:-2], target])
+        # The start may sit closer to an obstacle than the shortcut margin allows: shortcut the
+        # start's own kink with its own clearance as the bar.
+        threshold = min(self.world.robot_radius + LOS_MARGIN, float(self.world.clearance(start[None])[0]))
+        while len(nodes) > 1 and self._clear(start, nodes[1], threshold):
+            nodes = nodes[1:]
+        return np.vstack([start, nodes])
+
+    def _clear(self, a: np.ndarray, b: np.ndarray, threshold: float) -> bool:
+        """Whether the segment ``a → b`` keeps ``threshold`` of clearance at samples ``LOS_SPACING`` apart."""
+        return bool(self.world.path_clearance(a[None], b[None], LOS_SPACING)[0] >= threshold)
+
+    def _shortcut(self, nodes: np.ndarray) -> np.ndarray:
+        """Pull a grid path taut: from each kept waypoint jump to the farthest one in sight."""
+        if len(nodes) <= 2:
+            return nodes
+        # Candidates are the nodes where the grid path turns, and its end.
+        turn = np.flatnonzero(np.any(np.diff(nodes, 2, axis=0) != 0, axis=1)) + 1
+        candidates = np.unique(np.concatenate([turn, [len(nodes) - 1]]))
+        threshold = self.world.robot_radius + LOS_MARGIN
+        kept = [0]
+        i = 0
+        while i < len(nodes) - 1:
+            later = candidates[candidates > i]
+            clear = self.world.path_clearance(np.broadcast_to(nodes[i], (len(later), 2)), nodes[later], LOS_SPACING) >= threshold
+            # Fall back on the next grid node: grid edges between free nodes are safe.
+            j = int(later[clear].max()) if clear.any() else i + 1
+            kept.append(j)
+            i = j
+        return nodes[kept]
+
+
+def _search_grid(world: World) -> SearchGrid:
+    return SearchGrid.of(world)
+
+
+def shortest_path(world: World, start: np.ndarray) -> np.ndarray | None:
+    """Waypoints of a shortest collision-free path from ``start`` to the nearest reachable target.
+
+    Returns:
+        (K, 2) waypoints (``start`` first), or None when no target is reachable.
+    """
+    return _search_grid(world).path(np.asarray(start, float))
+
+
+def shortest_path_length(world: World, start: np.ndarray) -> float | None:
+    """Length of the shortcut grid path from ``start`` to the nearest reachable target, or None.
+
+    The robot keeps its radius plus a small margin from obstacles and the map's edge along the
+    path, so this is an upper bound on (and close to) the true shortest length with that clearance.
+    """
+    path = shortest_path(world, start)
+    if path is None:
+        return None
+    return float(np.sum(np.hypot(*np.diff(path, axis=0).T)))
+
+
+def reachable(world: World, start: np.ndarray) -> bool:
+    """Whether a robot at ``start`` can reach a target of ``world`` (a free path exists)."""
+    return _search_grid(world).reachable(np.asarray(start, float))
