@@ -17,6 +17,7 @@ import numpy as np
 import yaml
 
 from apf_physics import geometry
+from apf_physics.bundled import resolve_world
 from apf_physics.errors import UserError, WorldError
 from apf_physics.field import FIELD_PRESETS, FieldParams
 from apf_physics.obstacles import CircleObstacle, Obstacle, PolygonObstacle
@@ -234,6 +235,7 @@ def load_world(path: str | Path) -> World:
     Raises:
         WorldError: the file is missing, unreadable, not YAML, or breaks the contract.
     """
+    path = resolve_world(path)
     return world_from_dict(read_yaml_file(path, "world", WorldError), str(path))
 
 
@@ -287,7 +289,7 @@ def load_worlds(paths: Sequence[str | Path]) -> list[World]:
     """Load several world files; a directory stands for every ``*.yaml`` in it, sorted."""
     out: list[World] = []
     for p in paths:
-        p = Path(p)
+        p = resolve_world(p)
         if p.is_dir():
             files = sorted(p.glob("*.yaml")) + sorted(p.glob("*.yml"))
             if not files:

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import apf_physics  # noqa: F401  (registers the ids)
+from apf_physics import world_from_dict
 from apf_physics.actions import ACTIONS
 from apf_physics.envs import NavigateVectorEnv, register_envs
 
@@ -179,23 +180,33 @@ def test_make_vec_entry_point(fixed20):
     assert rew.shape == (3,) and info["position"].shape == (3, 2)
 
 
-def test_sb3_dqn_trains_a_few_thousand_steps(fixed20):
+def test_sb3_dqn_learns_to_reach_a_target():
+    """Stable-Baselines3 trains on the env as it is (bounded observations) and does better than chance."""
     sb3 = pytest.importorskip("stable_baselines3")
-    import torch
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
-    from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
-
-    class Small(BaseFeaturesExtractor):
-        def __init__(self, space):
-            super().__init__(space, features_dim=32)
-            self.net = torch.nn.Sequential(torch.nn.Flatten(), torch.nn.Linear(int(np.prod(space.shape)), 32), torch.nn.ReLU())
-
-        def forward(self, x):
-            return self.net(x / 100.0)
-
-    env = gym.make("apf_physics/Navigate-v0", world=fixed20, starts="random")
-    model = sb3.DQN("MlpPolicy", env, learning_starts=200, buffer_size=2000, batch_size=32, seed=0,
-                    policy_kwargs={"features_extractor_class": Small, "net_arch": [32]}, device="cpu")
+    world = world_from_dict({"name": "open", "size": [7, 7], "field": "thesis-fixed", "targets": [[3.5, 3.5]],
+                             "starts": [[1.5, 1.5], [5.5, 1.5], [1.5, 5.5], [5.5, 5.5], [3.5, 1.5], [1.5, 3.5]]})
+    env = gym.make("apf_physics/Navigate-v0", world=world, obs_scale="log", max_episode_steps=20, starts="random")
+    sb3_check_env(env.unwrapped, warn=False)
+    model = sb3.DQN("MlpPolicy", env, learning_starts=300, buffer_size=5000, batch_size=64, seed=0, train_freq=4,
+                    exploration_fraction=0.5, target_update_interval=250, policy_kwargs={"net_arch": [64]},
+                    device="cpu")
     model.learn(total_timesteps=2000)
-    action, _ = model.predict(env.reset(seed=0)[0], deterministic=True)
-    assert 0 <= int(action) < 9
+    test = gym.make("apf_physics/Navigate-v0", world=world, obs_scale="log", max_episode_steps=20)
+
+    def successes(act) -> int:
+        reached = 0
+        for start in range(len(world.starts)):
+            obs, _ = test.reset(seed=start, options={"start": start})
+            for _ in range(20):
+                obs, _, terminated, truncated, info = test.step(act(obs))
+                if terminated or truncated:
+                    reached += info["success"]
+                    break
+        return reached
+
+    rng = np.random.default_rng(0)
+    learned = successes(lambda obs: int(model.predict(obs, deterministic=True)[0]))
+    chance = successes(lambda obs: int(rng.integers(9)))
+    assert learned >= 5 and learned > chance

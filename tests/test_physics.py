@@ -7,7 +7,12 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from apf_physics import world_from_dict
+import pymunk
+import pymunk.batch
+import pytest
+from hypothesis import assume
+
+from apf_physics import WorldError, load_world, world_from_dict
 from apf_physics.physics import Physics
 from apf_physics.geometry import triangulate
 from apf_physics.geometry import polygon_area
@@ -118,13 +123,11 @@ def test_no_tunnelling_at_full_speed(obstacles, heading, seed, radius):
                              robot_radius=radius)
     try:
         world = world_from_dict(data)
-    except Exception:
-        return  # the random polygon was degenerate after clipping; not a world
+    except WorldError:
+        world = None   # the random polygon was degenerate after clipping; not a world
+    assume(world is not None and len(world.free_cells()) > 0)
     rng = np.random.default_rng(seed)
-    try:
-        start = world.random_free_positions(rng, 1)
-    except Exception:
-        return
+    start = world.random_free_positions(rng, 1)
     physics = Physics([world])
     physics.place([0], start)
     velocity = np.array([[math.cos(heading), math.sin(heading)]]) * physics.max_speed
@@ -140,3 +143,105 @@ def test_no_tunnelling_at_full_speed(obstacles, heading, seed, radius):
         p = physics.positions
         assert world.obstacle_distance(p)[0] > 0, "robot centre inside an obstacle"
         assert world.edge_distance(p)[0] > 0, "robot centre outside the map"
+
+
+# -- the fast path: robots in open space skip pymunk, and move exactly as pymunk would move them ---
+
+def _all_through_pymunk(physics):
+    physics.needs_physics = lambda moves: np.ones(physics.num_robots, bool)
+    return physics
+
+
+@pytest.mark.parametrize("robots_per_slot", [1, 3])
+def test_skipping_pymunk_changes_nothing(worlds_dir, robots_per_slot):
+    world = load_world(worlds_dir / "fixed20.yaml")
+    rng = np.random.default_rng(3)
+    starts = world.random_free_positions(rng, 12 * robots_per_slot, margin=0.6)
+    fast = Physics([world] * 12, robots_per_slot)
+    slow = _all_through_pymunk(Physics([world] * 12, robots_per_slot))
+    for physics in (fast, slow):
+        physics.place(np.arange(len(starts)), starts)
+    skipped = 0
+    for _ in range(40):
+        moves = rng.uniform(-1, 1, (len(starts), 2))
+        skipped += int((~fast.needs_physics(moves * fast.control_dt)).sum())
+        log_fast, log_slow = fast.step(moves), slow.step(moves)
+        np.testing.assert_allclose(fast.positions, slow.positions, atol=1e-9)
+        np.testing.assert_array_equal(log_fast.pairs, log_slow.pairs)
+    assert skipped > 100   # the fast path was taken, not only pymunk
+
+
+def test_needs_physics_is_conservative(worlds_dir):
+    # every robot the test lets skip pymunk keeps clear of everything along its whole move
+    world = load_world(worlds_dir / "fixed20.yaml")
+    rng = np.random.default_rng(0)
+    physics = Physics([world] * 400)
+    positions = world.random_free_positions(rng, 400)
+    physics.place(np.arange(400), positions)
+    moves = rng.uniform(-1, 1, (400, 2)) * 1.4
+    free = ~physics.needs_physics(moves)
+    t = np.linspace(0, 1, 101)
+    path = positions[free, None, :] + t[None, :, None] * moves[free, None, :]
+    clearance = world.clearance(path.reshape(-1, 2)).reshape(len(path), -1).min(axis=1)
+    assert free.sum() > 100
+    assert np.all(clearance > world.robot_radius)
+
+
+def test_pymunk_batch_behaves_as_the_physics_assumes():
+    """pymunk.batch is experimental: if its rows or fields change, fail here, loudly."""
+    space = pymunk.Space()
+    space.collision_persistence = 1
+    wall = pymunk.Body(body_type=pymunk.Body.STATIC)
+    space.add(wall, pymunk.Poly(wall, [(5, 0), (6, 0), (6, 10), (5, 10)]))
+    bodies = []
+    for k in range(6):
+        body = pymunk.Body(1.0, math.inf)
+        space.add(body, pymunk.Circle(body, 0.25))
+        body.position = (1.0 + 0.5 * k, 1.0 + k)
+        bodies.append(body)
+    buffer = pymunk.batch.Buffer()
+    pymunk.batch.get_space_bodies(space, pymunk.batch.BodyFields.BODY_ID | pymunk.batch.BodyFields.POSITION, buffer)
+    ids = np.frombuffer(buffer.int_buf(), dtype=np.uintp)
+    rows = np.frombuffer(buffer.float_buf()).reshape(-1, 2)
+    assert set(ids.tolist()) == {b.id for b in bodies} | {wall.id}    # static bodies are rows too
+    for body_id, row in zip(ids.tolist(), rows):
+        body = next((b for b in bodies if b.id == body_id), None)
+        if body is not None:
+            assert tuple(row) == tuple(body.position)
+    velocities = np.zeros((len(ids), 2))
+    velocities[ids == bodies[-1].id] = (2.0, 0.0)
+    write = pymunk.batch.Buffer()
+    write.set_float_buf(velocities.reshape(-1))
+    pymunk.batch.set_space_bodies(space, pymunk.batch.BodyFields.VELOCITY, write)
+    assert tuple(bodies[-1].velocity) == (2.0, 0.0) and tuple(bodies[0].velocity) == (0.0, 0.0)
+    # arbiters: the body ids of the pairs touching after a step, and only those
+    bodies[0].position, bodies[0].velocity = (4.8, 5.0), (2.0, 0.0)
+    space.step(0.1)
+    arbiters = pymunk.batch.Buffer()
+    pymunk.batch.get_space_arbiters(space, pymunk.batch.ArbiterFields.BODY_A_ID | pymunk.batch.ArbiterFields.BODY_B_ID,
+                                    arbiters)
+    pairs = np.frombuffer(arbiters.int_buf(), dtype=np.uintp).reshape(-1, 2)
+    assert [set(p) for p in pairs.tolist()] == [{bodies[0].id, wall.id}]
+    bodies[0].position, bodies[0].velocity = (2.0, 8.0), (0.0, 0.0)
+    space.step(0.1)
+    arbiters.clear()
+    pymunk.batch.get_space_arbiters(space, pymunk.batch.ArbiterFields.BODY_A_ID | pymunk.batch.ArbiterFields.BODY_B_ID,
+                                    arbiters)
+    assert len(np.frombuffer(arbiters.int_buf(), dtype=np.uintp)) == 0
+
+
+def test_a_released_proxy_carries_nothing_to_its_next_robot(worlds_dir):
+    # a robot pressed into a wall hands its proxy back; the next robot to get it must move as if new
+    world = load_world(worlds_dir / "fixed20.yaml")
+    physics = Physics([world, world])
+    physics.place([0, 1], [[0.3, 10.0], [10.0, 19.6]])
+    for _ in range(3):
+        physics.step(np.array([[-1.0, 0.0], [0.0, 0.0]]))     # robot 0 pushes into the left wall
+    physics.place([0], [[10.0, 10.0]])                         # gone: its proxy is parked
+    fresh = Physics([world, world])
+    fresh.place([0, 1], [[10.0, 10.0], [10.0, 19.6]])
+    for _ in range(4):                                          # robot 1 now needs pymunk (the top wall)
+        moves = np.array([[0.0, 0.0], [0.3, 0.5]])
+        physics.step(moves)
+        fresh.step(moves)
+        np.testing.assert_allclose(physics.positions, fresh.positions, atol=1e-12)

@@ -235,6 +235,18 @@ def test_codec_choice_by_extension_and_mismatches():
         choose_codec("a.mp4", "x265")
 
 
+def test_without_pyav_mp4_falls_back_to_mp4v_and_says_so(monkeypatch):
+    from apf_physics.render import video
+
+    monkeypatch.setattr(video, "av", None)
+    fallback = choose_codec("a.mp4")
+    assert (fallback.name, fallback.browsers) == ("mp4v", False)
+    with pytest.raises(UserError, match=r"VP9 needs PyAV \(pip install av\)"):
+        choose_codec("a.webm")
+    with pytest.raises(UserError, match=r"H\.264 needs PyAV"):
+        choose_codec("a.mp4", "h264")
+
+
 def test_writing_videos_prints_no_codec_warnings(tmp_path):
     # OpenCV's FFMPEG backend printed "tag ... is not supported" for every .webm; FFmpeg and
     # x264 print statistics unless their log is off. Nothing may reach the terminal.

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Iterable, Iterator, Sequence
 
 import cv2
 import numpy as np
+from tqdm import tqdm
 
 from apf_physics.errors import UserError
 from apf_physics.render.drawing import FieldImage, Snapshot, TrailLayer, draw_frame, field_image
@@ -75,8 +76,9 @@ CODECS = {
 DEFAULT_CODEC = {".mp4": "h264", ".webm": "vp9", ".avi": "mjpg"}
 VIDEO_EXTENSIONS = tuple(DEFAULT_CODEC)
 
-# Encoder settings. x264 "veryfast" keeps draw + encode of 512x512 frames above 300 frames/s
-# on one core at CRF 23 (see BENCHMARKS.md); VP9's realtime mode is the only one near that.
+# Encoder settings: x264's "veryfast" preset at CRF 23 keeps draw + encode of 512x512 frames
+# near 400-450 frames/s on these 2-core machines ("medium": ~170), VP9's realtime mode ~500
+# (BENCHMARKS.md). Per codec: container format, encoder options, container options.
 _PYAV_SETTINGS = {
     "h264": ("mp4", {"preset": "veryfast", "crf": "23"}, {"movflags": "+faststart"}),
     "vp9": ("webm", {"deadline": "realtime", "cpu-used": "8", "crf": "32", "b": "0", "row-mt": "1"}, {}),
@@ -279,8 +281,6 @@ def progress_bar(total: int | None, description: str, unit: str, enabled: bool =
     A disabled bar is still a tqdm object (``update``, ``set_postfix_str`` and ``close`` do
     nothing), so callers need no branches.
     """
-    from tqdm import tqdm
-
     shown = enabled and sys.stderr.isatty()
     return tqdm(total=total, desc=description, unit=unit, file=sys.stderr, leave=False, dynamic_ncols=True,
                 disable=not shown)
