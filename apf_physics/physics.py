@@ -186,6 +186,8 @@ class Physics:
         self._proxy_dirty = np.zeros(0, bool)        # parked this step; may carry solver state
         self._proxy_radius = np.zeros(0)
         self._proxy_ids = np.zeros(0, np.uintp)      # their body ids
+        self._proxy_target = np.zeros((0, 2))         # where a proxy is to be put before pymunk next steps
+        self._proxy_moved = np.zeros(0, bool)         # ... for those that must be put there
         self._robot_proxy = np.full(self.num_robots, -1, np.intp)
         self._proxy_held = False                     # some robot holds a proxy
         self._buffer = pymunk.batch.Buffer()
@@ -278,6 +280,8 @@ class Physics:
         self._proxy_dirty = np.append(self._proxy_dirty, False)
         self._proxy_radius = np.append(self._proxy_radius, radius)
         self._proxy_ids = np.append(self._proxy_ids, np.uintp(body.id))
+        self._proxy_target = np.vstack([self._proxy_target, self._parking(k)])
+        self._proxy_moved = np.append(self._proxy_moved, False)
         self._rows_dirty = True
         return k
 
@@ -292,8 +296,8 @@ class Physics:
         proxies = proxies[proxies >= 0]
         if not len(proxies):
             return
-        for k in proxies.tolist():
-            self._proxy_body[k].position = self._parking(k)   # its velocity is set when pymunk next steps
+        self._proxy_target[proxies] = [self._parking(k) for k in proxies.tolist()]
+        self._proxy_moved[proxies] = True
         self._robot_proxy[self._proxy_robot[proxies]] = -1
         self._proxy_robot[proxies] = -1
         self._proxy_dirty[proxies] = True
@@ -311,9 +315,8 @@ class Physics:
             proxies = free[:len(mine)]
             self._proxy_robot[proxies] = mine
             self._robot_proxy[mine] = proxies
-            where = self._positions[mine] + self._tile_offset[self._slot_tile[mine // self.robots_per_slot]]
-            for k, (x, y) in zip(proxies.tolist(), where.tolist()):
-                self._proxy_body[k].position = (x, y)
+            self._proxy_target[proxies] = self._positions[mine] + self._tile_offset[self._slot_tile[mine // self.robots_per_slot]]
+            self._proxy_moved[proxies] = True
 
     def _index_rows(self) -> None:
         """Map pymunk.batch rows to proxies (rows are not in insertion order)."""
@@ -325,9 +328,8 @@ class Physics:
         row_proxy = np.array([index.get(int(i), -1) for i in ids])
         self._proxy_rows = np.flatnonzero(row_proxy >= 0)
         self._proxy_of_row = row_proxy[self._proxy_rows]
-        self._velocity_rows = np.zeros((len(ids), 2))
-        self._velocity_buffer = pymunk.batch.Buffer()  # shares memory with _velocity_rows
-        self._velocity_buffer.set_float_buf(self._velocity_rows.reshape(-1))
+        self._row_of_proxy = np.empty(len(self._proxy_body), np.intp)
+        self._row_of_proxy[self._proxy_of_row] = self._proxy_rows
         self._proxy_order = np.argsort(self._proxy_ids)
         self._rows_dirty = False
 
@@ -404,7 +406,7 @@ class Physics:
         return self._touch_free if pairs is None or not len(pairs) else self._log(pairs)
 
     def _simulate(self, robots: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Step pymunk with the proxies of ``robots`` at their commanded velocities.
+        """Step pymunk with the proxies of ``robots`` at their commanded velocities (the others at rest).
 
         Returns:
             (K, 2) body ids of the pairs that touched at some substep.
@@ -412,39 +414,47 @@ class Physics:
         if self._rows_dirty:
             self._index_rows()
         proxies = self._robot_proxy[robots]
-        velocity = v[robots] / self.control_dt
+        velocity = np.zeros((len(self._proxy_body), 2))
+        velocity[proxies] = v[robots] / self.control_dt
+        moved = np.flatnonzero(self._proxy_moved)
         if len(self._proxy_body) <= _FEW:
-            for k in range(len(self._proxy_body)):
-                self._proxy_body[k].velocity = (0.0, 0.0)
-            for k, (vx, vy) in zip(proxies.tolist(), velocity.tolist()):
+            for k in moved.tolist():
+                self._proxy_body[k].position = tuple(self._proxy_target[k])
+            for k, (vx, vy) in enumerate(velocity.tolist()):
                 self._proxy_body[k].velocity = (vx, vy)
         else:
-            per_proxy = np.zeros((len(self._proxy_body), 2))
-            per_proxy[proxies] = velocity
-            self._velocity_rows[self._proxy_rows] = per_proxy[self._proxy_of_row]
-            pymunk.batch.set_space_bodies(self.space, pymunk.batch.BodyFields.VELOCITY, self._velocity_buffer)
+            # every body's position and velocity in one read and one write (static bodies are
+            # rows too: they are written back as they were read)
+            fields = pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.VELOCITY
+            buf = self._buffer
+            buf.clear()
+            pymunk.batch.get_space_bodies(self.space, fields, buf)
+            rows = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 4).copy()
+            rows[self._row_of_proxy[moved], :2] = self._proxy_target[moved]
+            rows[self._proxy_rows, 2:] = velocity[self._proxy_of_row]
+            write = pymunk.batch.Buffer()
+            write.set_float_buf(rows.reshape(-1))
+            pymunk.batch.set_space_bodies(self.space, fields, write)
+        self._proxy_moved[:] = False
         touched = []
-        fields = pymunk.batch.ArbiterFields.BODY_A_ID | pymunk.batch.ArbiterFields.BODY_B_ID
+        arbiter_fields = pymunk.batch.ArbiterFields.BODY_A_ID | pymunk.batch.ArbiterFields.BODY_B_ID
         for _ in range(self.substeps):
             self.space.step(self.dt)
             self._arbiters.clear()
-            pymunk.batch.get_space_arbiters(self.space, fields, self._arbiters)
+            pymunk.batch.get_space_arbiters(self.space, arbiter_fields, self._arbiters)
             ids = np.frombuffer(self._arbiters.int_buf(), dtype=np.uintp)
             if len(ids):
                 touched.append(ids.reshape(-1, 2).copy())
         self._proxy_dirty[:] = False
         offsets = self._tile_offset[self._slot_tile[robots // self.robots_per_slot]]
         if len(self._proxy_body) <= _FEW:
-            moved = np.array([tuple(self._proxy_body[k].position) for k in proxies.tolist()]).reshape(-1, 2)
+            after = np.array([tuple(self._proxy_body[k].position) for k in proxies.tolist()]).reshape(-1, 2)
         else:
             buf = self._buffer
             buf.clear()
             pymunk.batch.get_space_bodies(self.space, pymunk.batch.BodyFields.POSITION, buf)
-            rows = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 2)
-            per_proxy = np.empty((len(self._proxy_body), 2))
-            per_proxy[self._proxy_of_row] = rows[self._proxy_rows]
-            moved = per_proxy[proxies]
-        self._positions[robots] = moved - offsets
+            after = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 2)[self._row_of_proxy[proxies]]
+        self._positions[robots] = after - offsets
         return np.unique(np.vstack(touched), axis=0) if touched else np.zeros((0, 2), np.uintp)
 
     def _log(self, pairs: np.ndarray) -> ContactLog:

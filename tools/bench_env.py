@@ -1,25 +1,29 @@
-"""Benchmark the environments: Navigate-v0 beside CartPole-v1, and the vectorised env.
+"""Benchmark the environments: Navigate-v0 beside CartPole-v1, and the vector env beside VMAS.
 
-    python tools/bench_env.py [--steps 20000]
+    python tools/bench_env.py [--steps 20000] [--vmas] [--sizes 64 256 1024]
 
-Prints steps per second of ``apf_physics/Navigate-v0`` (through ``gymnasium.make``, random
-actions) beside Gymnasium's ``CartPole-v1`` run the same way in the same process, their
-ratio, and robot-steps per second of ``NavigateVectorEnv`` at N = 64 and 256.
+Prints, from one process:
+
+- µs per step of ``apf_physics/Navigate-v0`` and Gymnasium's ``CartPole-v1``, both through
+  ``gymnasium.make`` (wrappers included) with random actions, and their ratio (aim ≤ 5);
+- robot-steps per second of ``NavigateVectorEnv`` on fixed20 (random starts and actions) at
+  each N, and with ``--vmas`` VMAS's ``navigation`` scenario (CPU, one agent per env,
+  continuous random actions, one torch thread) at the same N, and their ratio. Aims: ours
+  never falls as N grows, and ≥ 400,000 robot-steps/s at N = 1024.
+- how many robots per step needed pymunk (the others moved without it).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import time
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 
-import apf_physics  # noqa: F401
+import apf_physics  # noqa: F401  (registers the ids)
 from apf_physics.envs import NavigateVectorEnv
-
-FIXED20 = Path(__file__).resolve().parent.parent / "worlds" / "fixed20.yaml"
 
 
 def single_rate(env_id: str, steps: int, **kwargs) -> float:
@@ -34,10 +38,37 @@ def single_rate(env_id: str, steps: int, **kwargs) -> float:
     return steps / (time.perf_counter() - t)
 
 
-def vector_rate(num_envs: int, steps: int) -> float:
-    env = NavigateVectorEnv(world=str(FIXED20), num_envs=num_envs, starts="random")
+def vector_rate(num_envs: int, steps: int) -> tuple[float, float]:
+    """Robot-steps per second, and the share of robot-steps that went through pymunk."""
+    env = NavigateVectorEnv(world="fixed20", num_envs=num_envs, starts="random")
     env.reset(seed=0)
+    physics = env._task.stepper.physics
     actions = np.random.default_rng(0).integers(0, 9, (steps, num_envs))
+    for a in actions[:10]:   # warm up (proxies created, rows indexed)
+        env.step(a)
+    t = time.perf_counter()
+    for a in actions:
+        env.step(a)
+    rate = steps * num_envs / (time.perf_counter() - t)
+    simulated = 0
+    for a in actions[:50]:   # counted apart: robots holding a pymunk proxy after the step
+        env.step(a)
+        simulated += int((physics._robot_proxy >= 0).sum())
+    return rate, simulated / (50 * num_envs)
+
+
+def vmas_rate(num_envs: int, steps: int) -> float:
+    import torch
+    import vmas
+
+    torch.set_num_threads(1)
+    env = vmas.make_env("navigation", num_envs=num_envs, device="cpu", continuous_actions=True, n_agents=1, seed=0)
+    env.reset()
+    agents = env.agents
+    generator = torch.Generator().manual_seed(0)
+    actions = [[torch.rand(num_envs, 2, generator=generator) * 2 - 1 for _ in agents] for _ in range(steps)]
+    for a in actions[:10]:
+        env.step(a)
     t = time.perf_counter()
     for a in actions:
         env.step(a)
@@ -46,18 +77,32 @@ def vector_rate(num_envs: int, steps: int) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=20000)
+    parser.add_argument("--steps", type=int, default=20000, help="single-environment steps (default 20000)")
+    parser.add_argument("--vmas", action="store_true", help="also run VMAS's navigation scenario (pip install vmas)")
+    parser.add_argument("--sizes", type=int, nargs="+", default=[64, 256, 1024], help="numbers of environments")
+    parser.add_argument("--vector-steps", type=int, default=300, help="vector steps per size (default 300)")
     args = parser.parse_args()
+    print(f"load average at start: {os.getloadavg()[0]:.2f}")
     cart = single_rate("CartPole-v1", args.steps)
-    ours = single_rate("apf_physics/Navigate-v0", args.steps, world=str(FIXED20))
+    ours = single_rate("apf_physics/Navigate-v0", args.steps, world="fixed20")
     print("single environment, random actions, through gymnasium.make (wrappers included)")
     print(f"  CartPole-v1                {cart:10.0f} steps/s   {1e6 / cart:7.1f} us/step")
     print(f"  apf_physics/Navigate-v0    {ours:10.0f} steps/s   {1e6 / ours:7.1f} us/step")
-    print(f"  a Navigate step costs      {cart / ours:10.1f} x a CartPole step")
-    print("vectorised (NavigateVectorEnv, fixed20, random starts and actions)")
-    for n in (64, 256):
-        rate = vector_rate(n, max(50, args.steps // n))
-        print(f"  N = {n:<4}                   {rate:10.0f} robot-steps/s")
+    print(f"  a Navigate step costs      {cart / ours:10.1f} x a CartPole step (aim <= 5)")
+    header = f"  {'N':>5} {'ours robot-steps/s':>20} {'via pymunk':>11}"
+    if args.vmas:
+        header += f" {'VMAS navigation':>17} {'ours / VMAS':>12}"
+    print("vectorised: NavigateVectorEnv on fixed20 (random starts and actions)"
+          + (" beside VMAS 'navigation' (CPU, 1 agent, 1 torch thread)" if args.vmas else ""))
+    print(header)
+    for n in args.sizes:
+        rate, simulated = vector_rate(n, args.vector_steps)
+        line = f"  {n:>5} {rate:>20,.0f} {simulated:>10.1%}"
+        if args.vmas:
+            theirs = vmas_rate(n, args.vector_steps)
+            line += f" {theirs:>17,.0f} {rate / theirs:>12.2f}"
+        print(line)
+    print(f"load average at end: {os.getloadavg()[0]:.2f}")
 
 
 if __name__ == "__main__":

@@ -3,36 +3,44 @@
 from __future__ import annotations
 
 import argparse
+import shlex
+import sys
 from pathlib import Path
 
 import yaml
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    from apf_physics.rl.config import CURRICULUM_DEFAULT, PRESETS, WORLD_DEFAULT
+
     p = subparsers.add_parser(
-        "train", help="train a DQN planner on a world; write best.pt, last.pt, train.csv, train.png",
-        description="Train the thesis's Q-network with deep Q-learning on one world. Writes OUT/best.pt (the "
-                    "network with the best greedy evaluation on the world's starts: the one to use), OUT/last.pt "
-                    "(the full training state, for --resume), OUT/train.csv and OUT/train.png (the training curve).")
+        "train", help="train a DQN planner on a world or a curriculum; write best.pt, last.pt, train.csv",
+        description="Train the thesis's Q-network with deep Q-learning, on one world or through a curriculum. "
+                    "Writes OUT/best.pt (the network with the best greedy evaluation, run through the physics as "
+                    "`apf-physics eval` runs it: the one to use), OUT/last.pt (the full training state, for "
+                    "--resume), OUT/train.csv and OUT/train.png (the training curve), and OUT/tensorboard/ when "
+                    "the tensorboard package is installed. OUT is locked while a run trains into it.")
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--world", help="world file (.yaml) to train in; its starts are the evaluation starts")
     where.add_argument("--curriculum", metavar="FILE",
-                       help="general training: a curriculum file of stages (e.g. worlds/curricula/thesis.yaml); "
-                            "stage i trains its worlds with every earlier stage's (rehearsal), then generated "
-                            "worlds; presets general-revisit (default: the shipped general model), general-memory, "
-                            "general or thesis-general")
-    p.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing)")
-    p.add_argument("--preset", default=None,
-                   help="with --world: fast (default: learns fastest), thesis-fixed (Table 3 as written) or "
-                        "thesis-general (Table 4); with --curriculum: general-revisit (default), general-memory, "
-                        "general or thesis-general")
+                       help="a curriculum file of stages (e.g. worlds/curricula/thesis.yaml): stage i trains its "
+                            "worlds with every earlier stage's (rehearsal), then generated worlds; evaluated on "
+                            "generated validation worlds")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
+    p.add_argument("--preset", default=None, choices=list(PRESETS), metavar="PRESET",
+                   help=f"one of {', '.join(PRESETS)}. Default: {WORLD_DEFAULT} with --world (learns a world "
+                        f"fastest), {CURRICULUM_DEFAULT} with --curriculum (the shipped general model's recipe). "
+                        "thesis-fixed is Table 3 on a world, thesis-general-world Table 4 on a world, "
+                        "thesis-general Table 4 through the curriculum")
     p.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="change one training option, e.g. --set total_steps=500000 --set double_dqn=false "
-                        "(values in YAML syntax; see apf_physics.rl.DQNConfig for the options)")
+                        "(values in YAML syntax; the options are the fields of apf_physics.rl.TrainConfig)")
     p.add_argument("--resume", action="store_true",
-                   help="continue the run in --out from its last.pt (same preset and options)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+                   help="continue the run in --out from its last.pt (its preset and options; --set may change "
+                        "how long it runs and how often it reports)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar (it is off anyway when stderr "
+                                                                 "is not a terminal)")
     p.set_defaults(func=run)
 
 
@@ -58,38 +66,67 @@ def parse_overrides(pairs: list[str]) -> dict:
     return overrides
 
 
+def resume_command(args: argparse.Namespace) -> str:
+    """The command that continues this run."""
+    where = ["--world", args.world] if args.world else ["--curriculum", args.curriculum]
+    return shlex.join(["apf-physics", "train", *where, "--out", args.out, "--resume"])
+
+
 def run(args: argparse.Namespace) -> int:
+    from apf_physics.curriculum import load_curriculum
     from apf_physics.errors import UserError
-    from apf_physics.rl.dqn import load_checkpoint_config, preset, train
+    from apf_physics.rl.config import CURRICULUM_DEFAULT, WORLD_DEFAULT, preset, replace
+    from apf_physics.rl.phases import phases_for_curriculum, phases_for_world
+    from apf_physics.rl.rundir import RunDir
+    from apf_physics.rl.trainer import CSV_COLUMNS, load_checkpoint_config, train
     from apf_physics.worldfile import load_world
 
     overrides = parse_overrides(args.set)
-    if args.curriculum:
-        from apf_physics.rl.general import run_curriculum_command
-
-        return run_curriculum_command(args.curriculum, args.preset, args.out, seed=args.seed, resume=args.resume,
-                                      overrides=overrides, progress=not args.no_progress)
-    world = load_world(args.world)
     if args.seed is not None:
         overrides["seed"] = args.seed
-    out = Path(args.out)
-    if args.resume:
-        last = out / "last.pt"
-        if not last.is_file():
-            raise UserError(f"{last}: nothing to resume (no checkpoint there)")
-        saved = load_checkpoint_config(last)
-        if args.preset is not None and args.preset != saved.preset:
-            raise UserError(f"{last}: was trained with preset {saved.preset!r}, not {args.preset!r}")
-        config = preset(saved.preset, **{**saved.to_dict(), **overrides})
-    else:
-        if (out / "last.pt").exists():
-            raise UserError(f"{out} already holds a training run; use --resume to continue it or another --out")
-        config = preset(args.preset or "fast", **overrides)
-    result = train(config, world, out_dir=out, resume=args.resume, progress=not args.no_progress)
-    best = "never evaluated" if result.best_eval_success is None else f"{result.best_eval_success:.1%} of the starts"
-    print(f"trained {result.global_step} steps, {result.episodes} episodes, {result.updates} updates "
-          f"in {result.wall_time:.1f} s; best greedy evaluation: {best}")
-    if result.time_to_target is not None:
-        print(f"reached the target success rate after {result.time_to_target:.1f} s")
-    print(f"wrote {result.best_path} (use this), {result.last_path}, {out / 'train.csv'}, {out / 'train.png'}")
+    with RunDir(args.out, CSV_COLUMNS) as out:  # locked from here on: a second run into --out is refused
+        if args.resume:
+            if not out.last.is_file():
+                raise UserError(f"{out.last}: nothing to resume (no checkpoint there)")
+            saved = load_checkpoint_config(out.last)
+            if args.preset is not None and args.preset != saved.preset:
+                raise UserError(f"{out.last}: was trained with preset {saved.preset!r}, not {args.preset!r}")
+            config = replace(saved, **overrides)
+        else:
+            if out.last.exists():
+                raise UserError(f"{out.path} already holds a training run; continue it with --resume "
+                                "or train into another --out")
+            config = preset(args.preset or (WORLD_DEFAULT if args.world else CURRICULUM_DEFAULT), **overrides)
+        if args.world:
+            phases = phases_for_world(load_world(args.world), config)
+        else:
+            phases = phases_for_curriculum(load_curriculum(args.curriculum), config)
+        try:
+            result = train(config, phases, out_dir=out, resume=args.resume, progress=not args.no_progress)
+        except KeyboardInterrupt:
+            if out.last.is_file():
+                print(f"interrupted: the training state is in {out.last}; continue with\n  {resume_command(args)}",
+                      file=sys.stderr)
+            else:
+                print("interrupted before anything was trained", file=sys.stderr)
+            return 130
+    c = result.counters
+    if result.already_finished:
+        print(f"{out.path}: this run has already finished ({result.stop_reason}, after {c.global_step} steps and "
+              f"{c.episodes} episodes); nothing more to train. To train on, resume with a larger limit, "
+              "e.g. --set total_steps=N")
+        return 0
+    best = result.best
+    summary = "never evaluated" if best is None else (
+        f"{best['success']:.1%} of the validation starts, {best['collisions']} collisions"
+        + ("" if best.get("spl") is None else f", SPL {best['spl']:.3f}")
+        + (f", {best['random_success']:.1%} of the random starts" if "random_success" in best else "")
+        + f" (at step {c.best_step})")
+    print(f"trained {c.global_step} steps, {c.episodes} episodes, {result.updates} updates in {c.wall_time:.1f} s "
+          f"({result.stop_reason}); best evaluation: {summary}")
+    if c.time_to_target is not None:
+        print(f"reached the target success rate after {c.time_to_target:.1f} s")
+    names = [Path(p).name for p in result.written]
+    use = " (best.pt is the network to use)" if "best.pt" in names else ""
+    print(f"wrote {', '.join(names)} in {out.path}{use}")
     return 0

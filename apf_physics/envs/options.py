@@ -66,18 +66,34 @@ class StartChooser:
         self._cells = [world.start_cells() if listed is None else None
                        for world, listed in zip(self.worlds, self._lists)]
 
-    def choose(self, rng: np.random.Generator, options: dict | None = None) -> tuple[int, np.ndarray]:
-        """``(world index, start)`` of a new episode."""
-        u = rng.random(4)  # one call: world, start row or cell, and the position within the cell
-        if not options:
-            w = int(u[0] * len(self.worlds))
+    def draw(self, uniforms: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Worlds and starts of ``k`` new episodes from ``(k, 4)`` uniforms in [0, 1).
+
+        Uniform 0 picks the world, 1 the start row (or the free cell), 2 and 3 the position
+        within the cell. Returns ``(world indices (k,), starts (k, 2))``.
+        """
+        uniforms = np.asarray(uniforms, float).reshape(-1, 4)
+        worlds = (uniforms[:, 0] * len(self.worlds)).astype(np.intp)
+        starts = np.empty((len(uniforms), 2))
+        for w in np.unique(worlds).tolist():
+            mine = worlds == w
+            u = uniforms[mine]
             listed = self._lists[w]
             if listed is not None:
-                return w, listed[int(u[1] * len(listed))].copy()
+                starts[mine] = listed[(u[:, 1] * len(listed)).astype(np.intp)]
+                continue
             cells = self._cells[w]
-            if len(cells):
-                return w, cells[int(u[1] * len(cells))] + (u[2:] - 0.5) * 0.25
-        options = options or {}
+            if not len(cells):
+                raise UserError(f"{self.worlds[w].label}: no free start away from the targets")
+            starts[mine] = cells[(u[:, 1] * len(cells)).astype(np.intp)] + (u[:, 2:] - 0.5) * 0.25
+        return worlds, starts
+
+    def choose(self, rng: np.random.Generator, options: dict | None = None) -> tuple[int, np.ndarray]:
+        """``(world index, start)`` of a new episode, drawn from ``rng`` (four uniforms, one call)."""
+        u = rng.random(4)
+        if not options:
+            worlds, starts = self.draw(u)
+            return int(worlds[0]), starts[0]
         w = int(options.get("world", int(u[0] * len(self.worlds))))
         if not 0 <= w < len(self.worlds):
             raise UserError(f"options['world'] = {w} is not among the {len(self.worlds)} worlds")
@@ -90,10 +106,10 @@ class StartChooser:
                     raise UserError(f"options['start'] = {int(start)}: there are "
                                     f"{0 if listed is None else len(listed)} starts to choose from")
                 return w, listed[int(start)].copy()
-            return w, start.reshape(2).copy()
-        if listed is not None:
-            return w, listed[int(u[1] * len(listed))].copy()
-        cells = self._cells[w]
-        if not len(cells):
-            raise UserError(f"{world.label}: no free start away from the targets")
-        return w, cells[int(u[1] * len(cells))] + (u[2:] - 0.5) * 0.25
+            start = start.reshape(2)
+            if not world.is_free(start[None])[0]:
+                raise UserError(f"options['start'] = {start.tolist()}: a robot of radius {world.robot_radius:g} "
+                                f"does not fit there in {world.label}")
+            return w, start.copy()
+        _, starts = self.draw(np.concatenate([[(w + 0.5) / len(self.worlds)], u[1:]]))
+        return w, starts[0]

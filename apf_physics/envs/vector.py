@@ -30,6 +30,8 @@ from apf_physics.envs.task import NavigationTask
 from apf_physics.observation import ObserverConfig
 from apf_physics.render.drawing import Snapshot, draw_frame, field_image
 
+_BLOCK = 32  # episode starts drawn ahead per copy
+
 
 class NavigateVectorEnv(VectorEnv):
     """N navigation environments in one physics (see :class:`~apf_physics.envs.navigate.NavigateEnv`).
@@ -72,14 +74,31 @@ class NavigateVectorEnv(VectorEnv):
         self._task = NavigationTask(self.worlds, self.num_envs, self.observer, self.weights,
                                     max_steps=self.max_episode_steps)
         self._rngs = [seeding.np_random(None)[0] for _ in range(self.num_envs)]
+        self._uniforms = np.zeros((self.num_envs, _BLOCK, 4))
+        self._drawn = np.full(self.num_envs, _BLOCK)
         self._needs_reset = np.zeros(self.num_envs, bool)
         self._trail: list[np.ndarray] = []
         self._all = np.ones(self.num_envs, bool)
 
+    def _uniforms_for(self, slots: np.ndarray) -> np.ndarray:
+        """Four uniforms per slot from each copy's own generator: the same numbers, in the same
+        order, as ``Navigate-v0``'s ``reset`` draws (drawn ahead in blocks, one call per block)."""
+        empty = slots[self._drawn[slots] == _BLOCK]
+        for i in empty.tolist():
+            self._uniforms[i] = self._rngs[i].random((_BLOCK, 4))
+        self._drawn[empty] = 0
+        u = self._uniforms[slots, self._drawn[slots]]
+        self._drawn[slots] += 1
+        return u
+
     def _start(self, slots: np.ndarray, options: dict | None = None) -> None:
-        chosen = [self.chooser.choose(self._rngs[i], options) for i in slots.tolist()]
-        worlds = np.array([w for w, _ in chosen], np.intp)
-        starts = np.array([s for _, s in chosen], float).reshape(-1, 2)
+        if options:
+            chosen = [self.chooser.choose(self._rngs[i], options) for i in slots.tolist()]
+            worlds = np.array([w for w, _ in chosen], np.intp)
+            starts = np.array([s for _, s in chosen], float).reshape(-1, 2)
+            self._drawn[slots] = _BLOCK   # the generators moved on: draw afresh next time
+        else:
+            worlds, starts = self.chooser.draw(self._uniforms_for(slots))
         self._task.start(slots, worlds, starts)
         self._needs_reset[slots] = False
         if 0 in slots:
@@ -91,6 +110,7 @@ class NavigateVectorEnv(VectorEnv):
             if len(seeds) != self.num_envs:
                 raise ValueError(f"{len(seeds)} seeds for {self.num_envs} environments")
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
+            self._drawn[:] = _BLOCK
         self._start(np.arange(self.num_envs), options)
         info = self._info()
         return self._task.observation(), info

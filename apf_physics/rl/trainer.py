@@ -365,8 +365,8 @@ def next_multiple(value: int, every: int) -> int:
     return (value // every + 1) * every
 
 
-def train(config: TrainConfig, phases: Sequence[Phase], out_dir: str | Path | None = None, resume: bool = False,
-          progress: bool = False) -> TrainResult:
+def train(config: TrainConfig, phases: Sequence[Phase], out_dir: str | Path | RunDir | None = None,
+          resume: bool = False, progress: bool = False) -> TrainResult:
     """Train a Q-network through ``phases`` with deep Q-learning.
 
     Args:
@@ -375,8 +375,8 @@ def train(config: TrainConfig, phases: Sequence[Phase], out_dir: str | Path | No
             :func:`~apf_physics.rl.phases.phases_for_curriculum`).
         out_dir: Folder for ``best.pt`` (the best evaluation's network: the one to use),
             ``last.pt`` (the training state), ``train.csv`` and ``train.png``; created if
-            missing and locked while training (:class:`~apf_physics.rl.rundir.RunDir`).
-            None: write nothing.
+            missing and locked while training (:class:`~apf_physics.rl.rundir.RunDir`; an open
+            one is used as it is and left open). None: write nothing.
         resume: Continue from ``out_dir/last.pt`` (same configuration except
             :data:`~apf_physics.rl.config.RESUMABLE` fields, same phases). If that run has
             already stopped by its rules, nothing is trained or written
@@ -387,8 +387,8 @@ def train(config: TrainConfig, phases: Sequence[Phase], out_dir: str | Path | No
         The result. KeyboardInterrupt is raised again after a checkpoint is saved.
 
     Raises:
-        UserError: Nothing to train, worlds of different fields, a folder locked by another run,
-            or ``resume`` without a usable checkpoint.
+        UserError: Nothing to train, worlds of different fields, a folder locked by another run
+            or holding a run already (without ``resume``), or ``resume`` without a usable checkpoint.
     """
     if not phases:
         raise UserError("nothing to train: no phases")
@@ -397,14 +397,17 @@ def train(config: TrainConfig, phases: Sequence[Phase], out_dir: str | Path | No
         raise UserError("a model is trained for one field, but these worlds have different field parameters")
     if resume and out_dir is None:
         raise UserError("resuming needs the output folder of the run to continue")
-    run = RunDir(out_dir, CSV_COLUMNS) if out_dir is not None else None
+    given = isinstance(out_dir, RunDir)
+    run = out_dir if given else RunDir(out_dir, CSV_COLUMNS) if out_dir is not None else None
     previous_threads = torch.get_num_threads()
     torch.set_num_threads(config.threads)
     try:
+        if run is not None and not resume and run.last.exists():
+            raise UserError(f"{run.path} already holds a training run; resume it or train into another folder")
         return _train(config, list(phases), run, resume, progress)
     finally:
         torch.set_num_threads(previous_threads)
-        if run is not None:
+        if run is not None and not given:
             run.close()
 
 
