@@ -17,7 +17,7 @@ MOVE_SAMPLES = 8
 """Points sampled along a move by :func:`move_clearance`, after its start."""
 
 
-def move_clearance(world: World, positions: np.ndarray, moves: np.ndarray = ACTIONS) -> np.ndarray:
+def move_clearance(world: World, positions: np.ndarray, moves: np.ndarray = ACTIONS, t: float | None = None) -> np.ndarray:
     """A lower bound of the clearance of a robot's centre along each straight move.
 
     The world's clearance is sampled at the start and at :data:`MOVE_SAMPLES` evenly spaced
@@ -30,6 +30,8 @@ def move_clearance(world: World, positions: np.ndarray, moves: np.ndarray = ACTI
         world: The world.
         positions: (N, 2) robot centres.
         moves: (M, 2) displacements (default: the nine moves of :data:`ACTIONS`).
+        t: The control step the moves start at: moving obstacles are taken where they are
+            along the move (:meth:`World.path_clearance`); None: at step 0.
 
     Returns:
         (N, M) clearance bounds.
@@ -40,5 +42,5 @@ def move_clearance(world: World, positions: np.ndarray, moves: np.ndarray = ACTI
     start = np.repeat(positions, len(moves), axis=0)
     end = start + np.tile(moves, (len(positions), 1))
     # a move of length 0 is one point: any positive spacing samples it
-    clear = world.path_clearance(start, end, np.tile(np.where(spacing > 0, spacing, 1.0), len(positions)))
+    clear = world.path_clearance(start, end, np.tile(np.where(spacing > 0, spacing, 1.0), len(positions)), t=t)
     return clear.reshape(len(positions), len(moves)) - 0.5 * spacing[None, :]

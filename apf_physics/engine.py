@@ -148,7 +148,7 @@ class Stepper:
         self.num_slots = int(num_slots)
         self.robots_per_slot = int(robots_per_slot)
         self.max_steps = max_steps
-        self.physics = Physics([self.worlds[0]] * self.num_slots, self.robots_per_slot)
+        self.physics = Physics([self.worlds[0]] * self.num_slots, self.robots_per_slot, other_worlds=self.worlds)
         self.world_of = np.zeros(self.num_slots, np.intp)
         self.positions = np.zeros((self.num_slots, self.robots_per_slot, 2))
         self.steps = np.zeros(self.num_slots, np.intp)
@@ -227,6 +227,7 @@ class Stepper:
         moved = self.outcome == RUNNING
         everyone = moved.all()
         commands = np.asarray(commands, float).reshape(-1, 2)
+        self.physics.set_time(self.steps)
         contacts = self.physics.step(commands, None if everyone else np.repeat(moved, self.robots_per_slot))
         after = self.physics.positions.reshape(self.positions.shape)
         if everyone:

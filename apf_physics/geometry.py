@@ -78,20 +78,53 @@ def _orientation(p: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
     return np.sign((q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0]))
 
 
-def polygon_is_simple(vertices: np.ndarray) -> bool:
-    """True when no two non-adjacent edges of the polygon touch or cross, and no vertex repeats."""
+SMALL_POLYGON = 16
+"""Up to this many vertices, :func:`polygon_is_simple` tests every pair in plain Python."""
+
+
+def polygon_is_simple(vertices: np.ndarray, chunk: int = 65536) -> bool:
+    """True when no two non-adjacent edges of the polygon touch or cross, and no vertex repeats.
+
+    Only pairs of edges whose bounding boxes overlap can meet: a sweep over the edges sorted
+    by their lowest x finds them, and they are tested ``chunk`` pairs at a time, so memory
+    stays bounded and typical polygons cost far less than all n² pairs.
+    """
     n = len(vertices)
-    a = vertices
-    b = np.roll(vertices, -1, axis=0)
+    if n <= SMALL_POLYGON:
+        return _polygon_is_simple_small(vertices)
+    a = np.asarray(vertices, dtype=float)
+    b = np.concatenate([a[1:], a[:1]])
     if np.any(np.all(np.isclose(a, b), axis=1)):
         return False
-    i, j = np.triu_indices(n, k=1)
-    # Adjacent edges share a vertex; they may only meet there.
-    adjacent = (j == i + 1) | ((i == 0) & (j == n - 1))
-    i, j = i[~adjacent], j[~adjacent]
-    if len(i) == 0:
-        return True
-    p1, p2, q1, q2 = a[i], b[i], a[j], b[j]
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    order = np.argsort(lo[:, 0], kind="stable")
+    # Edge order[k] can only meet the edges order[k+1 : stop[k]] later in the sweep.
+    stop = np.searchsorted(lo[order, 0], hi[order, 0], side="right")
+    counts = np.maximum(stop - np.arange(n) - 1, 0)
+    ends = np.cumsum(counts)
+    first = 0
+    while first < n:
+        # the next block of sweep positions whose candidate pairs fit in one chunk
+        last = max(first + 1, int(np.searchsorted(ends, ends[first] - counts[first] + chunk, side="right")))
+        ks = np.arange(first, min(last, n))
+        c = counts[ks]
+        if c.sum():
+            k = np.repeat(ks, c)
+            step = np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c) + 1
+            i, j = order[k], order[k + step]
+            meet = (lo[i, 1] <= hi[j, 1]) & (lo[j, 1] <= hi[i, 1])
+            gap = np.abs(i - j)
+            meet &= (gap != 1) & (gap != n - 1)   # adjacent edges share a vertex; they may only meet there
+            if _edges_meet(a[i[meet]], b[i[meet]], a[j[meet]], b[j[meet]]):
+                return False
+        first = int(ks[-1]) + 1
+    return True
+
+
+def _edges_meet(p1: np.ndarray, p2: np.ndarray, q1: np.ndarray, q2: np.ndarray) -> bool:
+    """Whether any segment ``p1[k]–p2[k]`` crosses or touches ``q1[k]–q2[k]``."""
+    if not len(p1):
+        return False
     o1, o2 = _orientation(p1, p2, q1), _orientation(p1, p2, q2)
     o3, o4 = _orientation(q1, q2, p1), _orientation(q1, q2, p2)
     proper = (o1 != o2) & (o3 != o4)
@@ -102,8 +135,32 @@ def polygon_is_simple(vertices: np.ndarray) -> bool:
 
     touching = ((o1 == 0) & on_segment(p1, p2, q1)) | ((o2 == 0) & on_segment(p1, p2, q2)) | (
         (o3 == 0) & on_segment(q1, q2, p1)) | ((o4 == 0) & on_segment(q1, q2, p2))
-    # Collinear consecutive edges (o == 0 everywhere) of adjacent pairs are excluded above.
-    return not bool(np.any(proper | touching))
+    return bool(np.any(proper | touching))
+
+
+def _polygon_is_simple_small(vertices: np.ndarray) -> bool:
+    """:func:`polygon_is_simple` for a few vertices, in plain Python (numpy's per-call cost dominates there)."""
+    pts = [tuple(p) for p in np.asarray(vertices, dtype=float).tolist()]
+    n = len(pts)
+    edges = [(pts[k], pts[(k + 1) % n]) for k in range(n)]
+    if any(abs(p[0] - q[0]) <= 1e-8 + 1e-5 * abs(q[0]) and abs(p[1] - q[1]) <= 1e-8 + 1e-5 * abs(q[1]) for p, q in edges):
+        return False   # as np.isclose
+
+    def orient(p, q, r):
+        v = (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
+        return (v > 0) - (v < 0)
+
+    def on_segment(p, q, r):
+        return min(p[0], q[0]) <= r[0] <= max(p[0], q[0]) and min(p[1], q[1]) <= r[1] <= max(p[1], q[1])
+
+    for i in range(n):
+        for j in range(i + 2, n - (i == 0)):
+            (p1, p2), (q1, q2) = edges[i], edges[j]
+            o1, o2, o3, o4 = orient(p1, p2, q1), orient(p1, p2, q2), orient(q1, q2, p1), orient(q1, q2, p2)
+            if (o1 != o2 and o3 != o4) or (o1 == 0 and on_segment(p1, p2, q1)) or (o2 == 0 and on_segment(p1, p2, q2)) \
+                    or (o3 == 0 and on_segment(q1, q2, p1)) or (o4 == 0 and on_segment(q1, q2, p2)):
+                return False
+    return True
 
 
 def triangulate(vertices: np.ndarray) -> list[np.ndarray]:

@@ -12,6 +12,11 @@ nodes inside an obstacle or outside the map read ``world.u_wall`` (the map's hig
 potential), so blocked points always look impassable. All robots' windows, in any mix of
 worlds, are one :class:`~apf_physics.field.Atlas` lookup.
 
+Moving obstacles: the raster holds the static part of U; the terms of the moving obstacles
+are added, at the step asked for, only at the window points within ``p0`` of where each of
+them is, and points inside one read ``u_wall``. Channel ``"previous"``: the same window at
+the step before (where the moving obstacles were), so that a policy can tell where they go.
+
 Channel ``"memory"``: the robot's visits to the 1×1 cells of its map at the same points,
 ``min(n, cap) / cap`` (:class:`VisitMemory`); points outside the map read 1.
 """
@@ -23,10 +28,11 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from apf_physics import field as apf
 from apf_physics.field import Atlas, Grid, Raster
 from apf_physics.world import World
 
-CHANNELS = ("potential", "memory")
+CHANNELS = ("potential", "previous", "memory")
 """Channels an observer can build, in the order they are stacked."""
 SCALES = ("raw", "log")
 """Values of :attr:`ObserverConfig.scale`."""
@@ -92,15 +98,15 @@ class ObserverConfig:
 
 
 def observation_raster(world: World, margin: int, resolution: int) -> Raster:
-    """U over the map plus ``margin`` units on every side, blocked nodes set to ``world.u_wall``.
+    """U of the static obstacles over the map plus ``margin`` units on every side, blocked nodes set to ``world.u_wall``.
 
     Built once per world and cached.
     """
     def build() -> Raster:
         grid = Grid.covering((-margin, -margin), (world.size[0] + margin, world.size[1] + margin), resolution)
         nodes = grid.node_points()
-        values = world.potential(nodes)
-        blocked = (world.edge_distance(nodes) < 0) | (world.obstacle_distance(nodes) <= 0)
+        values = apf.potential(nodes, world.targets, world.static_obstacles, world.field)
+        blocked = (world.edge_distance(nodes) < 0) | (world.obstacle_distance(nodes, static=True) <= 0)
         values[blocked] = world.u_wall
         return Raster(grid, values.reshape(grid.shape))
     return world.cached(("observation", int(margin), int(resolution)), build)
@@ -164,28 +170,76 @@ class Observer:
         self.memory.visit(positions, robots)
         return before
 
-    def potential_at(self, positions: np.ndarray, robots: np.ndarray | None = None) -> np.ndarray:
-        """(n,) U at ``positions`` of ``robots`` (default all), from the same raster as the windows."""
+    def potential_at(self, positions: np.ndarray, robots: np.ndarray | None = None,
+                     t: np.ndarray | float = 0.0) -> np.ndarray:
+        """(n,) U at ``positions`` of ``robots`` (default all) at step ``t``, as the windows read it."""
         robots = np.arange(self.num) if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
-        return self._atlas.sample(positions, self.world_of[robots]).astype(float)
+        positions = np.asarray(positions, float).reshape(-1, 2)
+        u = self._atlas.sample(positions, self.world_of[robots]).astype(float)
+        return self._add_moving(u[:, None], positions, robots, t, np.zeros((1, 2)))[:, 0]
 
-    def potential_windows(self, positions: np.ndarray, robots: np.ndarray | None = None) -> np.ndarray:
-        """(n, k, k) float32 windows of U around ``positions`` of ``robots`` (default all)."""
+    def potential_windows(self, positions: np.ndarray, robots: np.ndarray | None = None,
+                          t: np.ndarray | float = 0.0, centre: np.ndarray | None = None) -> np.ndarray:
+        """(n, k, k) float32 windows of U at step ``t`` around ``positions`` of ``robots`` (default all).
+
+        ``centre``: with ``scale="log"``, the U the window is taken relative to (default its own centre).
+        """
         robots = np.arange(self.num) if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
+        positions = np.asarray(positions, float).reshape(-1, 2)
         k = self.config.size
-        windows = self._atlas.sample(positions, self.world_of[robots], self._offsets).reshape(-1, k, k)
+        windows = self._atlas.sample(positions, self.world_of[robots], self._offsets)
+        windows = self._add_moving(windows, positions, robots, t, self._offsets).reshape(-1, k, k)
         if self.config.scale == "log":
-            d = windows - windows[:, k // 2, k // 2, None, None]
+            middle = windows[:, k // 2, k // 2, None, None] if centre is None else centre[:, None, None]
+            d = windows - middle
             windows = np.sign(d) * np.log1p(np.abs(d)) / self._log_range[self.world_of[robots], None, None].astype(np.float32)
         return windows
 
-    def observe(self, positions: np.ndarray, robots: np.ndarray | None = None) -> np.ndarray:
-        """(n, C, k, k) float32 observations of ``robots`` (default all) at ``positions``."""
+    def _add_moving(self, values: np.ndarray, positions: np.ndarray, robots: np.ndarray, t: np.ndarray | float,
+                    offsets: np.ndarray) -> np.ndarray:
+        """Add the moving obstacles' terms at step ``t`` to ``values`` (n, Q) sampled at ``positions + offsets``."""
+        worlds = self.world_of[robots]
+        when = np.broadcast_to(np.asarray(t, float), (len(robots),))
+        reach = np.abs(offsets).max() if len(offsets) else 0.0
+        for w in np.unique(worlds).tolist():
+            world = self.worlds[w]
+            if not world.moving:
+                continue
+            mine = np.flatnonzero(worlds == w)
+            p0, blocked = world.field.p0, np.zeros((len(mine), len(offsets)), bool)
+            changed = np.zeros(len(mine), bool)
+            for i in world.moving:
+                obstacle = world.obstacles[i]
+                shift = obstacle.motion.offset(when[mine])                        # (m, 2)
+                lo, hi = obstacle.bounds
+                local = positions[mine] - shift                                    # robots in the obstacle's frame
+                near = np.all((local > lo - p0 - reach) & (local < hi + p0 + reach), axis=1)
+                if not near.any():
+                    continue
+                points = (local[near, None, :] + offsets[None]).reshape(-1, 2)
+                d, _ = obstacle.signed_distance(points)
+                d = d.reshape(-1, len(offsets))
+                rows = mine[near]
+                values[rows] = values[rows] + apf.repulsive_term(d, world.field.krep, p0, world.field.u_max)
+                blocked[near] |= d <= 0
+                changed |= near
+            if changed.any():   # u_wall stays the highest reading: points inside read it, none above it
+                rows = mine[changed]
+                values[rows] = np.where(blocked[changed], world.u_wall, np.minimum(values[rows], world.u_wall))
+        return values
+
+    def observe(self, positions: np.ndarray, robots: np.ndarray | None = None,
+                t: np.ndarray | float = 0.0) -> np.ndarray:
+        """(n, C, k, k) float32 observations of ``robots`` (default all) at ``positions``, at step ``t``."""
         robots = np.arange(self.num) if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
         out = np.empty((len(robots), *self.config.shape), np.float32)
-        out[:, 0] = self.potential_windows(positions, robots)
+        out[:, 0] = self.potential_windows(positions, robots, t)
+        channels = self.config.channels
+        if "previous" in channels:
+            centre = self.potential_at(positions, robots, t) if self.config.scale == "log" else None
+            out[:, channels.index("previous")] = self.potential_windows(positions, robots, np.asarray(t) - 1.0, centre)
         if self.config.memory:
-            out[:, self.config.channels.index("memory")] = self.memory.window(positions, robots)
+            out[:, channels.index("memory")] = self.memory.window(positions, robots)
         return out
 
 

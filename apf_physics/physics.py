@@ -55,9 +55,9 @@ CLEARANCE_CAP = 4.0  # clearance beyond this is not measured (it exceeds any mov
 _FEW = 4  # up to this many proxies, per-body attribute access beats pymunk.batch's fixed cost
 _PROXY_GROUP = 1  # collision group of proxies of single-robot slots: they never touch each other
 _THIRDS = np.array([0.0, 0.5, 1.0])[None, :, None]  # where a move's clearance is sampled
-KINDS = ("obstacle", "wall", "robot")
-"""What a robot can touch; :attr:`ContactLog.kind` holds indices into this."""
-_OBSTACLE, _WALL, _ROBOT = range(3)
+KINDS = ("obstacle", "wall", "robot", "moving_obstacle")
+"""What a robot can touch; :attr:`ContactLog.pairs` holds indices into this."""
+_OBSTACLE, _WALL, _ROBOT, _MOVING = range(4)
 
 
 class CollisionType(IntEnum):
@@ -87,9 +87,10 @@ class ContactLog:
     """What touched what during the last control step.
 
     Attributes:
-        obstacle: (N,) bool: the robot touched an obstacle.
+        obstacle: (N,) bool: the robot touched a static obstacle.
         wall: (N,) bool: the robot touched the map's edge.
         robot: (N,) bool: the robot touched another robot.
+        moving: (N,) bool: the robot touched a moving obstacle (or one touched it).
         pairs: (K, 3) int: one row ``(robot, kind, other)`` per touching pair (:data:`KINDS`;
             a robot–robot touch appears once per robot), sorted.
     """
@@ -97,12 +98,13 @@ class ContactLog:
     obstacle: np.ndarray
     wall: np.ndarray
     robot: np.ndarray
+    moving: np.ndarray
     pairs: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.intp))
 
     @property
     def any(self) -> np.ndarray:
         """(N,) bool: touched anything."""
-        return self.obstacle | self.wall | self.robot
+        return self.obstacle | self.wall | self.robot | self.moving
 
     @property
     def touched(self) -> bool:
@@ -131,11 +133,19 @@ class Physics:
             ``v · control_dt``.
         max_speed: Fastest allowed speed, in units per control step; commands are clipped to it.
         substeps: Substeps per control step; by default the fewest (a power of two) that keep
-            tunnelling impossible for the smallest robot (see the module docstring).
+            tunnelling impossible for the smallest robot, against the fastest moving obstacle
+            (see the module docstring).
+        other_worlds: Worlds that slots may be put in later (:meth:`set_world`): counted for the
+            substeps.
+
+    Moving obstacles are kinematic bodies, lent like the robots' proxies to the slots whose
+    robots need physics near them, and put where their route has them at the slot's step.
+    A slot in a world with moving obstacles has a tile of its own (its obstacles are where
+    its own episode's step puts them).
     """
 
     def __init__(self, worlds: Sequence[World], robots_per_slot: int = 1, control_dt: float = 1.0,
-                 max_speed: float = MAX_SPEED, substeps: int | None = None):
+                 max_speed: float = MAX_SPEED, substeps: int | None = None, other_worlds: Sequence[World] = ()):
         if not worlds:
             raise ValueError("Physics needs at least one world")
         self.num_slots = len(worlds)
@@ -143,8 +153,11 @@ class Physics:
         self.num_robots = self.num_slots * self.robots_per_slot
         self.control_dt = float(control_dt)
         self.max_speed = float(max_speed)
-        self._min_radius = min(w.robot_radius for w in worlds)
-        self.substeps = int(substeps) if substeps is not None else substeps_for(self._min_radius, self.max_speed)
+        every = list(worlds) + list(other_worlds)
+        self._min_radius = min(w.robot_radius for w in every)
+        obstacle_speed = max((w.obstacles[i].motion.speed for w in every for i in w.moving), default=0.0)
+        relative = self.max_speed + obstacle_speed / self.control_dt
+        self.substeps = int(substeps) if substeps is not None else substeps_for(self._min_radius, relative)
         self.dt = self.control_dt / self.substeps
 
         self.space = pymunk.Space()
@@ -163,8 +176,13 @@ class Physics:
         self._tiles: dict[tuple[int, int], int] = {}
         self._tile_offset = np.zeros((0, 2))
         self._next_tile_x = 0.0
-        self._static_ids = np.zeros(0, np.uintp)        # sorted body ids of the static bodies
+        self._static_ids = np.zeros(0, np.uintp)        # sorted body ids of obstacles, walls, moving obstacles
         self._static_label = np.zeros((0, 2), np.intp)  # (kind, index) of each, in that order
+        # Moving obstacles: kinematic bodies, each built for one (world, obstacle), lent per step.
+        self._mover_body: list[pymunk.Body] = []
+        self._mover_key: list[tuple[int, int]] = []
+        self._mover_target = np.zeros((0, 4))           # position and velocity before pymunk next steps
+        self._slot_time = np.zeros(self.num_slots)
         # Clearance rasters, one per distinct world, sampled together.
         self._atlas = Atlas(CLEARANCE_RESOLUTION)
         self._atlas_ids: dict[int, int] = {}
@@ -195,14 +213,15 @@ class Physics:
         self._rows_dirty = True
         nothing = np.zeros(self.num_robots, bool)
         nothing.flags.writeable = False
-        self._touch_free = ContactLog(nothing, nothing, nothing)   # the log of a step without contacts
+        self._touch_free = ContactLog(nothing, nothing, nothing, nothing)   # the log of a step without contacts
+        self._movers_needed: list = []
 
     # -- worlds and tiles ------------------------------------------------------------------
-    def _lane(self, slot: int) -> int:
-        return slot + 1 if self.robots_per_slot > 1 else 0
+    def _lane(self, slot: int, world: World) -> int:
+        return slot + 1 if self.robots_per_slot > 1 or world.moving else 0
 
     def _assign(self, slot: int, world: World) -> None:
-        key = (id(world), self._lane(slot))
+        key = (id(world), self._lane(slot, world))
         if key not in self._tiles:
             self._tiles[key] = self._build_tile(world)
         if id(world) not in self._atlas_ids:
@@ -223,15 +242,10 @@ class Physics:
         self._next_tile_x += w + 2 * WALL_THICKNESS + TILE_GAP
         bodies: list[tuple[pymunk.Body, list[pymunk.Shape], int, int]] = []   # body, shapes, kind, index
         for i, obstacle in enumerate(world.obstacles):
+            if obstacle.motion is not None:
+                continue   # moving obstacles are lent per step (_lend_movers)
             body = pymunk.Body(body_type=pymunk.Body.STATIC)
-            if isinstance(obstacle, PolygonObstacle):
-                shapes = [pymunk.Poly(body, [(x + ox, y + oy) for x, y in piece]) for piece in obstacle.convex_pieces()]
-            elif isinstance(obstacle, CircleObstacle):
-                cx, cy = obstacle.center
-                shapes = [pymunk.Circle(body, obstacle.radius, offset=(cx + ox, cy + oy))]
-            for shape in shapes:
-                shape.collision_type = CollisionType.OBSTACLE
-            bodies.append((body, shapes, _OBSTACLE, i))
+            bodies.append((body, _obstacle_shapes(body, obstacle, (ox, oy)), _OBSTACLE, i))
         # Walls are solid slabs just outside the map (a zero-thickness segment could be crossed
         # by a robot squeezed against it): bottom, right, top, left.
         t = WALL_THICKNESS
@@ -247,13 +261,34 @@ class Physics:
                 shape.friction = 0.0
                 shape.elasticity = 0.0
             self.space.add(body, *shapes)
-        ids = np.concatenate([self._static_ids, np.array([b.id for b, *_ in bodies], np.uintp)])
-        labels = np.concatenate([self._static_label, np.array([(k, i) for _, _, k, i in bodies], np.intp)])
-        order = np.argsort(ids)
-        self._static_ids, self._static_label = ids[order], labels[order]
+        self._label_bodies([(b, k, i) for b, _, k, i in bodies])
         self._tile_offset = np.vstack([self._tile_offset, [ox, oy]])
         self._rows_dirty = True
         return tile
+
+    def _label_bodies(self, bodies: list[tuple[pymunk.Body, int, int]]) -> None:
+        """Record what each body is (kind, index), for reading contacts from arbiters."""
+        ids = np.concatenate([self._static_ids, np.array([b.id for b, _, _ in bodies], np.uintp)])
+        labels = np.concatenate([self._static_label, np.array([(k, i) for _, k, i in bodies], np.intp).reshape(-1, 2)])
+        order = np.argsort(ids)
+        self._static_ids, self._static_label = ids[order], labels[order]
+
+    def _new_mover(self, world: World, index: int) -> int:
+        """A kinematic body shaped like moving obstacle ``index`` of ``world``, parked."""
+        body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+        shapes = _obstacle_shapes(body, world.obstacles[index], (0.0, 0.0))
+        for shape in shapes:
+            shape.friction = 0.0
+            shape.elasticity = 0.0
+        k = len(self._mover_body)
+        body.position = (4.0 * k, -2000.0)
+        self.space.add(body, *shapes)
+        self._mover_body.append(body)
+        self._mover_key.append((id(world), index))
+        self._mover_target = np.vstack([self._mover_target, [4.0 * k, -2000.0, 0.0, 0.0]])
+        self._label_bodies([(body, _MOVING, index)])
+        self._rows_dirty = True
+        return k
 
     def set_world(self, slot: int, world: World) -> None:
         """Put ``slot`` in ``world`` (its robots keep their coordinates until :meth:`place`)."""
@@ -330,6 +365,10 @@ class Physics:
         self._proxy_of_row = row_proxy[self._proxy_rows]
         self._row_of_proxy = np.empty(len(self._proxy_body), np.intp)
         self._row_of_proxy[self._proxy_of_row] = self._proxy_rows
+        movers = {b.id: k for k, b in enumerate(self._mover_body)}
+        row_mover = np.array([movers.get(int(i), -1) for i in ids])
+        self._row_of_mover = np.empty(len(self._mover_body), np.intp)
+        self._row_of_mover[row_mover[row_mover >= 0]] = np.flatnonzero(row_mover >= 0)
         self._proxy_order = np.argsort(self._proxy_ids)
         self._rows_dirty = False
 
@@ -351,7 +390,8 @@ class Physics:
         Conservative: False guarantees that the robot's disc keeps more than
         :data:`CONTACT_MARGIN` from every obstacle, the map's edge and the robots of its slot
         during the whole move (each moving straight and uniformly), so that it moves exactly
-        as a free pymunk disc would.
+        as a free pymunk disc would. Moving obstacles are taken where the slots' steps
+        (:meth:`set_time`) put them.
         """
         # Clearance at the start, the middle and the end of each move: a 1-Lipschitz function
         # sampled at both ends of a piece of length L/2 is at least (c_a + c_b − L/2) / 2 on it,
@@ -367,7 +407,37 @@ class Physics:
             close = _closest_approach(p, dp) < 2 * self._slot_radius[:, None, None] + CONTACT_MARGIN
             close[:, np.arange(m), np.arange(m)] = False
             needs |= close.any(axis=2).ravel()
+        self._movers_needed = []
+        for slots, world, index, near in self._near_movers(moves):
+            robots = (slots[:, None] * m + np.arange(m)).ravel()
+            needs[robots] |= near.ravel()
+            self._movers_needed.append((world, index, slots, near.any(axis=1)))
         return needs
+
+    def set_time(self, steps: np.ndarray) -> None:
+        """The control step each slot's episode is at (where its moving obstacles are)."""
+        self._slot_time = np.asarray(steps, float).reshape(self.num_slots)
+
+    def _near_movers(self, moves: np.ndarray):
+        """For each moving obstacle of each world in use: ``(slots, world, index, near (k, m))``,
+        the robots of those slots whose swept disc this step comes near the obstacle's swept box."""
+        m = self.robots_per_slot
+        for world in {id(w): w for w in self.worlds if w.moving}.values():
+            slots = np.flatnonzero([w is world for w in self.worlds])
+            t = self._slot_time[slots]
+            p = self._positions.reshape(-1, m, 2)[slots]
+            q = p + moves.reshape(-1, m, 2)[slots]
+            reach = world.robot_radius + 2 * CONTACT_MARGIN
+            robot_lo, robot_hi = np.minimum(p, q) - reach, np.maximum(p, q) + reach
+            for index in world.moving:
+                obstacle = world.obstacles[index]
+                start, end = obstacle.motion.offset(t), obstacle.motion.offset(t + 1.0)
+                lo, hi = obstacle.bounds
+                box_lo = (lo + np.minimum(start, end))[:, None, :]
+                box_hi = (hi + np.maximum(start, end))[:, None, :]
+                near = np.all((robot_hi >= box_lo) & (robot_lo <= box_hi), axis=2)
+                if near.any():
+                    yield slots, world, index, near
 
     def step(self, velocities: np.ndarray, active: np.ndarray | None = None) -> ContactLog:
         """Advance one control step with a velocity command per robot.
@@ -399,11 +469,35 @@ class Physics:
         self._release(np.flatnonzero(held & ~simulate))
         self._lend(np.flatnonzero(simulate & ~held))
         robots = np.flatnonzero(simulate)
+        self._lend_movers(active)
         pairs = self._simulate(robots, v) if len(robots) or self._proxy_dirty.any() else None
         free = ~simulate
         self._positions[free] += moves[free]
         self._proxy_held = bool(len(robots))
         return self._touch_free if pairs is None or not len(pairs) else self._log(pairs)
+
+    def _lend_movers(self, active: np.ndarray | None) -> None:
+        """Put a kinematic copy of each moving obstacle that a robot needing physics comes near
+        where its route has it at the slot's step, moving to where it will be at the next."""
+        self._mover_target[:, :2] = np.column_stack([4.0 * np.arange(len(self._mover_body)),
+                                                     np.full(len(self._mover_body), -2000.0)])
+        self._mover_target[:, 2:] = 0.0
+        m = self.robots_per_slot
+        for world, index, slots, near in self._movers_needed:
+            if active is not None:
+                near = near & active.reshape(-1, m)[slots].any(axis=1)
+            slots = slots[near]
+            if not len(slots):
+                continue
+            pool = [k for k, key in enumerate(self._mover_key) if key == (id(world), index)]
+            while len(pool) < len(slots):
+                pool.append(self._new_mover(world, index))
+            movers = np.array(pool[:len(slots)])
+            motion = world.obstacles[index].motion
+            t = self._slot_time[slots]
+            start = motion.offset(t)
+            self._mover_target[movers, :2] = start + self._tile_offset[self._slot_tile[slots]]
+            self._mover_target[movers, 2:] = (motion.offset(t + 1.0) - start) / self.control_dt
 
     def _simulate(self, robots: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Step pymunk with the proxies of ``robots`` at their commanded velocities (the others at rest).
@@ -417,7 +511,7 @@ class Physics:
         velocity = np.zeros((len(self._proxy_body), 2))
         velocity[proxies] = v[robots] / self.control_dt
         moved = np.flatnonzero(self._proxy_moved)
-        if len(self._proxy_body) <= _FEW:
+        if len(self._proxy_body) <= _FEW and not self._mover_body:
             for k in moved.tolist():
                 self._proxy_body[k].position = tuple(self._proxy_target[k])
             for k, (vx, vy) in enumerate(velocity.tolist()):
@@ -432,6 +526,7 @@ class Physics:
             rows = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 4).copy()
             rows[self._row_of_proxy[moved], :2] = self._proxy_target[moved]
             rows[self._proxy_rows, 2:] = velocity[self._proxy_of_row]
+            rows[self._row_of_mover] = self._mover_target
             write = pymunk.batch.Buffer()
             write.set_float_buf(rows.reshape(-1))
             pymunk.batch.set_space_bodies(self.space, fields, write)
@@ -447,7 +542,7 @@ class Physics:
                 touched.append(ids.reshape(-1, 2).copy())
         self._proxy_dirty[:] = False
         offsets = self._tile_offset[self._slot_tile[robots // self.robots_per_slot]]
-        if len(self._proxy_body) <= _FEW:
+        if len(self._proxy_body) <= _FEW and not self._mover_body:
             after = np.array([tuple(self._proxy_body[k].position) for k in proxies.tolist()]).reshape(-1, 2)
         else:
             buf = self._buffer
@@ -473,9 +568,9 @@ class Physics:
             with_robot = (robot >= 0) & (robot_of[:, b] >= 0)
             rows.append(np.column_stack([robot[with_robot], np.full(with_robot.sum(), _ROBOT), robot_of[with_robot, b]]))
         table = np.unique(np.vstack(rows).astype(np.intp), axis=0)
-        flags = np.zeros((3, self.num_robots), bool)
+        flags = np.zeros((len(KINDS), self.num_robots), bool)
         flags[table[:, 1], table[:, 0]] = True
-        return ContactLog(flags[_OBSTACLE], flags[_WALL], flags[_ROBOT], table)
+        return ContactLog(flags[_OBSTACLE], flags[_WALL], flags[_ROBOT], flags[_MOVING], table)
 
 
 def _closest_approach(p: np.ndarray, dp: np.ndarray) -> np.ndarray:
@@ -486,3 +581,18 @@ def _closest_approach(p: np.ndarray, dp: np.ndarray) -> np.ndarray:
     t = np.clip(np.where(a > 0, -np.sum(r0 * dr, axis=-1) / np.where(a > 0, a, 1.0), 0.0), 0.0, 1.0)
     closest = r0 + t[..., None] * dr
     return np.sqrt(np.sum(closest * closest, axis=-1))
+
+
+def _obstacle_shapes(body: pymunk.Body, obstacle, offset: tuple[float, float]) -> list[pymunk.Shape]:
+    """The obstacle's shapes on ``body``, its written coordinates shifted by ``offset``."""
+    ox, oy = offset
+    if isinstance(obstacle, PolygonObstacle):
+        shapes = [pymunk.Poly(body, [(x + ox, y + oy) for x, y in piece]) for piece in obstacle.convex_pieces()]
+    elif isinstance(obstacle, CircleObstacle):
+        cx, cy = obstacle.center
+        shapes = [pymunk.Circle(body, obstacle.radius, offset=(cx + ox, cy + oy))]
+    else:
+        raise TypeError(f"unknown obstacle {obstacle!r}")
+    for shape in shapes:
+        shape.collision_type = CollisionType.OBSTACLE
+    return shapes

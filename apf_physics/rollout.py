@@ -166,7 +166,7 @@ def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | 
     while stepper.running.any():
         active = stepper.running
         positions = stepper.positions
-        leader = planner.act(positions[:, 0], active)
+        leader = planner.act(positions[:, 0], active, int(stepper.steps[active].max()))
         gave_up = planner.stuck()
         gave_up = active & gave_up if gave_up is not None else np.zeros(n, bool)
         moving = active & ~gave_up

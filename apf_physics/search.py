@@ -26,6 +26,7 @@ import math
 import cv2
 import numpy as np
 
+from apf_physics import geometry
 from apf_physics.field import Grid
 from apf_physics.world import World
 
@@ -56,7 +57,7 @@ class SearchGrid:
         self.world = world
         self.grid = Grid.covering((0.0, 0.0), world.size, resolution)
         self.margin = float(margin)
-        self.clearance = world.clearance(self.grid.node_points()).reshape(self.grid.shape)
+        self.clearance = world.static_clearance(self.grid.node_points()).reshape(self.grid.shape)
         self.free = self.clearance >= world.robot_radius + self.margin
         self._labels: np.ndarray | None = None
         self._cost: np.ndarray | None = None
@@ -113,7 +114,7 @@ class SearchGrid:
         if not len(nodes):
             return nodes
         r = self.world.robot_radius
-        threshold = min(r + LOS_MARGIN, float(self.world.clearance(start[None])[0]))
+        threshold = min(r + LOS_MARGIN, float(self.world.static_clearance(start[None])[0]))
         xy = self.node_xy(nodes)
         clear = self.world.path_clearance(np.broadcast_to(start, xy.shape), xy, 0.02) >= threshold
         return nodes[clear]
@@ -175,8 +176,14 @@ class SearchGrid:
             self._search()
         return self._cost
 
-    def path(self, start: np.ndarray) -> np.ndarray | None:
+    def path(self, start: np.ndarray, t: float | None = None) -> np.ndarray | None:
         """Shortest path (shortcut waypoints) from ``start`` to the nearest reachable target.
+
+        Args:
+            start: The start.
+            t: None: around the static obstacles (one Dijkstra search, shared by every start).
+                A step: also around the moving obstacles where they are at that step, as if
+                they stood still (an A* search of its own).
 
         Returns:
             (K, 2) waypoints, ``start`` first and a target (or a node within reach of it) last;
@@ -185,42 +192,104 @@ class SearchGrid:
         start = np.asarray(start, float)
         if self.at_target(start):
             return start[None].copy()
+        moving = t is not None and bool(self.world.moving)
+        clearance = (lambda p: self.world.clearance(p, t)) if moving else self.world.static_clearance
         entries = self.entry_nodes(start)
+        if moving:
+            free = self.free.ravel() & ~self._moving_blocked(t)
+            entries = entries[free[entries]]
         if not len(entries):
             return None
-        cost = self.cost_to_go
-        total = cost[entries] + np.hypot(*(self.node_xy(entries) - start).T)
-        best = int(np.argmin(total))
-        if not math.isfinite(total[best]):
-            return None
-        chain = [int(entries[best])]
-        nxt = self._next
-        while nxt[chain[-1]] >= 0:
-            chain.append(int(nxt[chain[-1]]))
-        nodes = self.node_xy(np.asarray(chain))
-        nodes = self._shortcut(nodes)
+        if moving:
+            chain = self._astar(start, entries, free)
+            if chain is None:
+                return None
+        else:
+            cost = self.cost_to_go
+            total = cost[entries] + np.hypot(*(self.node_xy(entries) - start).T)
+            best = int(np.argmin(total))
+            if not math.isfinite(total[best]):
+                return None
+            chain = [int(entries[best])]
+            nxt = self._next
+            while nxt[chain[-1]] >= 0:
+                chain.append(int(nxt[chain[-1]]))
+        nodes = self._shortcut(self.node_xy(np.asarray(chain)), clearance)
         end = nodes[-1]
         target = self.world.targets[int(np.argmin(np.hypot(*(self.world.targets - end).T)))]
-        if self._clear(end, target, self.world.robot_radius + LOS_MARGIN):
+        if self._clear(end, target, self.world.robot_radius + LOS_MARGIN, clearance):
             if np.hypot(*(nodes[-1] - target)) > 1e-9:
                 nodes = np.vstack([nodes, target])
-            if len(nodes) >= 3 and self._clear(nodes[-3], target, self.world.robot_radius + LOS_MARGIN):
+            if len(nodes) >= 3 and self._clear(nodes[-3], target, self.world.robot_radius + LOS_MARGIN, clearance):
                 nodes = np.vstack([nodes[:-2], target])
         # The start may sit closer to an obstacle than the shortcut margin allows: shortcut the
         # start's own kink with its own clearance as the bar.
-        threshold = min(self.world.robot_radius + LOS_MARGIN, float(self.world.clearance(start[None])[0]))
-        while len(nodes) > 1 and self._clear(start, nodes[1], threshold):
+        threshold = min(self.world.robot_radius + LOS_MARGIN, float(clearance(start[None])[0]))
+        while len(nodes) > 1 and self._clear(start, nodes[1], threshold, clearance):
             nodes = nodes[1:]
         return np.vstack([start, nodes])
 
-    def _clear(self, a: np.ndarray, b: np.ndarray, threshold: float) -> bool:
-        """Whether the segment ``a → b`` keeps ``threshold`` of clearance at samples ``LOS_SPACING`` apart."""
-        return bool(self.world.path_clearance(a[None], b[None], LOS_SPACING)[0] >= threshold)
+    def _moving_blocked(self, t: float) -> np.ndarray:
+        """(rows*cols,) nodes where a robot would not keep its radius plus the margin from a moving obstacle at step ``t``."""
+        nodes = self.grid.node_points()
+        blocked = np.zeros(len(nodes), bool)
+        reach = self.world.robot_radius + self.margin
+        for i in self.world.moving:
+            obstacle = self.world.obstacles[i]
+            shift = obstacle.motion.offset(t)
+            lo, hi = obstacle.bounds
+            near = np.flatnonzero(np.all((nodes >= lo + shift - reach) & (nodes <= hi + shift + reach), axis=1))
+            if len(near):
+                d, _ = obstacle.signed_distance(nodes[near] - shift)
+                blocked[near[d < reach]] = True
+        return blocked
 
-    def _shortcut(self, nodes: np.ndarray) -> np.ndarray:
+    def _astar(self, start: np.ndarray, entries: np.ndarray, free: np.ndarray) -> list[int] | None:
+        """A* over ``free`` nodes from ``entries`` (reached straight from ``start``) to the goal nodes."""
+        rows, cols = self.grid.shape
+        goals = set(self.goal_nodes[free[self.goal_nodes]].tolist())
+        if not goals:
+            return None
+        h = 1.0 / self.grid.resolution
+        targets = self.world.targets
+        xy = self.node_xy(np.arange(rows * cols))
+        heuristic = np.min(np.hypot(xy[:, None, 0] - targets[None, :, 0], xy[:, None, 1] - targets[None, :, 1]), axis=1)
+        cost = {int(e): float(np.hypot(*(xy[e] - start))) for e in entries}
+        came: dict[int, int] = {}
+        heap = [(cost[e] + heuristic[e], e) for e in cost]
+        heapq.heapify(heap)
+        free_list = free.tolist()
+        while heap:
+            _, u = heapq.heappop(heap)
+            if u in goals:
+                chain = [u]
+                while chain[-1] in came:
+                    chain.append(came[chain[-1]])
+                return chain[::-1]
+            r, c = divmod(u, cols)
+            for dr, dc, w in _NEIGHBOURS:
+                rr, cc = r + dr, c + dc
+                if 0 <= rr < rows and 0 <= cc < cols:
+                    v = rr * cols + cc
+                    if free_list[v]:
+                        nd = cost[u] + w * h
+                        if nd < cost.get(v, math.inf):
+                            cost[v] = nd
+                            came[v] = u
+                            heapq.heappush(heap, (nd + heuristic[v], v))
+        return None
+
+    def _clear(self, a: np.ndarray, b: np.ndarray, threshold: float, clearance=None) -> bool:
+        """Whether the segment ``a → b`` keeps ``threshold`` of clearance at samples ``LOS_SPACING`` apart."""
+        clearance = clearance or self.world.static_clearance
+        points, _ = geometry.segment_samples(a[None], b[None], LOS_SPACING)
+        return bool(clearance(points).min() >= threshold)
+
+    def _shortcut(self, nodes: np.ndarray, clearance=None) -> np.ndarray:
         """Pull a grid path taut: from each kept waypoint jump to the farthest one in sight."""
         if len(nodes) <= 2:
             return nodes
+        clearance = clearance or self.world.static_clearance
         # Candidates are the nodes where the grid path turns, and its end.
         turn = np.flatnonzero(np.any(np.diff(nodes, 2, axis=0) != 0, axis=1)) + 1
         candidates = np.unique(np.concatenate([turn, [len(nodes) - 1]]))
@@ -229,7 +298,10 @@ class SearchGrid:
         i = 0
         while i < len(nodes) - 1:
             later = candidates[candidates > i]
-            clear = self.world.path_clearance(np.broadcast_to(nodes[i], (len(later), 2)), nodes[later], LOS_SPACING) >= threshold
+            points, owner = geometry.segment_samples(np.broadcast_to(nodes[i], (len(later), 2)), nodes[later], LOS_SPACING)
+            lowest = np.full(len(later), np.inf)
+            np.minimum.at(lowest, owner, clearance(points))
+            clear = lowest >= threshold
             # Fall back on the next grid node: grid edges between free nodes are safe.
             j = int(later[clear].max()) if clear.any() else i + 1
             kept.append(j)

@@ -19,7 +19,7 @@ from apf_physics import field as apf
 from apf_physics import geometry
 from apf_physics.errors import WorldError
 from apf_physics.field import FieldParams
-from apf_physics.obstacles import Obstacle
+from apf_physics.obstacles import Obstacle, obstacle_at
 
 T = TypeVar("T")
 
@@ -65,7 +65,7 @@ class World:
         robot_radius: Radius of each robot's disc.
         goal_tolerance: A target is reached when the robot's centre is this close to it.
         field: The potential field's parameters.
-        obstacles: Static obstacles.
+        obstacles: The obstacles (those with a ``motion`` move along their route).
         targets: ``(T, 2)`` target positions (at least one).
         starts: ``(S, 2)`` evaluation start positions (may be empty).
         formation: The formation, if the world file defines one.
@@ -98,17 +98,34 @@ class World:
             self._cache[key] = build()
         return self._cache[key]
 
-    # -- the field ---------------------------------------------------------------------
-    def potential(self, points: np.ndarray) -> np.ndarray:
-        """Total potential U at ``(N, 2)`` points (SPEC §1)."""
-        return apf.potential(points, self.targets, self.obstacles, self.field)
+    # -- obstacles in time -----------------------------------------------------------------
+    @property
+    def static_obstacles(self) -> tuple[Obstacle, ...]:
+        """The obstacles that do not move."""
+        return self.cached("static", lambda: tuple(o for o in self.obstacles if o.motion is None))
 
-    def gradient(self, points: np.ndarray) -> np.ndarray:
-        """``∇U`` at ``(N, 2)`` points."""
-        return apf.gradient(points, self.targets, self.obstacles, self.field)
+    @property
+    def moving(self) -> tuple[int, ...]:
+        """Indices (in :attr:`obstacles`) of the obstacles that move."""
+        return self.cached("moving", lambda: tuple(i for i, o in enumerate(self.obstacles) if o.motion is not None))
+
+    def obstacles_at(self, t: float = 0.0) -> tuple[Obstacle, ...]:
+        """Every obstacle where it is at control step ``t``."""
+        if not self.moving:
+            return self.obstacles
+        return tuple(obstacle_at(o, t) for o in self.obstacles)
+
+    # -- the field ---------------------------------------------------------------------
+    def potential(self, points: np.ndarray, t: float = 0.0) -> np.ndarray:
+        """Total potential U at ``(N, 2)`` points at control step ``t`` (SPEC §1)."""
+        return apf.potential(points, self.targets, self.obstacles_at(t), self.field)
+
+    def gradient(self, points: np.ndarray, t: float = 0.0) -> np.ndarray:
+        """``∇U`` at ``(N, 2)`` points at control step ``t``."""
+        return apf.gradient(points, self.targets, self.obstacles_at(t), self.field)
 
     def raster(self, resolution: int = 4) -> apf.Raster:
-        """U at the nodes of a grid over the map, ``resolution`` nodes per unit; built once and cached."""
+        """U at step 0 at the nodes of a grid over the map, ``resolution`` nodes per unit; built once and cached."""
         def build() -> apf.Raster:
             grid = apf.Grid.covering((0.0, 0.0), self.size, resolution)
             return apf.Raster(grid, self.potential(grid.node_points()).reshape(grid.shape))
@@ -135,12 +152,23 @@ class World:
         return d
 
     # -- geometry ----------------------------------------------------------------------
-    def obstacle_distance(self, points: np.ndarray) -> np.ndarray:
-        """Signed distance to the nearest obstacle's boundary (negative inside); +inf without obstacles."""
+    def obstacle_distance(self, points: np.ndarray, t: np.ndarray | float = 0.0, static: bool = False) -> np.ndarray:
+        """Signed distance to the nearest obstacle's boundary (negative inside); +inf without obstacles.
+
+        Args:
+            points: (N, 2) points.
+            t: Control step at which moving obstacles are taken: one for all points, or (N,).
+            static: Leave the moving obstacles out.
+        """
         points = np.asarray(points, dtype=float).reshape(-1, 2)
         best = np.full(len(points), np.inf)
         for obstacle in self.obstacles:
-            d, _ = obstacle.signed_distance(points)
+            if obstacle.motion is None:
+                d, _ = obstacle.signed_distance(points)
+            elif static:
+                continue
+            else:   # measure in the obstacle's own frame: points moved back by its offset at t
+                d, _ = obstacle.signed_distance(points - obstacle.motion.offset(t))
             best = np.minimum(best, d)
         return best
 
@@ -150,32 +178,51 @@ class World:
         w, h = self.size
         return np.minimum.reduce([points[:, 0], w - points[:, 0], points[:, 1], h - points[:, 1]])
 
-    def clearance(self, points: np.ndarray) -> np.ndarray:
-        """Distance from each point to the nearest obstacle or the map's edge (negative when blocked)."""
-        return np.minimum(self.obstacle_distance(points), self.edge_distance(points))
+    def clearance(self, points: np.ndarray, t: np.ndarray | float = 0.0) -> np.ndarray:
+        """Distance from each point to the nearest obstacle (at step ``t``) or the map's edge (negative when blocked)."""
+        return np.minimum(self.obstacle_distance(points, t), self.edge_distance(points))
 
-    def path_clearance(self, a: np.ndarray, b: np.ndarray, spacing: np.ndarray | float) -> np.ndarray:
+    def path_clearance(self, a: np.ndarray, b: np.ndarray, spacing: np.ndarray | float,
+                       t: float | None = None, during: bool = True) -> np.ndarray:
         """Least clearance sampled along each straight segment ``a[i] → b[i]``.
 
         Samples are at most ``spacing`` apart, ends included (:func:`~apf_physics.geometry.segment_samples`).
-        Clearance changes no faster than distance, so no point of a segment is nearer to an
-        obstacle than the returned value minus ``spacing / 2``: subtract that for a bound.
+        Clearance changes no faster than distance, so no point of a segment is nearer to a
+        static obstacle than the returned value minus ``spacing / 2``: subtract that for a bound.
 
         Args:
             a: (K, 2) segment starts.
             b: (K, 2) segment ends.
             spacing: Scalar or (K,) largest distance between samples (> 0).
+            t: None: only the static obstacles. A step: also the moving obstacles, where they
+                are at step ``t`` (``during`` False), or, with ``during`` (each segment is a
+                move made during control step ``t → t + 1``), where they are at ``t + s`` for a
+                sample a fraction ``s`` along it.
+            during: See ``t``.
 
         Returns:
             (K,) sampled minimum clearance of each segment.
         """
+        a = np.asarray(a, float).reshape(-1, 2)
         points, owner = geometry.segment_samples(a, b, spacing)
-        out = np.full(len(np.asarray(a).reshape(-1, 2)), np.inf)
-        np.minimum.at(out, owner, self.clearance(points))
+        if t is None or not self.moving:
+            clearance = self.static_clearance(points)
+        elif not during:
+            clearance = self.clearance(points, t)
+        else:
+            along = np.hypot(*(points - a[owner]).T)
+            length = np.hypot(*(np.asarray(b, float).reshape(-1, 2) - a).T)[owner]
+            clearance = self.clearance(points, t + np.where(length > 0, along / np.where(length > 0, length, 1.0), 0.0))
+        out = np.full(len(a), np.inf)
+        np.minimum.at(out, owner, clearance)
         return out
 
+    def static_clearance(self, points: np.ndarray) -> np.ndarray:
+        """Distance from each point to the nearest static obstacle or the map's edge (negative when blocked)."""
+        return np.minimum(self.obstacle_distance(points, static=True), self.edge_distance(points))
+
     def clearance_raster(self, resolution: int = 8, cap: float = 4.0, margin: float = 2.0) -> apf.Raster:
-        """``min(clearance, cap)`` at the nodes of a grid over the map and ``margin`` beyond; cached.
+        """``min(clearance, cap)`` from the static obstacles, at the nodes of a grid over the map and ``margin`` beyond; cached.
 
         Capped clearance is still 1-Lipschitz, and only points within ``cap`` of an obstacle's
         bounding box are measured against it, so large sparse maps are cheap. A bilinear
@@ -188,7 +235,7 @@ class World:
             nodes = grid.node_points()
             values = np.minimum(self.edge_distance(nodes), cap)
             xs, ys = nodes[:, 0], nodes[:, 1]
-            for obstacle in self.obstacles:
+            for obstacle in self.static_obstacles:
                 lo, hi = obstacle.bounds
                 near = np.flatnonzero((xs >= lo[0] - cap) & (xs <= hi[0] + cap) & (ys >= lo[1] - cap) & (ys <= hi[1] + cap))
                 if len(near):

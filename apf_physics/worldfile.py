@@ -1,17 +1,30 @@
 """World files: reading, validating and writing the YAML world-file contract (README "World files").
 
 :func:`load_world` reads a file (YAML, or JSON being YAML) and :func:`world_from_dict`
-validates a mapping and builds the :class:`~apf_physics.world.World`. Every problem is
-reported as one :class:`~apf_physics.errors.WorldError` naming the file, the key and what is
-wrong. :func:`save_world` writes a file that reads back to the same world.
+validates a mapping and builds the :class:`~apf_physics.world.World`. Every problem found is
+reported, one line each, in one :class:`~apf_physics.errors.WorldError`: ``<file>: <key>:
+<what is wrong>``, with values shortened. :func:`save_world` writes a file that reads back
+to the same world.
+
+Hostile or broken input gets a clear refusal, never a traceback, a hang or a raw memory
+error: only regular files of at most :data:`MAX_FILE_BYTES` are read; the YAML parser's
+events are checked for depth, length and node count (aliases expanded) before any Python
+object is built; and the limits below are checked before the work they protect (the
+rasters the physics and the planners build, the physics' substeps, the field's values).
 """
 
 from __future__ import annotations
 
+import difflib
 import math
-from dataclasses import fields
+import numbers
+import os
+import re
+import reprlib
+import stat
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence, TypeVar
 
 import numpy as np
 import yaml
@@ -23,217 +36,745 @@ from apf_physics.field import FIELD_PRESETS, FieldParams
 from apf_physics.obstacles import CircleObstacle, Obstacle, PolygonObstacle
 from apf_physics.world import FormationSpec, World
 
-# ---------------------------------------------------------------------------------------
+T = TypeVar("T")
+
+# -- limits (README "World files") -------------------------------------------------------
+# Reading: what any YAML file (world or curriculum) may hold.
+MAX_FILE_BYTES = 10 * 2**20
+"""Largest file read [bytes] (a world of 10,000 boxes is about 0.7 MB)."""
+MAX_DEPTH = 32
+"""Deepest nesting of lists and mappings (a world file needs 5)."""
+MAX_NODES = 500_000
+"""Most values in one file (numbers, strings, lists, mappings), every alias counted as what it expands to."""
+MAX_SCALAR_CHARS = 4096
+"""Longest single value [characters]: a path fits; an integer stays below Python's 4,300-digit parsing limit."""
+
+# The world: each limit protects something built later.
+MIN_SIDE = 1.0
+"""Shortest side of the map [units] (the rasters need at least a few nodes across)."""
+MAX_SIDE = 10_000.0
+"""Longest side of the map [units]; the memory budget below usually binds first."""
+MAX_OBSTACLES = 10_000
+"""Most obstacles (loading checks each; the field and the physics visit each)."""
+MAX_POLYGON_VERTICES = 1_000
+"""Most vertices of one polygon (the physics splits it into triangles in about O(n²))."""
+MAX_VERTICES = 100_000
+"""Most polygon vertices in all."""
+MAX_TARGETS = 100
+"""Most targets (every value of U is a sum over them)."""
+MAX_STARTS = 10_000
+"""Most starts (each is one robot in an evaluation)."""
+MAX_FOLLOWERS = 32
+"""Most followers in a formation."""
+MIN_ROBOT_RADIUS = 0.01
+"""Smallest robot radius [units]: keeps the physics at most 256 substeps per control step."""
+MIN_GOAL_TOLERANCE = 0.25
+"""Smallest goal tolerance [units]: one A* grid spacing, so that grid nodes reach every target."""
+MAX_POTENTIAL = 1e12
+"""Largest magnitude of U and of its slope anywhere the package evaluates them."""
+MAX_NAME_CHARS = 200
+"""Longest world name [characters]."""
+MAX_PROBLEMS = 20
+"""Problems reported from one file before the check stops."""
+
+MEMORY_BUDGET = 2 * 2**30
+"""Default peak memory the rasters of one world may take [bytes]; the environment variable
+``APF_PHYSICS_MEMORY_BUDGET`` (bytes, or a number with K, M, G or T) overrides it."""
+MEMORY_BUDGET_VARIABLE = "APF_PHYSICS_MEMORY_BUDGET"
+RASTER_MARGIN = 16.0
+"""How far beyond the map rasters reach [units] (observation windows of up to 27 × 27)."""
+RASTER_BYTES_PER_UNIT2 = 6_000
+"""Peak bytes per square unit of rasters (map plus margin) an evaluation builds: measured
+4,600–5,000 (the physics' clearance raster at 8 nodes per unit dominates; then the potential,
+observation and A* rasters at 4), rounded up."""
+RASTER_BYTES_PER_TARGET = 400
+"""Further peak bytes per square unit per target (U is computed from a column per target)."""
 
 _TOP_KEYS = {"name", "size", "robot_radius", "goal_tolerance", "field", "obstacles", "targets", "starts", "formation"}
 _REQUIRED = ("size", "field", "targets")
 
 
+# -- messages ----------------------------------------------------------------------------
+class _ShortRepr(reprlib.Repr):
+    """``repr`` cut to a few elements and levels; huge integers by their digit count (their
+    ``repr`` would raise beyond 4,300 digits)."""
+
+    def __init__(self):
+        super().__init__()
+        self.maxlevel, self.maxlist, self.maxtuple, self.maxdict, self.maxset = 3, 4, 4, 4, 4
+        self.maxstring, self.maxlong, self.maxother = 40, 24, 40
+
+    def repr_int(self, x: int, level: int) -> str:
+        if x.bit_length() > 256:
+            return f"<an integer of about {int(x.bit_length() * math.log10(2)) + 1} digits>"
+        return super().repr_int(x, level)
+
+
+_REPR = _ShortRepr()
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    """``value`` for a message: one line of at most ``limit`` characters, whatever it is."""
+    try:
+        text = _REPR.repr(value)
+    except Exception:  # a value whose repr fails: say what it is
+        text = f"<{type(value).__name__}>"
+    text = text.replace("\n", " ")
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _kind(value: Any) -> str:
+    """``list [1, 2, ...]``: the type and the shortened value."""
+    return f"{type(value).__name__} {_short(value)}"
+
+
+def _key_text(key: Any) -> str:
+    """A mapping key as messages show it: plain if it is a short printable string."""
+    if isinstance(key, str) and key.isprintable() and 0 < len(key) <= 40:
+        return key
+    return _short(key, 40)
+
+
+def _did_you_mean(word: Any, choices: Sequence[str]) -> str:
+    if not isinstance(word, str) or len(word) > 100:
+        return ""
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
+    return f"did you mean {close[0]!r}? " if close else ""
+
+
+class _Invalid(Exception):
+    """A value failed its check; the problem is recorded and what depends on the value is skipped."""
+
+
+class _TooMany(Exception):
+    """:data:`MAX_PROBLEMS` problems recorded: stop checking."""
+
+
 class _Checker:
-    """Builds one clear message per problem: ``<file>: <key>: <what is wrong>``."""
+    """Records one line per problem: ``<file>: <key>: <what is wrong>``."""
 
     def __init__(self, source: str):
         self.source = source
+        self.problems: list[str] = []
+        self.stopped = False
 
-    def fail(self, key: str, problem: str) -> WorldError:
-        return WorldError(f"{self.source}: {key}: {problem}" if key else f"{self.source}: {problem}")
+    def bad(self, key: str, problem: str) -> _Invalid:
+        """Record a problem and return the exception that skips what depends on the value."""
+        self.problems.append(f"{self.source}: {key}: {problem}" if key else f"{self.source}: {problem}")
+        if len(self.problems) >= MAX_PROBLEMS:
+            self.stopped = True
+            raise _TooMany
+        return _Invalid()
+
+    def attempt(self, parse: Callable[..., T], *args: Any, **kwargs: Any) -> T | None:
+        """``parse(*args, **kwargs)``, or None when it found a problem (recorded)."""
+        try:
+            return parse(*args, **kwargs)
+        except _Invalid:
+            return None
+
+    def error(self) -> WorldError:
+        lines = list(self.problems)
+        if self.stopped:
+            lines.append(f"{self.source}: stopped after {MAX_PROBLEMS} problems")
+        return WorldError("\n".join(lines))
 
     def number(self, value: Any, key: str, *, positive: bool = False, nonnegative: bool = False) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.fail(key, f"expected a number, got {type(value).__name__} {value!r}")
-        value = float(value)
-        if not math.isfinite(value):
-            raise self.fail(key, f"must be finite, got {value}")
-        if positive and value <= 0:
-            raise self.fail(key, f"must be positive, got {value:g}")
-        if nonnegative and value < 0:
-            raise self.fail(key, f"must not be negative, got {value:g}")
-        return value
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            raise self.bad(key, f"expected a number, got {_kind(value)}")
+        try:
+            number = float(value)
+        except OverflowError:
+            raise self.bad(key, f"too large for a number: {_short(value)}") from None
+        if not math.isfinite(number):
+            raise self.bad(key, f"must be finite, got {number}")
+        if positive and number <= 0:
+            raise self.bad(key, f"must be positive, got {number:g}")
+        if nonnegative and number < 0:
+            raise self.bad(key, f"must not be negative, got {number:g}")
+        return number
 
-    def point(self, value: Any, key: str) -> np.ndarray:
+    def point(self, value: Any, key: str) -> tuple[float, float]:
         if not isinstance(value, (list, tuple)) or len(value) != 2:
-            raise self.fail(key, f"expected a point [x, y], got {value!r}")
-        return np.array([self.number(v, f"{key}[{i}]") for i, v in enumerate(value)])
+            raise self.bad(key, f"expected a point [x, y], got {_kind(value)}")
+        x = self.attempt(self.number, value[0], f"{key}[0]")
+        y = self.attempt(self.number, value[1], f"{key}[1]")
+        if x is None or y is None:
+            raise _Invalid
+        return x, y
 
-    def points(self, value: Any, key: str, *, at_least: int = 0) -> np.ndarray:
+    def points(self, value: Any, key: str, *, at_least: int = 0, at_most: int, what: str = "points") -> np.ndarray:
+        """A list of points, its length checked before any point is."""
         if not isinstance(value, (list, tuple)):
-            raise self.fail(key, f"expected a list of points [[x, y], ...], got {type(value).__name__}")
+            raise self.bad(key, f"expected a list of points [[x, y], ...], got {_kind(value)}")
         if len(value) < at_least:
-            raise self.fail(key, f"needs at least {at_least} point{'s' if at_least > 1 else ''}, got {len(value)}")
-        pts = [self.point(p, f"{key}[{i}]") for i, p in enumerate(value)]
+            raise self.bad(key, f"needs at least {at_least} point{'s' if at_least > 1 else ''}, got {len(value)}")
+        if len(value) > at_most:
+            raise self.bad(key, f"at most {at_most:,} {what}, got {len(value):,}")
+        pts = [self.attempt(self.point, p, f"{key}[{i}]") for i, p in enumerate(value)]
+        if any(p is None for p in pts):
+            raise _Invalid
         return np.array(pts, dtype=float).reshape(-1, 2)
 
     def mapping(self, value: Any, key: str, allowed: set[str], required: Sequence[str] = ()) -> Mapping[str, Any]:
+        """``value`` if it is a mapping; its unknown and missing keys are recorded (and skipped by the caller)."""
         if not isinstance(value, Mapping):
-            raise self.fail(key, f"expected a mapping, got {type(value).__name__} {value!r}")
-        unknown = sorted(set(map(str, value)) - allowed)
-        if unknown:
-            raise self.fail(f"{key}.{unknown[0]}" if key else unknown[0],
-                            f"unknown key (allowed: {', '.join(sorted(allowed))})")
+            raise self.bad(key, f"expected a mapping, got {_kind(value)}")
+        for name in value:
+            if not (isinstance(name, str) and name in allowed):
+                where = f"{key}.{_key_text(name)}" if key else _key_text(name)
+                hint = _did_you_mean(name, sorted(allowed))
+                self.bad(where, f"unknown key ({hint or ''}allowed: {', '.join(sorted(allowed))})")
         for name in required:
             if name not in value:
-                raise self.fail(f"{key}.{name}" if key else name, "missing")
+                self.bad(f"{key}.{name}" if key else name, "missing")
         return value
 
 
+# -- the parts of a world ------------------------------------------------------------------
+def _parse_size(check: _Checker, value: Any) -> tuple[float, float]:
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise check.bad("size", f"expected [width, height], got {_kind(value)}")
+    sides = [check.attempt(check.number, v, f"size[{i}]", positive=True) for i, v in enumerate(value)]
+    for i, side in enumerate(sides):
+        if side is not None and not MIN_SIDE <= side <= MAX_SIDE:
+            check.bad(f"size[{i}]", f"must be between {MIN_SIDE:g} and {MAX_SIDE:,.0f} units, got {side:g}")
+            sides[i] = None
+    if sides[0] is None or sides[1] is None:
+        raise _Invalid
+    return sides[0], sides[1]
+
+
+def _parse_name(check: _Checker, value: Any) -> str:
+    if not isinstance(value, str) or not value:
+        raise check.bad("name", f"expected a non-empty string, got {_kind(value)}")
+    if len(value) > MAX_NAME_CHARS:
+        raise check.bad("name", f"at most {MAX_NAME_CHARS} characters, got {len(value):,}")
+    if not value.isprintable():
+        raise check.bad("name", f"must be printable on one line, got {_short(value)}")
+    return value
+
+
 def _parse_field(check: _Checker, value: Any) -> FieldParams:
+    known = f"(known: {', '.join(FIELD_PRESETS)})"
     if isinstance(value, str):
         if value not in FIELD_PRESETS:
-            raise check.fail("field", f"unknown preset {value!r} (known: {', '.join(FIELD_PRESETS)})")
-        return FieldParams(**{k: float(v) for k, v in FIELD_PRESETS[value].items()})
+            raise check.bad("field", f"unknown preset {_short(value)} ({_did_you_mean(value, list(FIELD_PRESETS))}"
+                                     f"known: {', '.join(FIELD_PRESETS)})")
+        return FieldParams.preset(value)
     names = [f.name for f in fields(FieldParams)]
-    raw = dict(check.mapping(value, "field", set(names) | {"preset"}))
-    base: dict[str, float] = {}
+    problems = len(check.problems)
+    raw = check.mapping(value, "field", set(names) | {"preset"})
+    base: dict[str, Any] = {}
     if "preset" in raw:
-        preset = raw.pop("preset")
-        if preset not in FIELD_PRESETS:
-            raise check.fail("field.preset", f"unknown preset {preset!r} (known: {', '.join(FIELD_PRESETS)})")
+        preset = raw["preset"]
+        if not isinstance(preset, str) or preset not in FIELD_PRESETS:
+            raise check.bad("field.preset", f"unknown preset {_short(preset)} {known}")
         base = dict(FIELD_PRESETS[preset])
-    base.update(raw)
-    for name in names:
-        if name not in base:
-            raise check.fail(f"field.{name}", "missing")
+    base.update({k: v for k, v in raw.items() if k in names})
     values = {}
     for name in names:
+        if name not in base:
+            check.bad(f"field.{name}", "missing")
+            continue
         positive = name in ("p0", "ps", "u_max")
-        values[name] = check.number(base[name], f"field.{name}", positive=positive, nonnegative=not positive)
+        values[name] = check.attempt(check.number, base[name], f"field.{name}", positive=positive,
+                                     nonnegative=not positive)
+    if len(check.problems) > problems:
+        raise _Invalid
     return FieldParams(**values)
 
 
-def _parse_obstacle(check: _Checker, value: Any, key: str, size: tuple[float, float]) -> Obstacle:
+def _outside(size: tuple[float, float] | None, lower: np.ndarray, upper: np.ndarray) -> str | None:
+    """What to say if the box ``[lower, upper]`` leaves the map, else None (also when the size is unknown)."""
+    if size is None:
+        return None
+    if lower[0] < 0 or lower[1] < 0 or upper[0] > size[0] or upper[1] > size[1]:
+        return f"reaches outside the map [0, {size[0]:g}] x [0, {size[1]:g}]"
+    return None
+
+
+def _parse_obstacle(check: _Checker, value: Any, key: str, size: tuple[float, float] | None) -> Obstacle:
+    problems = len(check.problems)
     body = check.mapping(value, key, {"polygon", "circle"})
-    if len(body) != 1:
-        raise check.fail(key, "each obstacle is exactly one of 'polygon: [[x, y], ...]' or 'circle: {center, radius}'")
-    w, h = size
+    shapes = [k for k in ("polygon", "circle") if k in body]
+    if len(shapes) != 1:
+        if len(check.problems) == problems:
+            check.bad(key, "each obstacle is exactly one of 'polygon: [[x, y], ...]' or 'circle: {center, radius}'")
+        raise _Invalid
     if "polygon" in body:
         k = f"{key}.polygon"
-        vertices = check.points(body["polygon"], k, at_least=3)
+        vertices = check.points(body["polygon"], k, at_least=3, at_most=MAX_POLYGON_VERTICES, what="vertices")
         if not geometry.polygon_is_simple(vertices):
-            raise check.fail(k, "polygon crosses itself or repeats a vertex (it must be a simple polygon)")
-        if abs(geometry.polygon_area(vertices)) < 1e-12:
-            raise check.fail(k, "polygon has zero area (its vertices are collinear)")
-        if vertices.min() < 0 or np.any(vertices[:, 0] > w) or np.any(vertices[:, 1] > h):
-            raise check.fail(k, f"polygon reaches outside the map [0, {w:g}] x [0, {h:g}]")
-        if geometry.polygon_area(vertices) < 0:
-            vertices = vertices[::-1].copy()
-        return PolygonObstacle(vertices)
+            raise check.bad(k, "polygon crosses itself or repeats a vertex (it must be a simple polygon)")
+        area = geometry.polygon_area(vertices)
+        if abs(area) < 1e-12:
+            raise check.bad(k, "polygon has zero area (its vertices are collinear)")
+        outside = _outside(size, vertices.min(axis=0), vertices.max(axis=0))
+        if outside:
+            raise check.bad(k, f"polygon {outside}")
+        if len(check.problems) > problems:
+            raise _Invalid
+        return PolygonObstacle(vertices if area > 0 else vertices[::-1].copy())
     k = f"{key}.circle"
     circle = check.mapping(body["circle"], k, {"center", "radius"}, required=("center", "radius"))
-    center = check.point(circle["center"], f"{k}.center")
-    radius = check.number(circle["radius"], f"{k}.radius", nonnegative=True)
-    if center[0] - radius < 0 or center[1] - radius < 0 or center[0] + radius > w or center[1] + radius > h:
-        raise check.fail(k, f"circle reaches outside the map [0, {w:g}] x [0, {h:g}]")
-    return CircleObstacle(center, radius)
+    center = check.attempt(check.point, circle["center"], f"{k}.center") if "center" in circle else None
+    radius = check.attempt(check.number, circle["radius"], f"{k}.radius", nonnegative=True) if "radius" in circle else None
+    if center is None or radius is None or len(check.problems) > problems:
+        raise _Invalid
+    c = np.array(center)
+    outside = _outside(size, c - radius, c + radius)
+    if outside:
+        raise check.bad(k, f"circle {outside}")
+    return CircleObstacle(c, radius)
+
+
+def _parse_obstacles(check: _Checker, value: Any, size: tuple[float, float] | None) -> tuple[Obstacle, ...]:
+    if value is None:
+        return ()
+    if not isinstance(value, list):
+        raise check.bad("obstacles", f"expected a list, got {_kind(value)}")
+    if len(value) > MAX_OBSTACLES:
+        raise check.bad("obstacles", f"at most {MAX_OBSTACLES:,} obstacles, got {len(value):,}")
+    vertices = sum(len(o["polygon"]) for o in value
+                   if isinstance(o, Mapping) and isinstance(o.get("polygon"), (list, tuple)))
+    if vertices > MAX_VERTICES:
+        raise check.bad("obstacles", f"at most {MAX_VERTICES:,} polygon vertices in all, got {vertices:,}")
+    parsed = [check.attempt(_parse_obstacle, check, o, f"obstacles[{i}]", size) for i, o in enumerate(value)]
+    if any(o is None for o in parsed):
+        raise _Invalid
+    return tuple(parsed)
 
 
 def _parse_formation(check: _Checker, value: Any) -> FormationSpec:
+    problems = len(check.problems)
     body = check.mapping(value, "formation", {"followers", "comm_range", "spacing", "shape", "offsets"})
     default = FormationSpec()
     followers = body.get("followers", default.followers)
-    if isinstance(followers, bool) or not isinstance(followers, int) or followers < 0:
-        raise check.fail("formation.followers", f"expected a whole number >= 0, got {followers!r}")
-    comm_range = check.number(body.get("comm_range", default.comm_range), "formation.comm_range", positive=True)
-    spacing = check.number(body.get("spacing", default.spacing), "formation.spacing", positive=True)
-    if spacing > comm_range:
-        raise check.fail("formation.spacing", f"spacing {spacing:g} exceeds comm_range {comm_range:g}")
+    if isinstance(followers, bool) or not isinstance(followers, int) or not 0 <= followers <= MAX_FOLLOWERS:
+        check.bad("formation.followers", f"expected a whole number from 0 to {MAX_FOLLOWERS}, got {_kind(followers)}")
+        followers = None
+    comm_range = check.attempt(check.number, body.get("comm_range", default.comm_range), "formation.comm_range",
+                               positive=True)
+    spacing = check.attempt(check.number, body.get("spacing", default.spacing), "formation.spacing", positive=True)
+    if spacing is not None and comm_range is not None and spacing > comm_range:
+        check.bad("formation.spacing", f"spacing {spacing:g} exceeds comm_range {comm_range:g}")
     shape = body.get("shape", default.shape)
     if shape not in ("line", "wedge", "offsets"):
-        raise check.fail("formation.shape", f"expected 'line', 'wedge' or 'offsets', got {shape!r}")
+        check.bad("formation.shape", f"expected 'line', 'wedge' or 'offsets', got {_kind(shape)}")
     offsets: tuple[tuple[float, float], ...] = ()
     if shape == "offsets":
         if "offsets" not in body:
-            raise check.fail("formation.offsets", "missing (required when shape is 'offsets')")
-        pts = check.points(body["offsets"], "formation.offsets", at_least=1)
-        if len(pts) != followers:
-            raise check.fail("formation.offsets", f"{len(pts)} offsets for {followers} followers")
-        offsets = tuple((float(a), float(b)) for a, b in pts)
+            check.bad("formation.offsets", "missing (required when shape is 'offsets')")
+        else:
+            pts = check.attempt(check.points, body["offsets"], "formation.offsets", at_least=1, at_most=MAX_FOLLOWERS)
+            if pts is not None and followers is not None and len(pts) != followers:
+                check.bad("formation.offsets", f"{len(pts)} offsets for {followers} followers")
+            elif pts is not None:
+                offsets = tuple((float(a), float(b)) for a, b in pts)
     elif "offsets" in body:
-        raise check.fail("formation.offsets", "only allowed when shape is 'offsets'")
+        check.bad("formation.offsets", "only allowed when shape is 'offsets'")
+    if len(check.problems) > problems:
+        raise _Invalid
     return FormationSpec(followers, comm_range, spacing, shape, offsets)
+
+
+# -- limits that depend on several values ----------------------------------------------------
+def memory_budget() -> int:
+    """The peak memory the rasters of one world may take [bytes]: :data:`MEMORY_BUDGET`, or
+    ``APF_PHYSICS_MEMORY_BUDGET`` (bytes, or a number with K, M, G or T, binary units).
+
+    Raises:
+        UserError: the variable is set to something else.
+    """
+    text = os.environ.get(MEMORY_BUDGET_VARIABLE, "").strip()
+    if not text:
+        return MEMORY_BUDGET
+    scale = {"K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}.get(text[-1:].upper(), 1)
+    number = text[:-1] if scale > 1 else text
+    try:
+        value = float(number) * scale
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or value <= 0:
+        raise UserError(f"{MEMORY_BUDGET_VARIABLE}: expected a size such as 8G or 500M, got {_short(text)}")
+    return int(value)
+
+
+def raster_memory(size: Sequence[float], targets: int) -> float:
+    """Estimated peak memory [bytes] of the rasters an evaluation of a world builds.
+
+    The physics' clearance raster (8 nodes per unit, float64), the potential and observation
+    rasters and the A* grid (4 nodes per unit) over the map and :data:`RASTER_MARGIN` beyond
+    it: :data:`RASTER_BYTES_PER_UNIT2` plus :data:`RASTER_BYTES_PER_TARGET` per target, per
+    square unit (measured peaks, rounded up).
+    """
+    area = (float(size[0]) + 2 * RASTER_MARGIN) * (float(size[1]) + 2 * RASTER_MARGIN)
+    return area * (RASTER_BYTES_PER_UNIT2 + RASTER_BYTES_PER_TARGET * int(targets))
+
+
+def _gib(n: float) -> str:
+    return f"{n / 2**30:.1f} GiB" if n >= 2**30 else f"{n / 2**20:.0f} MiB"
+
+
+def _field_bounds(params: FieldParams, size: tuple[float, float], targets: int, obstacles: int) -> dict[str, tuple[float, float]]:
+    """Upper bounds of |U| and |∇U| from each term of the field anywhere the rasters reach.
+
+    ``U_att ≤ katt/2 · T · D²`` and ``|∇U_att| ≤ katt · T · D`` with ``D`` the diagonal of the
+    map and margin; ``|U_bh| ≤ kstr/2 · T · ps²``, ``|∇U_bh| ≤ kstr · T · ps``; each repulsive
+    term is capped at ``u_max`` and grows only where ``(1/d − 1/p0)² < 2 u_max / krep``, so
+    its slope ``krep (1/d − 1/p0) / d²`` stays below ``krep · s · (1/p0 + s)²`` with ``s = √(2 u_max / krep)``.
+    """
+    with np.errstate(all="ignore"):
+        f = {k: np.float64(v) for k, v in params.as_dict().items()}
+        reach = np.float64(math.hypot(size[0] + 2 * RASTER_MARGIN, size[1] + 2 * RASTER_MARGIN))
+        s = np.sqrt(2 * f["u_max"] / f["krep"]) if f["krep"] > 0 else np.float64(0.0)
+        rep_slope = obstacles * f["krep"] * s * (1 / f["p0"] + s) ** 2 if f["krep"] > 0 else np.float64(0.0)
+        return {
+            "katt": (f["katt"] / 2 * targets * reach**2, f["katt"] * targets * reach),
+            "kstr and ps": (f["kstr"] / 2 * targets * f["ps"] ** 2, f["kstr"] * targets * f["ps"]),
+            "krep, p0 and u_max": (obstacles * f["u_max"], rep_slope),
+        }
+
+
+def _check_together(check: _Checker, size, robot_radius, goal_tolerance, params, obstacles, targets, starts) -> None:
+    """The limits that depend on several values (each checked when its values are valid)."""
+    if size is not None:
+        if robot_radius is not None and robot_radius >= min(size) / 2:
+            check.bad("robot_radius", f"{robot_radius:g} does not fit in the {size[0]:g} x {size[1]:g} map "
+                                      "(it must be less than half its shorter side)")
+        half_diagonal = math.hypot(*size) / 2
+        if goal_tolerance is not None and goal_tolerance >= half_diagonal:
+            check.bad("goal_tolerance", f"{goal_tolerance:g} is not less than half the map's diagonal "
+                                        f"({half_diagonal:.4g}): nearly every point would count as reached")
+    if size is not None and targets is not None:
+        need, budget = raster_memory(size, len(targets)), memory_budget()
+        if need > budget:
+            check.bad("size", f"a {size[0]:g} x {size[1]:g} map with {len(targets)} target(s) needs about {_gib(need)} "
+                              f"of rasters (the physics' clearance at 8 nodes per unit, the planners' at 4), over the "
+                              f"budget of {_gib(budget)}; use a smaller map, or set {MEMORY_BUDGET_VARIABLE} "
+                              f"(e.g. {math.ceil(need / 2**30)}G) on a machine with that much memory")
+    if size is not None and targets is not None and params is not None and obstacles is not None:
+        bounds = _field_bounds(params, size, len(targets), len(obstacles))
+        for index, what in ((0, "|U|"), (1, "the slope of U")):
+            worst = max(bounds, key=lambda k: np.nan_to_num(bounds[k][index], nan=np.inf))
+            value = bounds[worst][index]
+            if not np.isfinite(value) or value > MAX_POTENTIAL:
+                shown = f"about {value:.1e}" if np.isfinite(value) else "infinity"
+                check.bad("field", f"{what} would reach {shown} on this map (from {worst}); "
+                                   f"it must stay below {MAX_POTENTIAL:.0e}")
+                break
+    if robot_radius is not None and robot_radius < MIN_ROBOT_RADIUS:
+        check.bad("robot_radius", f"must be at least {MIN_ROBOT_RADIUS:g} (smaller robots need more than 256 physics "
+                                  f"substeps per step), got {robot_radius:g}")
+    if goal_tolerance is not None and goal_tolerance < MIN_GOAL_TOLERANCE:
+        check.bad("goal_tolerance", f"must be at least {MIN_GOAL_TOLERANCE:g} (the A* grid's spacing), "
+                                    f"got {goal_tolerance:g}")
+
+
+def _near(world: World, points: np.ndarray, reach: float) -> World:
+    """``world`` with only the obstacles whose bounding box is within ``reach`` of a point (and
+    any that move): the others cannot change a verdict that looks no farther than ``reach``."""
+    if len(world.obstacles) <= 64 or not len(points):
+        return world
+    lo = np.array([o.bounds[0] for o in world.obstacles]) - reach
+    hi = np.array([o.bounds[1] for o in world.obstacles]) + reach
+    keep = np.array([getattr(o, "motion", None) is not None for o in world.obstacles])
+    for first in range(0, len(points), 256):
+        p = points[first:first + 256, None, :]
+        keep |= np.any(np.all((p >= lo[None]) & (p <= hi[None]), axis=2), axis=0)
+    return replace(world, obstacles=tuple(o for o, k in zip(world.obstacles, keep.tolist()) if k), _cache={})
+
+
+def _check_placement(check: _Checker, world: World) -> None:
+    """Targets and starts inside the map and outside the obstacles; starts not yet at a target."""
+    size, radius = world.size, world.robot_radius
+    for key, pts, margin in (("targets", world.targets, 0.0), ("starts", world.starts, radius)):
+        if not len(pts):
+            continue
+        edge = world.edge_distance(pts)
+        inside = _near(world, pts, margin + 1e-6).obstacle_distance(pts)
+        reached = world.distance_to_target(pts) <= world.goal_tolerance if key == "starts" else np.zeros(len(pts), bool)
+        for i in np.flatnonzero((edge < margin) | (inside < margin) | (inside <= 0) | reached).tolist():
+            where, at = f"{key}[{i}]", pts[i].tolist()
+            if edge[i] < 0:
+                check.bad(where, f"{at} is outside the map [0, {size[0]:g}] x [0, {size[1]:g}]")
+            elif edge[i] < margin:
+                check.bad(where, f"{at} is closer than the robot radius {radius:g} to the map's edge")
+            elif inside[i] <= 0:
+                check.bad(where, f"{at} is inside an obstacle")
+            elif inside[i] < margin:
+                check.bad(where, f"{at} is closer than the robot radius {radius:g} to an obstacle")
+            else:
+                check.bad(where, f"{at} is already within goal_tolerance {world.goal_tolerance:g} of a target")
+
+
+def _build(check: _Checker, data: Any, source: str) -> World | None:
+    if not isinstance(data, Mapping):
+        check.bad("", f"a world file must be a mapping of keys, got {_kind(data)}")
+        return None
+    check.mapping(data, "", _TOP_KEYS, required=_REQUIRED)
+    size = check.attempt(_parse_size, check, data["size"]) if "size" in data else None
+    default_name = Path(source).stem if source != "<dict>" else "world"
+    name = check.attempt(_parse_name, check, data.get("name", default_name))
+    robot_radius = check.attempt(check.number, data.get("robot_radius", 0.25), "robot_radius", positive=True)
+    goal_tolerance = check.attempt(check.number, data.get("goal_tolerance", 0.75), "goal_tolerance", positive=True)
+    params = check.attempt(_parse_field, check, data["field"]) if "field" in data else None
+    obstacles = check.attempt(_parse_obstacles, check, data.get("obstacles"), size)
+    targets = (check.attempt(check.points, data["targets"], "targets", at_least=1, at_most=MAX_TARGETS, what="targets")
+               if "targets" in data else None)
+    starts = check.attempt(check.points, data.get("starts") or [], "starts", at_most=MAX_STARTS, what="starts")
+    formation = (check.attempt(_parse_formation, check, data["formation"])
+                 if data.get("formation") is not None else None)
+    _check_together(check, size, robot_radius, goal_tolerance, params, obstacles, targets, starts)
+    if check.problems:
+        return None
+    world = World(name, size, robot_radius, goal_tolerance, params, obstacles, targets, starts, formation, source)
+    _check_placement(check, world)
+    return world
 
 
 def world_from_dict(data: Any, source: str = "<dict>") -> World:
     """Validate a world-file mapping and build the :class:`World`.
 
     Raises:
-        WorldError: naming ``source``, the key and what is wrong.
+        WorldError: one line per problem (at most :data:`MAX_PROBLEMS`), each naming
+            ``source``, the key and what is wrong.
     """
     check = _Checker(source)
-    if not isinstance(data, Mapping):
-        raise check.fail("", f"a world file must be a mapping of keys, got {type(data).__name__}")
-    check.mapping(data, "", _TOP_KEYS, required=_REQUIRED)
-
-    size_raw = data["size"]
-    if not isinstance(size_raw, (list, tuple)) or len(size_raw) != 2:
-        raise check.fail("size", f"expected [width, height], got {size_raw!r}")
-    size = (check.number(size_raw[0], "size[0]", positive=True), check.number(size_raw[1], "size[1]", positive=True))
-
-    name = data.get("name", Path(source).stem if source != "<dict>" else "world")
-    if not isinstance(name, str) or not name:
-        raise check.fail("name", f"expected a non-empty string, got {name!r}")
-    robot_radius = check.number(data.get("robot_radius", 0.25), "robot_radius", positive=True)
-    goal_tolerance = check.number(data.get("goal_tolerance", 0.75), "goal_tolerance", positive=True)
-    params = _parse_field(check, data["field"])
-
-    raw_obstacles = data.get("obstacles", [])
-    if raw_obstacles is None:
-        raw_obstacles = []
-    if not isinstance(raw_obstacles, list):
-        raise check.fail("obstacles", f"expected a list, got {type(raw_obstacles).__name__}")
-    obstacles = tuple(_parse_obstacle(check, o, f"obstacles[{i}]", size) for i, o in enumerate(raw_obstacles))
-
-    targets = check.points(data["targets"], "targets", at_least=1)
-    starts = check.points(data.get("starts", []) or [], "starts")
-    formation = _parse_formation(check, data["formation"]) if data.get("formation") is not None else None
-
-    world = World(name, size, robot_radius, goal_tolerance, params, obstacles, targets, starts, formation, source)
-
-    for key, pts, margin in (("targets", targets, 0.0), ("starts", starts, robot_radius)):
-        if not len(pts):
-            continue
-        edge = world.edge_distance(pts)
-        inside = world.obstacle_distance(pts)
-        for i in range(len(pts)):
-            where = f"{key}[{i}]"
-            if edge[i] < margin:
-                if edge[i] < 0:
-                    raise check.fail(where, f"{pts[i].tolist()} is outside the map [0, {size[0]:g}] x [0, {size[1]:g}]")
-                raise check.fail(where, f"{pts[i].tolist()} is closer than the robot radius {robot_radius:g} to the map's edge")
-            if inside[i] <= 0:
-                raise check.fail(where, f"{pts[i].tolist()} is inside an obstacle")
-            if inside[i] < margin:
-                raise check.fail(where, f"{pts[i].tolist()} is closer than the robot radius {robot_radius:g} to an obstacle")
+    try:
+        world = _build(check, data, source)
+    except _TooMany:
+        world = None
+    if check.problems or world is None:
+        raise check.error()
     return world
 
 
+# -- reading files ---------------------------------------------------------------------------
+_PARSER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)   # libyaml's parser when PyYAML has it
+
+
+class _Resolver(yaml.resolver.Resolver):
+    """YAML 1.1's implicit types, plus the floats of YAML 1.2 and JSON (``1e-9``, ``2.5E3``), which
+    YAML 1.1 would read as strings."""
+
+
+_Resolver.add_implicit_resolver(
+    "tag:yaml.org,2002:float", re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"), list("-+0123456789"))
+_RESOLVER = _Resolver()
+_CONSTRUCTOR = yaml.constructor.SafeConstructor()
+_SEQUENCE_TAGS = (None, "!", "tag:yaml.org,2002:seq")
+_SCALAR_TAGS = {f"tag:yaml.org,2002:{name}" for name in ("null", "bool", "int", "float", "str", "binary", "timestamp")}
+_MERGE = object()  # the key ``<<``: merge the mappings that are its value
+_MAPPING_TAGS = (None, "!", "tag:yaml.org,2002:map")
+
+
+class _YamlLimit(Exception):
+    """The text breaks a limit; the message says where and which."""
+
+
+@dataclass
+class _Open:
+    """A list or mapping the parser has opened and not yet closed."""
+
+    value: list | dict
+    anchor: str | None
+    size: int = 1                      # values in it so far, itself included, aliases expanded
+    key: Any = None                    # in a mapping: the key waiting for its value
+    has_key: bool = False
+    merges: list | None = None         # mappings merged in with ``<<``
+
+
+def _scalar(event: yaml.ScalarEvent) -> Any:
+    """The Python value of a scalar, by the safe loader's rules for its tag."""
+    tag = event.tag if event.tag not in (None, "!") else _RESOLVER.resolve(yaml.ScalarNode, event.value, event.implicit)
+    if tag == "tag:yaml.org,2002:merge":
+        return _MERGE
+    construct = _CONSTRUCTOR.yaml_constructors.get(tag) if tag in _SCALAR_TAGS else None
+    if construct is None:
+        raise _YamlLimit(f"line {event.start_mark.line + 1}: unsupported tag {_short(tag)}")
+    return construct(_CONSTRUCTOR, yaml.ScalarNode(tag, event.value, event.start_mark, event.end_mark, event.style))
+
+
+def _load_yaml(text: str) -> Any:
+    """The document in ``text``, built from the parser's events with the limits checked as they come.
+
+    What ``yaml.safe_load`` returns (one document; anchors and aliases share one object;
+    ``<<`` merges), but nothing is built beyond the limits: nesting deeper than
+    :data:`MAX_DEPTH`, a value longer than :data:`MAX_SCALAR_CHARS`, more than
+    :data:`MAX_NODES` values with every alias counted as what it expands to (an alias bomb is
+    refused after the few events that define it), an alias inside what it names, and a key
+    repeated in one mapping (YAML would keep only the last: what was written first would be lost).
+
+    Raises:
+        _YamlLimit: a limit is broken or a value cannot be built.
+        yaml.YAMLError: ``text`` is not YAML.
+    """
+    nodes, documents = 0, 0
+    stack: list[_Open] = []
+    anchors: dict[str, tuple[Any, int]] = {}   # anchor -> (value, values it expands to)
+    unfinished: set[str] = set()              # anchors of collections still open
+    document: Any = None
+    for event in yaml.parse(text, Loader=_PARSER):
+        where = f"line {event.start_mark.line + 1}"
+        if isinstance(event, yaml.DocumentStartEvent):
+            documents += 1
+            if documents > 1:
+                raise _YamlLimit(f"{where}: a second document; the file must hold one")
+            continue
+        if isinstance(event, yaml.CollectionStartEvent):
+            if len(stack) >= MAX_DEPTH:
+                raise _YamlLimit(f"{where}: nested deeper than {MAX_DEPTH} levels")
+            mapping = isinstance(event, yaml.MappingStartEvent)
+            if event.tag not in (_MAPPING_TAGS if mapping else _SEQUENCE_TAGS):
+                raise _YamlLimit(f"{where}: unsupported tag {_short(event.tag)}")
+            stack.append(_Open({} if mapping else [], event.anchor))
+            if event.anchor:
+                unfinished.add(event.anchor)
+            continue
+        if isinstance(event, yaml.CollectionEndEvent):
+            frame = stack.pop()
+            value, size, count = frame.value, frame.size, 1   # its contents are counted already
+            if frame.merges:  # explicit keys win, then the first merged mapping, then the next
+                merged: dict = {}
+                for source in reversed(frame.merges):
+                    merged.update(source)
+                merged.update(value)
+                value.clear()
+                value.update(merged)
+            if frame.anchor:
+                anchors[frame.anchor] = (value, size)
+                unfinished.discard(frame.anchor)
+        elif isinstance(event, yaml.ScalarEvent):
+            if len(event.value) > MAX_SCALAR_CHARS:
+                raise _YamlLimit(f"{where}: a value of {len(event.value):,} characters (at most {MAX_SCALAR_CHARS:,})")
+            value = _scalar(event)
+            size = count = 1
+            if event.anchor:
+                anchors[event.anchor] = (value, 1)
+        elif isinstance(event, yaml.AliasEvent):
+            name = _key_text(event.anchor)
+            if event.anchor in unfinished:
+                raise _YamlLimit(f"{where}: alias *{name} is inside the collection it names")
+            if event.anchor not in anchors:
+                raise _YamlLimit(f"{where}: alias *{name} has no anchor &{name} before it")
+            value, size = anchors[event.anchor]
+            count = size
+        else:  # stream and document ends
+            continue
+        nodes += count
+        if nodes > MAX_NODES:
+            raise _YamlLimit(f"{where}: more than {MAX_NODES:,} values (aliases counted as what they expand to)")
+        if value is _MERGE and not (stack and isinstance(stack[-1].value, dict) and not stack[-1].has_key):
+            raise _YamlLimit(f"{where}: '<<' is only a mapping's key")
+        if not stack:
+            document = value
+            continue
+        parent = stack[-1]
+        parent.size += size
+        if isinstance(parent.value, list):
+            parent.value.append(value)
+        elif not parent.has_key:
+            if value is _MERGE:
+                if parent.merges is not None:
+                    raise _YamlLimit(f"{where}: key '<<' appears twice in one mapping")
+                parent.merges = []
+            else:
+                try:
+                    hash(value)
+                except TypeError:
+                    raise _YamlLimit(f"{where}: a {type(value).__name__} as a mapping key") from None
+                if value in parent.value:
+                    raise _YamlLimit(f"{where}: key {_short(value)} appears twice in one mapping")
+            parent.key, parent.has_key = value, True
+        else:
+            if parent.key is _MERGE:
+                sources = [value] if isinstance(value, dict) else value
+                if not isinstance(sources, list) or not all(isinstance(m, dict) for m in sources):
+                    raise _YamlLimit(f"{where}: '<<' merges a mapping or a list of mappings")
+                parent.merges.extend(sources)
+            else:
+                parent.value[parent.key] = value
+            parent.has_key = False
+    return document
+
+
+def _file_kind(mode: int) -> str:
+    for test, kind in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return kind
+    return "not a regular file"
+
+
+def _read_regular_file(path: str | Path, kind: str, error: type[UserError]) -> bytes:
+    """The bytes of ``path`` if it is a regular file of at most :data:`MAX_FILE_BYTES`.
+
+    Opened without blocking (a FIFO would wait for a writer forever) and checked with
+    ``fstat`` on the open file, so what is read is what was checked.
+    """
+    source = str(path)
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    except FileNotFoundError:
+        raise error(f"{source}: no such {kind} file") from None
+    except OSError as exc:
+        raise error(f"{source}: cannot read the {kind} file ({exc.strerror or exc})") from None
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise error(f"{source}: cannot read the {kind} file: it is {_file_kind(info.st_mode)}, not a regular file")
+        if info.st_size > MAX_FILE_BYTES:
+            raise error(f"{source}: the {kind} file is {info.st_size:,} bytes, over the limit of {MAX_FILE_BYTES:,}")
+        chunks, total = [], 0
+        while total <= MAX_FILE_BYTES:
+            chunk = os.read(fd, MAX_FILE_BYTES + 1 - total)
+            if not chunk:
+                break
+            chunks.append(chunk)
+            total += len(chunk)
+        if total > MAX_FILE_BYTES:
+            raise error(f"{source}: the {kind} file grew over the limit of {MAX_FILE_BYTES:,} bytes while being read")
+        return b"".join(chunks)
+    except OSError as exc:
+        raise error(f"{source}: cannot read the {kind} file ({exc.strerror or exc})") from None
+    finally:
+        os.close(fd)
+
+
 def read_yaml_file(path: str | Path, kind: str, error: type[UserError] = UserError) -> Any:
-    """Read a YAML file, turning every failure into one ``error`` naming the file.
+    """Read a YAML file within the limits, turning every failure into one ``error`` naming the file.
 
     Args:
-        path: The file.
+        path: The file: a regular file of at most :data:`MAX_FILE_BYTES`.
         kind: What the file is, for messages (``"world"``, ``"curriculum"``).
         error: The exception class to raise.
     """
     source = str(path)
+    data = _read_regular_file(path, kind, error)
     try:
-        text = Path(path).read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise error(f"{source}: no such {kind} file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise error(f"{source}: cannot read the {kind} file ({exc})") from None
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise error(f"{source}: cannot read the {kind} file (not UTF-8 text: byte {exc.start:,} is {data[exc.start]:#04x})") from None
     try:
-        return yaml.safe_load(text)
+        return _load_yaml(text)
+    except _YamlLimit as exc:
+        raise error(f"{source}: {exc}") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        raise error(f"{source}: not valid YAML{where}: {getattr(exc, 'problem', exc)}") from None
+        raise error(f"{source}: not valid YAML{where}: {_short(getattr(exc, 'problem', None) or exc, 200)}") from None
+    except (ValueError, OverflowError, TypeError) as exc:  # a value YAML's constructors reject (a date like 2024-13-45)
+        raise error(f"{source}: not valid YAML: {_short(str(exc), 200)}") from None
 
 
 def load_world(path: str | Path) -> World:
     """Read and validate a world file (YAML, or JSON being YAML).
 
     Raises:
-        WorldError: the file is missing, unreadable, not YAML, or breaks the contract.
+        WorldError: the file is missing, not a regular file, too large, not YAML, or breaks
+            the contract (every problem, one line each).
     """
     path = resolve_world(path)
     return world_from_dict(read_yaml_file(path, "world", WorldError), str(path))

@@ -53,7 +53,7 @@ def test_followers_start_behind_the_leader(worlds_dir):
 
 def test_no_room_for_followers_is_a_clear_error():
     # a map barely larger than one robot: nowhere to put a follower
-    world = world_from_dict(simple_world_dict(size=[1.2, 1.2], obstacles=[], starts=[[0.6, 0.6]], targets=[[0.3, 0.3]]))
+    world = world_from_dict(simple_world_dict(size=[1.2, 1.2], obstacles=[], starts=[[0.6, 0.6]], targets=[[1.15, 1.15]]))
     with pytest.raises(UserError, match="no free position for follower 1"):
         initial_followers(world, FormationSpec(), world.starts[0])
 

@@ -94,7 +94,7 @@ class Pacing(Planner):
         self.trap_window = window
         self.t = 0
 
-    def act(self, positions, active):
+    def act(self, positions, active, t=0):
         self.t += 1
         move = ACTIONS[3] if self.t % 2 else ACTIONS[2]
         return np.tile(move, (len(positions), 1)) * active[:, None]

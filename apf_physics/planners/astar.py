@@ -5,12 +5,15 @@ from __future__ import annotations
 import numpy as np
 
 from apf_physics.planners.base import Planner
-from apf_physics.search import LOS_MARGIN, LOS_SPACING, shortest_path
+from apf_physics.search import LOS_MARGIN, LOS_SPACING, SearchGrid
 from apf_physics.world import World
+
+HORIZON = 4.0
+"""How far ahead (along the path, in units) a replanning robot checks its path against the moving obstacles."""
 
 
 class AStarPlanner(Planner):
-    """Executes the shortest grid path (see the module docstring) through the physics.
+    """Executes the shortest grid path (:class:`~apf_physics.search.SearchGrid`) through the physics.
 
     Each control step a robot moves straight toward its current waypoint, at most one unit
     along each axis (the direction kept, the length scaled down). A waypoint is passed once the
@@ -18,8 +21,12 @@ class AStarPlanner(Planner):
     along the segment from the robot). A robot from whose start no target can be reached is
     reported by :meth:`stuck`.
 
-    It is the oracle for path length: its paths are near-shortest among those that keep the
-    robot's radius plus a small margin from everything.
+    In a world without moving obstacles it is the oracle for path length: its paths are
+    near-shortest among those that keep the robot's radius plus a small margin from
+    everything. With moving obstacles it is the reactive baseline: every step, a robot whose
+    path (over the next :data:`HORIZON` units) runs into a moving obstacle where it is now
+    plans again around the obstacles as they stand (A* on the grid); it does not predict
+    where they go. When no path exists around them, it waits.
     """
 
     name = "astar"
@@ -29,7 +36,8 @@ class AStarPlanner(Planner):
     def reset(self, world: World, positions: np.ndarray) -> None:
         super().reset(world, positions)
         positions = np.asarray(positions, float).reshape(-1, 2)
-        self.paths = [shortest_path(world, p) for p in positions]
+        self.search = SearchGrid.of(world)
+        self.paths = [self.search.path(p) for p in positions]
         self._waypoint = np.ones(len(positions), int)
         self._no_path = np.array([p is None for p in self.paths], bool)
 
@@ -37,7 +45,7 @@ class AStarPlanner(Planner):
         """Robots from whose start no target can be reached."""
         return self._no_path
 
-    def act(self, positions: np.ndarray, active: np.ndarray) -> np.ndarray:
+    def act(self, positions: np.ndarray, active: np.ndarray, t: int = 0) -> np.ndarray:
         positions = np.asarray(positions, float).reshape(-1, 2)
         step = np.zeros_like(positions)
         movers = [i for i in np.flatnonzero(active) if not self._no_path[i] and len(self.paths[i]) > 1]
@@ -49,16 +57,42 @@ class AStarPlanner(Planner):
             while k < len(path) - 1 and np.hypot(*(path[k] - positions[i])) <= self.arrive:
                 k += 1
             self._waypoint[i] = k
+        if self.world.moving:
+            waiting = self._replan(positions, movers, t)
+            movers = [i for i in movers if i not in waiting]
+        when = t if self.world.moving else None
         # Skip a waypoint when the one after it is already in sight (one check per robot, batched).
         ahead = [i for i in movers if self._waypoint[i] < len(self.paths[i]) - 1]
         if ahead:
             a = positions[ahead]
             b = np.array([self.paths[i][self._waypoint[i] + 1] for i in ahead])
-            threshold = np.minimum(self.world.robot_radius + LOS_MARGIN, self.world.clearance(a))
-            for i, ok in zip(ahead, self.world.path_clearance(a, b, LOS_SPACING) >= threshold):
+            now = self.world.clearance(a, t) if when is not None else self.world.static_clearance(a)
+            threshold = np.minimum(self.world.robot_radius + LOS_MARGIN, now)
+            for i, ok in zip(ahead, self.world.path_clearance(a, b, LOS_SPACING, t=when, during=False) >= threshold):
                 if ok:
                     self._waypoint[i] += 1
         for i in movers:
             d = self.paths[i][self._waypoint[i]] - positions[i]
             step[i] = d / max(1.0, float(np.max(np.abs(d))))
         return step
+
+    def _replan(self, positions: np.ndarray, movers: list[int], t: int) -> set[int]:
+        """Plan again for the robots whose path ahead meets a moving obstacle now; returns those that wait."""
+        waiting = set()
+        bar = self.world.robot_radius + LOS_MARGIN
+        for i in movers:
+            path = np.vstack([positions[i], self.paths[i][self._waypoint[i]:]])
+            lengths = np.hypot(*np.diff(path, axis=0).T)
+            keep = int(np.searchsorted(np.cumsum(lengths), HORIZON)) + 1
+            a, b = path[:-1][:keep], path[1:][:keep]
+            static = self.world.path_clearance(a, b, LOS_SPACING)
+            now = self.world.path_clearance(a, b, LOS_SPACING, t=t, during=False) if len(a) else static
+            # blocked by a moving obstacle (not by the static ones, which the path already respects)
+            if len(a) and np.any((now < bar) & (now < static)):
+                new = self.search.path(positions[i], t)
+                if new is None or len(new) < 2:
+                    waiting.add(i)
+                    continue
+                self.paths[i] = new
+                self._waypoint[i] = 1
+        return waiting

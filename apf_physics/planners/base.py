@@ -43,13 +43,15 @@ class Planner:
         """(N,) bool: robots for which the planner itself gives up (it knows it is trapped), or None."""
         return None
 
-    def act(self, positions: np.ndarray, active: np.ndarray) -> np.ndarray:
+    def act(self, positions: np.ndarray, active: np.ndarray, t: int = 0) -> np.ndarray:
         """Return the displacement each robot should make during this control step.
 
         Args:
             positions: (N, 2) current robot centres in world coordinates.
             active: (N,) bool, False for robots whose episode already ended (their
                 command is ignored).
+            t: The control step the episodes are at (where the moving obstacles are; the
+                move is made during ``t → t + 1``).
 
         Returns:
             (N, 2) float displacements in world units per control step; each component

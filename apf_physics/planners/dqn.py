@@ -57,14 +57,14 @@ class DQNPlanner(Planner):
         self.trap_window = self.MEMORY_TRAP_WINDOW if self._policy.observer.memory else None
         self._started = False
 
-    def act(self, positions: np.ndarray, active: np.ndarray) -> np.ndarray:
+    def act(self, positions: np.ndarray, active: np.ndarray, t: int = 0) -> np.ndarray:
         if self._started:  # the first call sees the starts, which reset() counted already
             self.observer.visit(positions)
         self._started = True
-        obs = self.observer.observe(positions)
+        obs = self.observer.observe(positions, t=t)
         if not self.shield:
             return ACTIONS[self._policy.act(obs)] * active[:, None]
-        room = move_clearance(self.world, positions) - (self.world.robot_radius + SAFETY)
+        room = move_clearance(self.world, positions, t=t) - (self.world.robot_radius + SAFETY)
         return ACTIONS[shielded_argmax(self._policy.q_values(obs), room)] * active[:, None]
 
 

@@ -81,6 +81,7 @@ class EscapePlanner(Planner):
         super().reset(world, positions)
         n = len(positions)
         self._descent = GradientPlanner()
+        self._t = 0
         self._descent.reset(world, positions)
         self.mode = np.full(n, _DESCEND)
         self._side = np.ones(n)                       # +1: obstacle on the left of the travel, −1: right
@@ -99,14 +100,14 @@ class EscapePlanner(Planner):
         return self.world.targets[np.argmin(d, axis=1)]
 
     def _safe(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        return self.world.path_clearance(a, b, 0.1) >= self.world.robot_radius + self.safety_margin
+        return self.world.path_clearance(a, b, 0.1, t=self._t) >= self.world.robot_radius + self.safety_margin
 
     # -- descent ----------------------------------------------------------------------------
     def _descend(self, positions: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Descent steps for robots ``idx`` and whether each is usable (lowers U, safe)."""
         mask = np.zeros(len(positions), bool)
         mask[idx] = True
-        step = self._descent.act(positions, mask)[idx]
+        step = self._descent.act(positions, mask, self._t)[idx]
         ok = ~self._descent.stuck()[idx]
         ok &= np.hypot(step[:, 0], step[:, 1]) > 1e-9
         ok[ok] &= self._safe(positions[idx[ok]], positions[idx[ok]] + step[ok])
@@ -115,7 +116,7 @@ class EscapePlanner(Planner):
     # -- boundary following -----------------------------------------------------------------
     def _body_distances(self, points: np.ndarray) -> np.ndarray:
         """(P, B) distance from each point to each body: every obstacle, then the map's four edges."""
-        cols = [o.signed_distance(points)[0] for o in self.world.obstacles]
+        cols = [o.signed_distance(points)[0] for o in self.world.obstacles_at(self._t)]
         w, h = self.world.size
         cols += [points[:, 0], w - points[:, 0], points[:, 1], h - points[:, 1]]
         return np.column_stack(cols)
@@ -194,10 +195,11 @@ class EscapePlanner(Planner):
         return step
 
     # -- the policy -------------------------------------------------------------------------
-    def act(self, positions: np.ndarray, active: np.ndarray) -> np.ndarray:
+    def act(self, positions: np.ndarray, active: np.ndarray, t: int = 0) -> np.ndarray:
         positions = np.asarray(positions, float).reshape(-1, 2)
+        self._t = t
         step = np.zeros_like(positions)
-        u = self.world.potential(positions)
+        u = self.world.potential(positions, t)
 
         # Followers that are now closer to the target than their best trap leave the boundary
         # if descent can move from here.

@@ -30,8 +30,8 @@ class GradientPlanner(Planner):
         """Robots whose next unit step would not lower the potential: a local minimum at this step size."""
         return self._stuck
 
-    def act(self, positions: np.ndarray, active: np.ndarray) -> np.ndarray:
-        grad = self.world.gradient(positions)
+    def act(self, positions: np.ndarray, active: np.ndarray, t: int = 0) -> np.ndarray:
+        grad = self.world.gradient(positions, t)
         norm = np.hypot(grad[:, 0], grad[:, 1])
         step = np.zeros_like(grad)
         moving = active & (norm > 1e-12)
@@ -40,14 +40,14 @@ class GradientPlanner(Planner):
         # obstacle that the target lies behind, the step would land in its repulsion. Before
         # calling that trapped, halve the step (backtracking) so that a minimum that is a
         # target, a little off the unit lattice, is still reached.
-        here = self.world.potential(positions)
+        here = self.world.potential(positions, t)
         scale = np.ones(len(positions))
         pending = moving.copy()
         for factor in self.backtracking:
             if not pending.any():
                 break
             scale[pending] = factor
-            there = self.world.potential(positions[pending] + factor * step[pending])
+            there = self.world.potential(positions[pending] + factor * step[pending], t)
             idx = np.flatnonzero(pending)
             pending[idx[there < here[idx]]] = False
         self._stuck = active & (pending | ~moving)
