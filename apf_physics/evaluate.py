@@ -3,16 +3,14 @@
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
 
-from apf_physics.errors import UserError
 from apf_physics.planners.base import Planner
+from apf_physics.render.output import check_writable, write_text
 from apf_physics.rollout import Episode, rollout
 from apf_physics.world import World
 
@@ -110,16 +108,10 @@ def write_json(evaluations: Sequence[Evaluation], path: str | Path) -> None:
 
 
 def write_text_atomic(path: str | Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file and a rename; a clear error if it cannot."""
-    path = Path(path)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes files private; results are ordinary files
-        os.replace(tmp, path)
-    except OSError as exc:
-        raise UserError(f"{path}: cannot write ({exc.strerror or exc})") from None
+    """Write ``text`` to ``path`` through a temporary file and a rename; a clear error if it cannot.
+
+    A missing folder is created; anything at ``path`` that is not a regular file (a
+    directory, a link, a device, a FIFO) is refused and left alone
+    (:func:`~apf_physics.render.output.check_writable`).
+    """
+    write_text(check_writable(path, create_parent=True), text)

@@ -5,6 +5,14 @@ from __future__ import annotations
 import argparse
 from collections import Counter
 
+from apf_physics.errors import UserError
+from apf_physics.planners.gradient import GradientPlanner
+from apf_physics.render.drawing import FieldImage
+from apf_physics.render.field_plot import plot_field
+from apf_physics.render.output import check_writable
+from apf_physics.rollout import rollout
+from apf_physics.worldfile import load_world
+
 
 def add_parser(subparsers) -> None:
     """Register the ``plot-field`` subcommand."""
@@ -30,26 +38,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="colour scale of the potential: log (default) or rank (histogram-equalised)")
     parser.add_argument("--max-steps", type=int, default=None,
                         help="step limit of each descent (default: the rollout's)")
+    parser.add_argument("--t", type=float, default=None, metavar="T",
+                        help="a world with moving obstacles: draw the field and the obstacles as they are at "
+                             "control step T (default: the static field, the routes as faint lines, the moving "
+                             "obstacles where they start)")
 
 
 def run(args: argparse.Namespace) -> int:
     """Draw the plot; returns the exit status."""
-    from apf_physics import load_world
-    from apf_physics.errors import UserError
-    from apf_physics.render.drawing import FieldImage
-    from apf_physics.render.field_plot import plot_field
-    from apf_physics.render.output import check_writable
-
     out = check_writable(args.out, (".png",), create_parent=True)
     if args.size < 16:
         raise UserError(f"--size must be at least 16 pixels, got {args.size}")
     world = load_world(args.world)
-    image = FieldImage.from_world(world, args.size, scaling=args.scaling)
+    if args.t is not None and args.t < 0:
+        raise UserError(f"--t must not be negative, got {args.t:g}")
+    image = FieldImage.from_world(world, args.size, scaling=args.scaling,
+                                  t=args.t if args.t is not None or not world.moving else None)
     paths, reached, title = [], [], [f"{world.name}: potential field"]
-    if not args.no_paths and len(world.starts):
-        from apf_physics.planners.gradient import GradientPlanner
-        from apf_physics.rollout import rollout
-
+    if args.t is not None:
+        title = [f"{world.name}: potential field at step {args.t:g}"]
+    if not args.no_paths and len(world.starts) and args.t is None:
         episodes = rollout(world, GradientPlanner(), world.starts, max_steps=args.max_steps)
         paths = [episode.path for episode in episodes]
         reached = [episode.success for episode in episodes]

@@ -131,6 +131,6 @@ class FormationEnv(gym.Env):
         if self.render_mode != "rgb_array":
             return None
         snap = Snapshot(self.positions, formation_roles(self.m), tuple(np.asarray(t) for t in self.trails),
-                        (f"{self.world.name}  step {self.steps}",))
+                        (f"{self.world.name}  step {self.steps}",), self.steps)
         return draw_frame(field_image(self.world), snap)
 

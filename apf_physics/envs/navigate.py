@@ -157,5 +157,5 @@ class NavigateEnv(gym.Env):
         if self.render_mode != "rgb_array":
             return None
         snap = Snapshot(self._task.positions[0, :1], ("single",), (np.asarray(self._trail),),
-                        (f"{self.world.name}  step {self._steps}",))
+                        (f"{self.world.name}  step {self._steps}",), self._steps)
         return draw_frame(field_image(self.world), snap)

@@ -143,5 +143,6 @@ class NavigateVectorEnv(VectorEnv):
         if self.render_mode != "rgb_array":
             return None
         world = self.worlds[self._task.world_of[0]]
-        snap = Snapshot(self._task.positions[0, :1], ("single",), (np.asarray(self._trail),), (world.name,))
+        snap = Snapshot(self._task.positions[0, :1], ("single",), (np.asarray(self._trail),), (world.name,),
+                        int(self._task.stepper.steps[0]))
         return draw_frame(field_image(world), snap)

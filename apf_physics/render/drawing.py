@@ -23,13 +23,14 @@ from __future__ import annotations
 import re
 import weakref
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Sequence
+from typing import Sequence
 
 import cv2
 import numpy as np
 
-if TYPE_CHECKING:
-    from apf_physics.world import World
+from apf_physics import field as apf
+from apf_physics.obstacles import obstacle_at
+from apf_physics.world import World
 
 RGB = tuple[int, int, int]
 
@@ -41,6 +42,7 @@ WHITE: RGB = (255, 255, 255)
 LEVEL_LINE: RGB = (120, 40, 150)       # thesis Fig. 22–23: level lines in purple
 OBSTACLE_FILL: RGB = (250, 250, 250)   # thesis: obstacles are white
 OBSTACLE_EDGE: RGB = (70, 70, 70)
+ROUTE: RGB = (150, 150, 150)           # the faint line a moving obstacle travels along
 DARK_HALO: RGB = (25, 25, 25)
 LIGHT_HALO: RGB = (245, 245, 245)
 
@@ -128,12 +130,14 @@ class Snapshot:
             for no trails at all.
         overlay: Lines of text drawn in the top-left corner, e.g. ``"step 12/40"``,
             ``"planner gradient"``, ``"outcome success"``.
+        t: The control step shown: where the world's moving obstacles are drawn.
     """
 
     positions: np.ndarray
     roles: tuple[str, ...]
     trails: tuple[np.ndarray, ...] = ()
     overlay: tuple[str, ...] = ()
+    t: float = 0.0
 
     def __post_init__(self) -> None:
         positions = np.asarray(self.positions, dtype=float).reshape(-1, 2)
@@ -169,6 +173,9 @@ class FieldImage:
             of the heatmap (increasing; the last is where the colour scale saturates): the
             colour bar's scale.
         levels: Number of bands between level lines.
+        moving: The world's moving obstacles, drawn on every frame where the snapshot's step
+            puts them (empty when they are drawn into the background at one step).
+        obstacle_px: Smallest radius of a drawn point obstacle in pixels.
     """
 
     background: np.ndarray
@@ -183,6 +190,8 @@ class FieldImage:
     scaling: str
     shade_potential: np.ndarray
     levels: int
+    moving: tuple = ()
+    obstacle_px: float = 3.0
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -199,6 +208,7 @@ class FieldImage:
         levels: int = 18,
         scaling: str = "log",
         min_radius: float = 3.0,
+        t: float | None = None,
     ) -> FieldImage:
         """Render the world's static picture.
 
@@ -216,6 +226,10 @@ class FieldImage:
                 equalised: shows the basins of local minima most clearly).
             min_radius: Smallest disc radius in pixels, so robots and targets stay visible
                 on large maps.
+            t: For a world with moving obstacles: None, the background holds the static
+                field and obstacles and the moving obstacles' routes as faint lines (the
+                obstacles are drawn on each frame at the frame's step); a step, the field and
+                every obstacle as they are at that step.
         """
         if long_side < 16:
             raise ValueError(f"long_side must be at least 16 pixels, got {long_side}")
@@ -229,8 +243,14 @@ class FieldImage:
         if raster_resolution is None:
             raster_resolution = int(np.clip(np.ceil(scale / 2), 4, 16))
         raster = world.raster(raster_resolution)
+        shown = world.obstacles_at(t) if t is not None else world.static_obstacles
+        if world.moving:   # the field as the frames show it: at step t, or of the static obstacles
+            grid = raster.grid
+            nodes = grid.node_points()
+            values = apf.potential(nodes, world.targets, shown, world.field)
+            raster = apf.Raster(grid, values.reshape(grid.shape))
 
-        shade, shade_potential = _shade(raster, world, scale, rows, cols, scaling)
+        shade, shade_potential = _shade(raster, world, scale, rows, cols, scaling, shown)
         shade_potential.setflags(write=False)
         image = heatmap(shade)
         draw_level_lines(image, shade, levels, thickness=max(1, round(unit)))
@@ -239,9 +259,12 @@ class FieldImage:
         robot_px = max(world.robot_radius * scale, min_px)
         targets = np.array(world.targets, dtype=float).reshape(-1, 2)
         targets.setflags(write=False)
+        moving = tuple(world.obstacles[i] for i in world.moving) if t is None else ()
         mapping = cls(image_cv, scale, (width, height), robot_px, line_width, halo_width, 0.45 * unit,
-                      targets, robot_px, scaling, shade_potential, levels)
-        mapping._draw_obstacles(image_cv, world.obstacles, min_px)
+                      targets, robot_px, scaling, shade_potential, levels, moving, min_px)
+        for obstacle in moving:
+            mapping._draw_route(image_cv, obstacle)
+        mapping._draw_obstacles(image_cv, shown, min_px)
         mapping._draw_tolerance(image_cv, world.goal_tolerance)
         mapping.draw_targets(image_cv)
         image_cv.setflags(write=False)
@@ -284,6 +307,18 @@ class FieldImage:
                 r = int(round(radius * _ONE))
                 cv2.circle(image, centre, r, OBSTACLE_FILL, -1, cv2.LINE_AA, _SHIFT)
                 cv2.circle(image, centre, r, OBSTACLE_EDGE, edge, cv2.LINE_AA, _SHIFT)
+
+    def _draw_route(self, image: np.ndarray, obstacle) -> None:
+        """The faint polyline a moving obstacle's centre travels along."""
+        lo, hi = obstacle.bounds
+        route = obstacle.motion.offset(np.linspace(0.0, obstacle.motion.period / obstacle.motion.speed, 400))
+        pts = self._fixed((lo + hi) / 2 + route)
+        cv2.polylines(image, [pts], False, ROUTE, 1, cv2.LINE_AA, _SHIFT)
+
+    def draw_moving(self, image: np.ndarray, t: float) -> None:
+        """Draw the moving obstacles where they are at step ``t`` onto ``image`` in place."""
+        if self.moving:
+            self._draw_obstacles(image, [obstacle_at(o, t) for o in self.moving], self.obstacle_px)
 
     def _draw_tolerance(self, image: np.ndarray, tolerance: float) -> None:
         # A robot whose centre is inside this ring has arrived.
@@ -364,7 +399,7 @@ class FieldImage:
 
 
 def _shade(raster, world: World, scale: float, rows: int, cols: int,
-           scaling: str) -> tuple[np.ndarray, np.ndarray]:
+           scaling: str, obstacles: Sequence) -> tuple[np.ndarray, np.ndarray]:
     """The potential mapped monotonically to [0, 1] at every pixel centre, ``(rows, cols)`` float32,
     and the inverse map: U at :data:`SHADE_SAMPLES` evenly spaced shades, ``(SHADE_SAMPLES,)``.
 
@@ -377,7 +412,7 @@ def _shade(raster, world: World, scale: float, rows: int, cols: int,
     are level lines of U.
     """
     values = raster.values
-    free = ~_obstacle_mask(world, raster.grid)
+    free = ~_obstacle_mask(obstacles, raster.grid)
     reference = values[free] if free.any() else values.ravel()
     samples = np.linspace(0.0, 1.0, SHADE_SAMPLES)
     if scaling == "rank":
@@ -405,14 +440,14 @@ def _shade(raster, world: World, scale: float, rows: int, cols: int,
     return cv2.remap(shade, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE), potential
 
 
-def _obstacle_mask(world: World, grid) -> np.ndarray:
-    """True at the raster nodes inside an obstacle, ``(rows, cols)`` bool.
+def _obstacle_mask(obstacles: Sequence, grid) -> np.ndarray:
+    """True at the raster nodes inside one of ``obstacles``, ``(rows, cols)`` bool.
 
     Filled with cv2 in grid-index space (exact to a node): the colour scale's statistics need
     only the free nodes, and measuring distances at every node would cost a hundred times more.
     """
     mask = np.zeros(grid.shape, dtype=np.uint8)
-    for obstacle in world.obstacles:
+    for obstacle in obstacles:
         if hasattr(obstacle, "vertices"):
             pts = np.round(grid.to_index(obstacle.vertices) * _ONE).astype(np.int32)
             cv2.fillPoly(mask, [pts], 1, cv2.LINE_8, _SHIFT)
@@ -461,6 +496,7 @@ def draw_frame(field_image: FieldImage, snapshot: Snapshot) -> np.ndarray:
         A new ``(H, W, 3)`` uint8 RGB array; neither argument is modified.
     """
     frame = field_image.background.copy()
+    field_image.draw_moving(frame, snapshot.t)
     colours = robot_colours(snapshot.roles)
     for trail, (_, trail_colour) in zip(snapshot.trails, colours):
         field_image.draw_path(frame, trail, trail_colour)
@@ -513,6 +549,7 @@ class TrailLayer:
     def frame(self, snapshot: Snapshot) -> np.ndarray:
         """A new frame: this layer's trails (not the snapshot's), the snapshot's robots and text."""
         frame = self.canvas.copy()
+        self.field_image.draw_moving(frame, snapshot.t)
         _draw_robots(frame, self.field_image, snapshot, self.colours)
         return frame
 

@@ -63,6 +63,7 @@ def draw_field_plot(
     """
     image = image if image is not None else field_image(world, long_side)
     frame = image.background.copy()
+    image.draw_moving(frame, 0.0)   # moving obstacles (if any) where they start
     paths = [np.asarray(p, dtype=float).reshape(-1, 2) for p in paths]
     paths = [p for p in paths if len(p)]
     if reached is None:

@@ -378,7 +378,7 @@ def trajectory_snapshots(
         lines = (f"step {t}/{steps - 1}", *overlay)
         if t == steps - 1:
             lines = (*lines, *final_overlay)
-        snapshot = Snapshot(trajectory[t], roles, tuple(per_robot[:, : t + 1]) if trails else (), lines)
+        snapshot = Snapshot(trajectory[t], roles, tuple(per_robot[:, : t + 1]) if trails else (), lines, t)
         yield snapshot
         if t == steps - 1:
             for _ in range(hold):

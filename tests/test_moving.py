@@ -1,0 +1,137 @@
+"""Moving obstacles: routes, the field at step t, the physics, observations and planners."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+
+import numpy as np
+import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+
+from apf_physics import world_from_dict
+from apf_physics.engine import Stepper
+from apf_physics.obstacles import CircleObstacle, Motion, PolygonObstacle
+from apf_physics.observation import Observer, ObserverConfig
+from apf_physics.planners import make_planner
+from apf_physics.rollout import rollout
+
+from conftest import simple_world_dict
+
+
+def with_moving(world, *moving):
+    """``world`` with extra moving obstacles."""
+    return dataclasses.replace(world, obstacles=world.obstacles + tuple(moving), _cache={})
+
+
+def bar(x0, y0, length, thickness, path, speed, **kw):
+    vertices = np.array([[x0, y0], [x0 + length, y0], [x0 + length, y0 + thickness], [x0, y0 + thickness]])
+    return PolygonObstacle(vertices, Motion(np.asarray(path, float), speed, **kw))
+
+
+# -- routes ------------------------------------------------------------------------------------
+
+def test_ping_pong_and_loop_routes():
+    there_and_back = Motion(np.array([[0.0, 12.0]]), 0.4)
+    np.testing.assert_allclose(there_and_back.offset([0, 1, 30, 31, 60, 61]),
+                               [[0, 0], [0, 0.4], [0, 12], [0, 11.6], [0, 0], [0, 0.4]], atol=1e-12)
+    loop = Motion(np.array([[10.0, 0.0], [10.0, 10.0]]), 0.3, loop=True, phase=4.0)
+    assert loop.period == pytest.approx(20 + math.sqrt(200))
+    np.testing.assert_allclose(loop.offset([0, 20, 100 / 3]), [[4, 0], [10, 0], [10, 4]], atol=1e-9)
+    # round again: the same place one period later
+    np.testing.assert_allclose(loop.offset(7.5), loop.offset(7.5 + loop.period / loop.speed), atol=1e-9)
+
+
+def test_the_field_moves_with_the_obstacle():
+    world = with_moving(world_from_dict(simple_world_dict(obstacles=[])),
+                        CircleObstacle(np.array([10.0, 5.0]), 1.0, Motion(np.array([[0.0, 8.0]]), 0.5)))
+    point = np.array([[10.0, 7.3]])   # 1.3 above the disc's rim at step 0; 1.3 below it... inside by step 4
+    assert world.obstacle_distance(point, 0)[0] == pytest.approx(1.3)
+    assert world.obstacle_distance(point, 4)[0] == pytest.approx(-0.7)
+    assert world.potential(point, 4)[0] > world.potential(point, 0)[0]
+    np.testing.assert_allclose(world.obstacle_distance(point, np.array([0.0, 4.0]))[:1], [1.3])
+
+
+def test_observation_adds_moving_terms_and_previous_channel():
+    base = world_from_dict(simple_world_dict(field="thesis-general"))
+    world = with_moving(base, CircleObstacle(np.array([10.0, 12.0]), 1.0, Motion(np.array([[0.0, -6.0]]), 0.5)))
+    positions = np.array([[10.0, 9.0], [3.0, 19.0]])
+    observer = Observer(ObserverConfig(channels=("potential", "previous")), 2, [world])
+    observer.reset(np.arange(2), positions, [world] * 2)
+    obs = observer.observe(positions, t=np.array([4.0, 4.0]))
+    points = (positions[:, None, :] + observer._offsets[None]).reshape(-1, 2)
+    for channel, t in ((0, 4.0), (1, 3.0)):
+        exact = world.potential(points, t)
+        blocked = (world.edge_distance(points) < 0) | (world.obstacle_distance(points, t) <= 0)
+        exact = np.where(blocked, world.u_wall, np.minimum(exact, world.u_wall)).reshape(2, 11, 11)
+        # robot 0 sees the moving disc (exact terms, where the static raster is smooth); robot 1 does not
+        near = np.abs(obs[0, channel] - exact[0])
+        assert np.median(near) < 0.05 and obs[0, channel].max() == pytest.approx(world.u_wall)
+        np.testing.assert_allclose(obs[1, channel], obs[1, 0])
+    assert np.any(obs[0, 0] != obs[0, 1])   # the disc moved between step 3 and step 4
+
+
+# -- physics -------------------------------------------------------------------------------------
+
+def test_a_standing_robot_hit_by_a_moving_obstacle_has_collided():
+    world = with_moving(world_from_dict(simple_world_dict(obstacles=[])),
+                        bar(2.0, 5.0, 10.0, 0.1, [[0.0, 10.0]], 0.8))
+    stepper = Stepper([world], 2, max_steps=30)
+    stepper.start(np.arange(2), np.array([[[5.0, 9.0]], [[15.0, 9.0]]]))
+    kinds = set()
+    while stepper.running.any():
+        report = stepper.step(np.zeros((2, 1, 2)))
+        kinds |= {c.kind for c in report.contacts.contacts}
+    assert stepper.outcome.tolist() == [2, 4]     # collision; the robot beside the bar's sweep: timeout
+    assert kinds == {"moving_obstacle"}
+
+
+thin = st.floats(0.01, 0.3)
+
+
+@settings(max_examples=int(os.environ.get("APF_TUNNEL_EXAMPLES", 40)), deadline=None)
+@given(st.floats(3, 14), st.floats(3, 14), st.floats(1.0, 5.0), thin, st.floats(0, 2 * math.pi), st.floats(0.1, 1.0),
+       st.integers(0, 10_000), st.booleans())
+def test_no_robot_passes_through_a_sweeping_bar(x, y, length, thickness, heading, speed, seed, standing):
+    # a thin bar sweeps back and forth across the map; robots stand or run at full speed
+    direction = np.array([math.cos(heading), math.sin(heading)])
+    route = np.clip(np.array([x, y]) + 6 * direction, 1.0, 19.0 - length) - np.array([x, y])
+    assume(np.hypot(*route) > 1.0)
+    world = with_moving(world_from_dict(simple_world_dict(obstacles=[], starts=[], targets=[[0.3, 0.3]])),
+                        bar(x, y, length, thickness, [route], speed))
+    rng = np.random.default_rng(seed)
+    starts = world.random_free_positions(rng, 8, margin=0.6)
+    stepper = Stepper([world], 8, max_steps=40)
+    stepper.start(np.arange(8), starts[:, None, :])
+    velocity = np.zeros((8, 1, 2)) if standing else rng.uniform(-1, 1, (8, 1, 2))
+    sides = None
+    while stepper.running.any():
+        report = stepper.step(velocity)
+        t = stepper.steps[:, None].astype(float)
+        p = report.positions[:, 0]
+        assert np.all(world.obstacle_distance(p, stepper.steps.astype(float)) > 0), "a centre inside the bar"
+        assert np.all(world.edge_distance(p) > 0), "a centre outside the map"
+        # which side of the bar's long axis each robot is on, in the bar's own frame
+        local = p - world.obstacles[-1].motion.offset(stepper.steps.astype(float))
+        side = np.sign(local[:, 1] - (y + thickness / 2))
+        inside_span = (local[:, 0] > x) & (local[:, 0] < x + length)
+        if sides is not None:
+            crossed = inside_span & was_inside & (side != sides) & report.moved
+            assert not crossed.any(), "a robot crossed the bar"
+        sides, was_inside = side, inside_span
+        del t
+
+
+# -- planners ----------------------------------------------------------------------------------
+
+def test_planners_run_on_the_field_at_step_t():
+    base = world_from_dict(simple_world_dict(obstacles=[], field="thesis-general", targets=[[18.0, 10.0]],
+                                             starts=[[2.0, 10.0], [2.0, 4.0], [2.0, 16.0]]))
+    world = with_moving(base, CircleObstacle(np.array([10.0, 3.0]), 1.0, Motion(np.array([[0.0, 14.0]]), 0.5)))
+    for name in ("gradient", "escape", "astar"):
+        episodes = rollout(world, make_planner(name), world.starts, max_steps=80)
+        assert len(episodes) == 3 and all(e.steps > 0 for e in episodes)
+    replanning = rollout(world, make_planner("astar"), world.starts, max_steps=80)
+    assert sum(e.success for e in replanning) >= 2
