@@ -163,6 +163,7 @@ class Stepper:
         self.trap = trap
         self._watch = TrapWatch(trap, self.num_slots) if trap is not None else None
         self._nobody = np.zeros(self.num_slots, bool)
+        self._moving = any(w.moving for w in self.worlds)
         self.last_distance = np.full(self.num_slots, np.inf)
         """Each leader's distance to its nearest target, after the last start or step."""
 
@@ -201,6 +202,7 @@ class Stepper:
         m = self.robots_per_slot
         robots = (slots[:, None] * m + np.arange(m)[None]).ravel()
         self.physics.place(robots, positions.reshape(-1, 2))
+        self.positions = self.positions.copy()   # never change an array a report handed out
         self.positions[slots] = positions
         self.steps[slots] = 0
         self.outcome[slots] = RUNNING
@@ -227,14 +229,15 @@ class Stepper:
         moved = self.outcome == RUNNING
         everyone = moved.all()
         commands = np.asarray(commands, float).reshape(-1, 2)
-        self.physics.set_time(self.steps)
+        if self._moving:
+            self.physics.set_time(self.steps)
         contacts = self.physics.step(commands, None if everyone else np.repeat(moved, self.robots_per_slot))
         after = self.physics.positions.reshape(self.positions.shape)
-        if everyone:
+        if everyone:   # a new array every step: the report can hand it out
             self.positions = after
             self.steps += 1
         else:
-            self.positions[moved] = after[moved]
+            self.positions = np.where(moved[:, None, None], after, self.positions)
             self.steps[moved] += 1
         distance = self.distance()
         reached = distance <= self._slot_tolerance
@@ -256,4 +259,4 @@ class Stepper:
             ended = moved & (outcome != RUNNING)
             self.outcome[ended] = outcome[ended]
         self.last_distance = distance
-        return StepReport(self.positions.copy(), contacts, moved, collided, reached, ended, distance)
+        return StepReport(self.positions, contacts, moved, collided, reached, ended, distance)

@@ -14,6 +14,9 @@ Families (:data:`FAMILIES`):
 - ``concave``: a U-shaped cup whose opening faces the starts.
 - ``bent_line``: two line-shaped obstacles, one bent (a V or L whose inside faces the starts).
 - ``clutter``: 5–10 mixed obstacles (discs, points, lines, boxes) scattered around the axis.
+- ``moving``: one of the families above plus 3–8 moving obstacles (discs and boxes) whose
+  routes cross the axis between the starts and the target, at 0.15–0.6 units per step:
+  back and forth across it, or round a loop through three points.
 
 Every world goes through :func:`~apf_physics.worldfile.world_from_dict` (so it honours the
 world-file contract), and every start is reachable: a path with the robot's clearance
@@ -39,6 +42,11 @@ from apf_physics.world import World
 from apf_physics.worldfile import world_from_dict
 
 FAMILIES = ("point", "line", "two_points", "concave", "bent_line", "clutter")
+"""The families of static worlds the thesis's general curriculum and the project's general recipes train on."""
+STATIC_FAMILIES = FAMILIES
+MOVING_FAMILIES = ("moving",)
+ALL_FAMILIES = FAMILIES + MOVING_FAMILIES
+"""Every family :func:`generate_world` draws."""
 
 ROBOT_RADIUS = 0.25
 # ≥ √2/2: a robot moving in unit steps (SPEC Table 1) from any start passes within √2/2 of
@@ -170,12 +178,63 @@ def _obstacles(family: str, rng: np.random.Generator, target: np.ndarray, u: np.
     raise UserError(f"--family: unknown family {family!r} (known: {', '.join(FAMILIES)})")
 
 
-def _inside(obstacle: dict, size: float, pad: float) -> bool:
+def _movers(rng: np.random.Generator, target: np.ndarray, u: np.ndarray, gap: float, scale: float) -> list[dict]:
+    """3–8 moving obstacles whose routes cross the axis between the starts and the target."""
+    v = np.array([-u[1], u[0]])
+    out = []
+    for _ in range(int(rng.integers(3, 9))):
+        centre = target + rng.uniform(2.5, gap + 12) * scale * u
+        speed = float(rng.uniform(0.15, 0.6))
+        if rng.random() < 0.6:   # back and forth across the axis
+            half = rng.uniform(3, 8) * scale
+            shift = rng.uniform(-1, 1) * half
+            first = centre + (shift - half) * v
+            path = [(2 * half * v).tolist()]
+            loop, length = False, 4 * half
+        else:                    # round a loop through three points around the crossing
+            corners = [centre + rng.uniform(2, 6) * scale * np.array([math.cos(a), math.sin(a)])
+                       for a in rng.uniform(0, 2 * math.pi) + np.array([0.0, 2.1, 4.2]) + rng.uniform(-0.3, 0.3, 3)]
+            first = corners[0]
+            path = [(corners[1] - first).tolist(), (corners[2] - first).tolist()]
+            loop = True
+            length = sum(np.hypot(*(corners[(i + 1) % 3] - corners[i])) for i in range(3))
+        motion = {"path": path, "speed": speed, "phase": float(rng.uniform(0, length))}
+        if loop:
+            motion["loop"] = True
+        if rng.random() < 0.6:
+            shape = _disc(first, rng.uniform(0.4, 1.2))
+        else:
+            w, h = rng.uniform(0.6, 2.5), rng.uniform(0.4, 1.0)
+            angle = rng.uniform(0, math.pi)
+            rot = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
+            shape = {"polygon": (first + (np.array([[-w, -h], [w, -h], [w, h], [-w, h]]) / 2) @ rot.T).tolist()}
+        out.append({**shape, "motion": motion})
+    return out
+
+
+def _route_points(obstacle: dict) -> np.ndarray:
+    """The obstacle's outline points at every vertex of its route (bounds everywhere it goes)."""
     if "polygon" in obstacle:
-        pts = np.asarray(obstacle["polygon"])
-        return bool(pts.min() >= pad and pts.max() <= size - pad)
-    c, r = np.asarray(obstacle["circle"]["center"]), obstacle["circle"]["radius"]
-    return bool(c.min() - r >= pad and c.max() + r <= size - pad)
+        outline = np.asarray(obstacle["polygon"], float)
+    else:
+        c, r = np.asarray(obstacle["circle"]["center"], float), obstacle["circle"]["radius"]
+        outline = c + r * np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]], float)
+    offsets = np.vstack([[0.0, 0.0], np.asarray(obstacle.get("motion", {}).get("path", []), float).reshape(-1, 2)])
+    return (outline[None] + offsets[:, None]).reshape(-1, 2)
+
+
+def _inside(obstacle: dict, size: float, pad: float) -> bool:
+    pts = _route_points(obstacle)
+    return bool(pts.min() >= pad and pts.max() <= size - pad)
+
+
+def _clear_of_target(obstacle: dict, target: np.ndarray, room: float) -> bool:
+    """Whether a moving obstacle's swept region stays ``room`` away from the target (its bounding box does)."""
+    if "motion" not in obstacle:
+        return True
+    pts = _route_points(obstacle)
+    lo, hi = pts.min(axis=0) - room, pts.max(axis=0) + room
+    return not bool(np.all((target >= lo) & (target <= hi)))
 
 
 def _round(value: Any) -> Any:
@@ -208,8 +267,8 @@ def generate_world(family: str, rng: np.random.Generator, size: float = 50, fiel
         UserError: unknown family or field preset, or no valid world found in
             :data:`MAX_ATTEMPTS` draws (the map is too small for the family).
     """
-    if family not in FAMILIES:
-        raise UserError(f"--family: unknown family {family!r} (known: {', '.join(FAMILIES)})")
+    if family not in ALL_FAMILIES:
+        raise UserError(f"--family: unknown family {family!r} (known: {', '.join(ALL_FAMILIES)})")
     if field not in FIELD_PRESETS:
         raise UserError(f"--field: unknown field preset {field!r} (known: {', '.join(FIELD_PRESETS)})")
     size = float(size)
@@ -219,8 +278,12 @@ def generate_world(family: str, rng: np.random.Generator, size: float = 50, fiel
         angle = rng.uniform(0, 2 * math.pi)
         u = np.array([math.cos(angle), math.sin(angle)])
         gap = rng.uniform(5, 12) * scale
-        obstacles = _obstacles(family, rng, target, u, gap)
-        if not all(_inside(o, size, 0.5) for o in obstacles):
+        if family == "moving":
+            base = STATIC_FAMILIES[int(rng.integers(len(STATIC_FAMILIES)))]
+            obstacles = _obstacles(base, rng, target, u, gap) + _movers(rng, target, u, gap, scale)
+        else:
+            obstacles = _obstacles(family, rng, target, u, gap)
+        if not all(_inside(o, size, 0.5) and _clear_of_target(o, target, 1.5) for o in obstacles):
             continue
         data = {
             "name": name or family,

@@ -135,6 +135,8 @@ class Observer:
         self._world_ids: dict[int, int] = {}
         self.worlds: list[World] = []
         self._log_range = np.zeros(0)
+        self._moving = False
+        self._everyone = np.arange(self.num)
         half = config.size // 2
         steps = np.arange(config.size, dtype=float) - half
         # window point [i, j] is (x + j − k//2, y + k//2 − i)
@@ -151,6 +153,7 @@ class Observer:
             raster = observation_raster(world, self.margin, self.config.resolution)
             self._world_ids[key] = self._atlas.add(raster)
             self.worlds.append(world)
+            self._moving = self._moving or bool(world.moving)
             self._log_range = np.append(self._log_range, np.log1p(world.u_wall - raster.values.min()))
         return self._world_ids[key]
 
@@ -163,7 +166,7 @@ class Observer:
 
     def visit(self, positions: np.ndarray, robots: np.ndarray | None = None) -> np.ndarray:
         """Count the cells ``robots`` (default all) are in; returns each cell's visits before this one (at most the cap)."""
-        robots = np.arange(self.num) if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
+        robots = self._everyone if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
         if self.memory is None:
             return np.zeros(len(robots), np.int32)
         before = self.memory.count(positions, robots)
@@ -173,7 +176,7 @@ class Observer:
     def potential_at(self, positions: np.ndarray, robots: np.ndarray | None = None,
                      t: np.ndarray | float = 0.0) -> np.ndarray:
         """(n,) U at ``positions`` of ``robots`` (default all) at step ``t``, as the windows read it."""
-        robots = np.arange(self.num) if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
+        robots = self._everyone if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
         positions = np.asarray(positions, float).reshape(-1, 2)
         u = self._atlas.sample(positions, self.world_of[robots]).astype(float)
         return self._add_moving(u[:, None], positions, robots, t, np.zeros((1, 2)))[:, 0]
@@ -184,7 +187,7 @@ class Observer:
 
         ``centre``: with ``scale="log"``, the U the window is taken relative to (default its own centre).
         """
-        robots = np.arange(self.num) if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
+        robots = self._everyone if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
         positions = np.asarray(positions, float).reshape(-1, 2)
         k = self.config.size
         windows = self._atlas.sample(positions, self.world_of[robots], self._offsets)
@@ -198,6 +201,8 @@ class Observer:
     def _add_moving(self, values: np.ndarray, positions: np.ndarray, robots: np.ndarray, t: np.ndarray | float,
                     offsets: np.ndarray) -> np.ndarray:
         """Add the moving obstacles' terms at step ``t`` to ``values`` (n, Q) sampled at ``positions + offsets``."""
+        if not self._moving:
+            return values
         worlds = self.world_of[robots]
         when = np.broadcast_to(np.asarray(t, float), (len(robots),))
         reach = np.abs(offsets).max() if len(offsets) else 0.0
@@ -231,7 +236,7 @@ class Observer:
     def observe(self, positions: np.ndarray, robots: np.ndarray | None = None,
                 t: np.ndarray | float = 0.0) -> np.ndarray:
         """(n, C, k, k) float32 observations of ``robots`` (default all) at ``positions``, at step ``t``."""
-        robots = np.arange(self.num) if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
+        robots = self._everyone if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
         out = np.empty((len(robots), *self.config.shape), np.float32)
         out[:, 0] = self.potential_windows(positions, robots, t)
         channels = self.config.channels
@@ -295,19 +300,19 @@ class VisitMemory:
 
     def visit(self, positions: np.ndarray, robots: np.ndarray | None = None) -> None:
         """Count the cell each robot is in (``robots``: which robots ``positions`` are; default all)."""
-        robots = np.arange(self.num) if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
+        robots = self._everyone if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
         c, r = self._cell(positions, robots)
         self.counts[robots, c, r] += 1
 
     def count(self, positions: np.ndarray, robots: np.ndarray | None = None) -> np.ndarray:
         """(N,) visits so far of the cell each robot is in, at most ``cap`` (robots ``robots``, default all)."""
-        robots = np.arange(self.num) if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
+        robots = self._everyone if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
         c, r = self._cell(positions, robots)
         return np.minimum(self.counts[robots, c, r], self.cap)
 
     def window(self, positions: np.ndarray, robots: np.ndarray | None = None) -> np.ndarray:
         """(N, k, k) float32 memory windows around ``positions`` (robots ``robots``, default all)."""
-        robots = np.arange(self.num) if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
+        robots = self._everyone if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
         c0, r0 = self._cell(positions, robots)
         dims = self.dims[robots]
         c = c0[:, None, None] + self._dc[None]

@@ -113,7 +113,7 @@ class FormationEnv(gym.Env):
         self.in_range += links <= self.formation.comm_range
         reached, collided = bool(result.reached[0]), bool(result.collided[0])
         info = self._get_info()
-        info["reward_terms"] = {name: float(result.terms[name][0]) for name in TERMS}
+        info["reward_terms"] = dict(zip(TERMS, result.terms[:, 0].tolist()))
         info["success"] = reached
         info["collision"] = collided
         info["robot_robot_contact"] = bool(result.robot_contact[0])

@@ -145,7 +145,7 @@ class NavigateEnv(gym.Env):
         if self.render_mode is not None:  # the trail is only drawn
             self._trail.append(self.position)
         info = self._get_info()
-        info["reward_terms"] = {name: float(result.terms[name][0]) for name in TERMS}
+        info["reward_terms"] = dict(zip(TERMS, result.terms[:, 0].tolist()))
         info["success"] = bool(result.reached[0])
         info["collision"] = bool(result.collided[0])
         return result.observation[0], float(result.reward[0]), bool(result.terminated[0]), False, info

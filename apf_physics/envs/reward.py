@@ -69,28 +69,19 @@ def reward_weights(spec: str | RewardWeights | dict) -> RewardWeights:
 
 def reward_terms(weights: RewardWeights, collided: np.ndarray, reached: np.ndarray,
                  u_before: np.ndarray, u_after: np.ndarray, revisits: np.ndarray | None = None,
-                 moved: np.ndarray | None = None) -> dict[str, np.ndarray]:
-    """The terms (:data:`TERMS`) for a batch of steps; their sum is the reward.
+                 moved: np.ndarray | None = None) -> np.ndarray:
+    """The terms (:data:`TERMS`, one row each) for a batch of steps, ``(6, N)``; their column sums are the rewards.
 
     ``revisits``: earlier visits of the cell each robot entered (None: no W5); ``moved``:
     distance each robot moved (None: no W6).
     """
-    k = weights.potential_discount
-    if len(collided) == 1:  # one robot: plain floats, numpy's per-call cost would dominate
-        c, r = bool(collided[0]), bool(reached[0])
-        return {
-            "collision": np.array([weights.w1 if c else 0.0]),
-            "target": np.array([weights.w2 if r and not c else 0.0]),
-            "step": np.array([weights.w3]),
-            "potential": np.array([weights.beta * (k * float(u_after[0]) - float(u_before[0]))]),
-            "revisit": np.array([0.0 if revisits is None else weights.revisit * float(revisits[0])]),
-            "length": np.array([0.0 if moved is None else weights.length * float(moved[0])]),
-        }
-    return {
-        "collision": np.where(collided, weights.w1, 0.0),
-        "target": np.where(reached & ~collided, weights.w2, 0.0),
-        "step": np.full(len(collided), weights.w3),
-        "potential": weights.beta * (k * u_after - u_before),
-        "revisit": np.zeros(len(collided)) if revisits is None else weights.revisit * revisits,
-        "length": np.zeros(len(collided)) if moved is None else weights.length * moved,
-    }
+    terms = np.zeros((len(TERMS), len(collided)))
+    terms[0] = np.where(collided, weights.w1, 0.0)
+    terms[1] = np.where(reached & ~collided, weights.w2, 0.0)
+    terms[2] = weights.w3
+    terms[3] = weights.beta * (weights.potential_discount * u_after - u_before)
+    if revisits is not None:
+        terms[4] = weights.revisit * revisits
+    if moved is not None:
+        terms[5] = weights.length * moved
+    return terms

@@ -30,7 +30,7 @@ class TaskStep:
     reward: np.ndarray         # (N,) float64, 0 where nothing moved
     terminated: np.ndarray     # (N,) bool: reached or collided
     truncated: np.ndarray      # (N,) bool: the step limit
-    terms: dict                # name -> (N,) float64
+    terms: np.ndarray          # (6, N) the reward's terms, rows in envs.reward.TERMS order
     reached: np.ndarray        # (N,) bool
     collided: np.ndarray       # (N,) bool
     moved: np.ndarray          # (N,) bool: slots that were running
@@ -133,8 +133,8 @@ class NavigationTask:
         terms = reward_terms(self.weights, report.collided, report.reached, u_before, self._u,
                              revisits if self.weights.revisit else None, walked)
         if not everyone:
-            terms = {name: np.where(moved, value, 0.0) for name, value in terms.items()}
-        reward = sum(terms.values())
+            terms *= moved
+        reward = terms.sum(axis=0)
         ended = report.ended
         if ended.any():
             truncated = ended & (self.stepper.outcome == TIMEOUT)

@@ -25,7 +25,7 @@ from gymnasium.vector.utils import batch_space
 
 from apf_physics.actions import ACTIONS
 from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, resolve_worlds
-from apf_physics.envs.reward import reward_weights
+from apf_physics.envs.reward import TERMS, reward_weights
 from apf_physics.envs.task import NavigationTask
 from apf_physics.observation import ObserverConfig
 from apf_physics.render.drawing import Snapshot, draw_frame, field_image
@@ -126,8 +126,8 @@ class NavigateVectorEnv(VectorEnv):
         self._needs_reset = result.terminated | result.truncated
         stepped = result.moved
         info = self._info()
-        info["reward_terms"] = {k: np.where(stepped, v, 0.0) for k, v in result.terms.items()}
-        info["reward_terms"].update({f"_{k}": stepped for k in result.terms})
+        info["reward_terms"] = dict(zip(TERMS, result.terms))
+        info["reward_terms"].update({f"_{k}": stepped for k in TERMS})
         info["_reward_terms"] = stepped
         info["success"], info["_success"] = result.reached & stepped, stepped
         info["collision"], info["_collision"] = result.collided & stepped, stepped
