@@ -42,6 +42,7 @@ import numpy as np
 import pymunk
 import pymunk.batch
 
+from apf_physics.errors import UserError
 from apf_physics.field import Atlas
 from apf_physics.obstacles import CircleObstacle, PolygonObstacle
 from apf_physics.world import World
@@ -374,10 +375,65 @@ class Physics:
 
     # -- control ---------------------------------------------------------------------------
     def place(self, robots: Sequence[int] | np.ndarray, positions: np.ndarray) -> None:
-        """Teleport robots (global indices) to world-local ``positions`` and stop them."""
+        """Teleport robots (global indices) to world-local ``positions`` and stop them.
+
+        Robots placed overlapping each other or an obstacle's edge are first moved apart, in
+        small steps that each keep the robot's radius from every obstacle and the map's edge
+        (so that nothing is crossed, as the solver's push-out could cross a thin wall).
+
+        Raises:
+            UserError: A centre inside an obstacle or outside the map, or robots that cannot be
+                separated in free space.
+        """
         robots = np.asarray(robots, dtype=np.intp).ravel()
         self._release(robots)
         self._positions[robots] = np.asarray(positions, dtype=float).reshape(-1, 2)
+        for slot in np.unique(robots // self.robots_per_slot).tolist():
+            self._separate(slot)
+
+    def _separate(self, slot: int) -> None:
+        """Move the robots of ``slot`` out of each other and off obstacles' edges without crossing anything."""
+        world, m = self.worlds[slot], self.robots_per_slot
+        mine = slice(slot * m, (slot + 1) * m)
+        p = self._positions[mine].copy()
+        r, t = world.robot_radius, float(self._slot_time[slot])
+        clearance = world.clearance(p, t)
+        if np.any(clearance <= 0):
+            k = int(np.argmin(clearance))
+            raise UserError(f"{world.label}: robot {slot * m + k} placed at {np.round(p[k], 4).tolist()} has its "
+                            f"centre inside an obstacle or outside the map")
+        need = 2 * r + 1e-6
+        for _ in range(200):
+            diff = p[:, None, :] - p[None, :, :]
+            d = np.hypot(diff[..., 0], diff[..., 1]) + np.eye(m) * 1e9
+            overlap = np.clip(need - d, 0.0, None)
+            edge = np.clip(r + 1e-6 - world.clearance(p, t), 0.0, None)
+            if not overlap.any() and not edge.any():
+                self._positions[mine] = p
+                return
+            # apart along the line of centres (robots on one point: a fixed fan of directions)
+            fan = np.arange(m)[:, None] - np.arange(m)[None, :]
+            angle = fan * 2.399963   # the golden angle: distinct for every pair
+            unit = np.where(d[..., None] > 1e-9, diff / np.maximum(d, 1e-9)[..., None],
+                            np.stack([np.cos(angle), np.sin(angle)], -1))
+            # a little more than the overlap (1e-3), so that it ends rather than only halves
+            push = 0.5 * np.sum(np.where(overlap > 0, overlap + 1e-3, 0.0)[..., None] * unit, axis=1)
+            if edge.any():   # off an obstacle's edge: up the clearance (finite differences)
+                h = 1e-4
+                grad = np.stack([world.clearance(p + [h, 0], t) - world.clearance(p - [h, 0], t),
+                                 world.clearance(p + [0, h], t) - world.clearance(p - [0, h], t)], -1) / (2 * h)
+                push += np.where(edge > 0, edge + 1e-3, 0.0)[:, None] * grad
+            length = np.hypot(push[:, 0], push[:, 1])
+            push *= np.minimum(1.0, 0.05 / np.maximum(length, 1e-12))[:, None]
+            # never through anything: take the longest of these steps that keeps the radius all along
+            bar = np.minimum(r, world.clearance(p, t))
+            step = np.zeros_like(push)
+            for scale in (0.25, 0.5, 1.0):
+                ok = world.path_clearance(p, p + scale * push, 0.01, t=t, during=False) >= bar
+                step[ok] = scale * push[ok]
+            p = p + step
+        raise UserError(f"{world.label}: robots {slot * m}..{slot * m + m - 1} placed on top of each other "
+                        f"could not be moved apart in free space")
 
     @property
     def positions(self) -> np.ndarray:

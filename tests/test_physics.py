@@ -12,7 +12,7 @@ import pymunk.batch
 import pytest
 from hypothesis import assume
 
-from apf_physics import WorldError, load_world, world_from_dict
+from apf_physics import UserError, WorldError, load_world, world_from_dict
 from apf_physics.physics import Physics
 from apf_physics.geometry import triangulate
 from apf_physics.geometry import polygon_area
@@ -245,3 +245,46 @@ def test_a_released_proxy_carries_nothing_to_its_next_robot(worlds_dir):
         physics.step(moves)
         fresh.step(moves)
         np.testing.assert_allclose(physics.positions, fresh.positions, atol=1e-12)
+
+
+# -- crowds and spawns: nothing pushes a robot through a wall -----------------------------------
+
+def _thin_wall_world(thickness=0.001):
+    return world_from_dict({"size": [20, 20], "field": "thesis-fixed", "targets": [[19.5, 19.5]],
+                            "obstacles": [{"polygon": [[0, 10], [20, 10], [20, 10 + thickness], [0, 10 + thickness]]}]})
+
+
+@pytest.mark.parametrize("robots", [2, 3, 6, 12])
+def test_robots_placed_on_one_point_are_separated_without_crossing(robots):
+    world = _thin_wall_world()
+    for angle in np.linspace(0, np.pi, 5):
+        physics = Physics([world], robots_per_slot=robots)
+        point = [10 + 0.01 * np.cos(angle), 10.001 + 0.26]
+        physics.place(np.arange(robots), np.tile(point, (robots, 1)))
+        p = physics.positions
+        gaps = np.hypot(*(p[:, None] - p[None]).transpose(2, 0, 1)) + np.eye(robots)
+        assert gaps.min() >= 2 * world.robot_radius
+        assert np.all(world.clearance(p) >= world.robot_radius)
+        for _ in range(20):
+            physics.step(np.zeros((robots, 2)))
+        assert np.all(physics.positions[:, 1] > 10.001), "a robot ended on the far side of the wall"
+
+
+def test_a_centre_placed_inside_an_obstacle_is_refused():
+    world = _thin_wall_world(thickness=1.0)
+    physics = Physics([world], robots_per_slot=2)
+    with pytest.raises(UserError, match="inside an obstacle"):
+        physics.place([0, 1], [[5.0, 10.5], [8.0, 14.0]])
+
+
+@settings(max_examples=int(os.environ.get("APF_CROWD_EXAMPLES", 6)), deadline=None)
+@given(st.integers(0, 10_000), st.floats(0.002, 0.05))
+def test_a_crowd_pressed_onto_a_thin_wall_never_pushes_through(seed, thickness):
+    world = _thin_wall_world(thickness)
+    n = 48
+    rng = np.random.default_rng(seed)
+    physics = Physics([world], robots_per_slot=n)
+    physics.place(np.arange(n), np.column_stack([rng.uniform(1, 19, n), rng.uniform(10.4, 14, n)]))
+    for _ in range(40):
+        physics.step(np.column_stack([rng.uniform(-0.3, 0.3, n), np.full(n, -1.4)]))
+        assert np.all(physics.positions[:, 1] > 10 + thickness), "a robot pushed through the wall"
