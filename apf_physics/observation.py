@@ -200,38 +200,80 @@ class Observer:
 
     def _add_moving(self, values: np.ndarray, positions: np.ndarray, robots: np.ndarray, t: np.ndarray | float,
                     offsets: np.ndarray) -> np.ndarray:
-        """Add the moving obstacles' terms at step ``t`` to ``values`` (n, Q) sampled at ``positions + offsets``."""
+        """Add the moving obstacles' terms at step ``t`` to ``values`` (n, Q) sampled at ``positions + offsets``.
+
+        ``offsets`` is the window's lattice (``self._offsets``) or one point (``[[0, 0]]``). Only
+        the window points within ``p0`` of an obstacle's box are measured (a few points of the
+        k²), for all robots and obstacles of a world at once.
+        """
         if not self._moving:
             return values
+        k, h = self.config.size, self.config.size // 2
+        lattice = len(offsets) == k * k
         worlds = self.world_of[robots]
         when = np.broadcast_to(np.asarray(t, float), (len(robots),))
-        reach = np.abs(offsets).max() if len(offsets) else 0.0
         for w in np.unique(worlds).tolist():
             world = self.worlds[w]
             if not world.moving:
                 continue
             mine = np.flatnonzero(worlds == w)
-            p0, blocked = world.field.p0, np.zeros((len(mine), len(offsets)), bool)
-            changed = np.zeros(len(mine), bool)
-            for i in world.moving:
-                obstacle = world.obstacles[i]
-                shift = obstacle.motion.offset(when[mine])                        # (m, 2)
-                lo, hi = obstacle.bounds
-                local = positions[mine] - shift                                    # robots in the obstacle's frame
-                near = np.all((local > lo - p0 - reach) & (local < hi + p0 + reach), axis=1)
-                if not near.any():
-                    continue
-                points = (local[near, None, :] + offsets[None]).reshape(-1, 2)
-                d, _ = obstacle.signed_distance(points)
-                d = d.reshape(-1, len(offsets))
-                rows = mine[near]
-                values[rows] = values[rows] + apf.repulsive_term(d, world.field.krep, p0, world.field.u_max)
-                blocked[near] |= d <= 0
-                changed |= near
-            if changed.any():   # u_wall stays the highest reading: points inside read it, none above it
-                rows = mine[changed]
-                values[rows] = np.where(blocked[changed], world.u_wall, np.minimum(values[rows], world.u_wall))
+            field = world.field
+            shift = world.moving_offsets(when[mine])                                    # (m, M, 2)
+            lo, hi = self._moving_boxes(world)                                          # (M, 2) each
+            local = positions[mine][:, None, :] - shift                                 # robots in each obstacle's frame
+            if lattice:   # window columns dx / rows dy within p0 of each obstacle's box, clipped to the window
+                first = np.clip(np.ceil(lo - field.p0 - local), -h, h + 1).astype(np.intp)
+                last = np.clip(np.floor(hi + field.p0 - local), -h - 1, h).astype(np.intp)
+            else:
+                first = last = np.zeros(local.shape, np.intp)
+                inside_box = np.all((local >= lo - field.p0) & (local <= hi + field.p0), axis=-1)
+                last = np.where(inside_box[..., None], last, -1)
+            robot, obstacle = np.nonzero(np.all(first <= last, axis=-1))
+            if not len(robot):
+                continue
+            first, last, base = first[robot, obstacle], last[robot, obstacle], local[robot, obstacle]
+            span = (last - first).max(axis=0) + 1
+            a, b = np.meshgrid(np.arange(span[0]), np.arange(span[1]), indexing="ij")
+            dx = first[:, None, 0] + a.ravel()[None]                                    # (pairs, S)
+            dy = first[:, None, 1] + b.ravel()[None]
+            valid = (dx <= last[:, None, 0]) & (dy <= last[:, None, 1])
+            px, py = base[:, None, 0] + dx, base[:, None, 1] + dy                       # in the obstacle's frame
+            centre, radius = self._moving_discs(world)
+            disc = ~np.isnan(radius[obstacle])
+            # discs all at once; polygons one by one
+            d = np.hypot(px - centre[obstacle, 0, None], py - centre[obstacle, 1, None]) - radius[obstacle, None]
+            for index in np.unique(obstacle[~disc]).tolist():
+                pairs = obstacle == index
+                shape = world.obstacles[world.moving[index]]
+                dist, _ = shape.signed_distance(np.stack([px[pairs], py[pairs]], -1).reshape(-1, 2))
+                d[pairs] = dist.reshape(-1, dx.shape[1])
+            term = np.where(valid, apf.repulsive_term(d, field.krep, field.p0, field.u_max), 0.0)
+            flat = (h - dy) * k + (dx + h) if lattice else np.zeros_like(dx)            # window point [h - dy, h + dx]
+            near, which = np.unique(robot, return_inverse=True)                          # the robots concerned
+            cell = (which[:, None] * values.shape[1] + flat)[valid]
+            size = len(near) * values.shape[1]
+            added = np.bincount(cell, weights=term[valid], minlength=size).reshape(len(near), -1)
+            blocked = np.bincount(cell[d[valid] <= 0], minlength=size).reshape(len(near), -1) > 0
+            rows = mine[near]
+            # u_wall stays the highest reading: points inside read it, none above it
+            values[rows] = np.where(blocked, world.u_wall, np.minimum(values[rows] + added, world.u_wall))
         return values
+
+    def _moving_discs(self, world: World) -> tuple[np.ndarray, np.ndarray]:
+        """Centres ``(M, 2)`` and radii ``(M,)`` of the moving discs where they are written (NaN for polygons)."""
+        def build():
+            shapes = [world.obstacles[i] for i in world.moving]
+            centre = np.array([getattr(s, "center", (np.nan, np.nan)) for s in shapes], float).reshape(-1, 2)
+            radius = np.array([getattr(s, "radius", np.nan) for s in shapes], float)
+            return centre, radius
+        return world.cached("moving_discs", build)
+
+    def _moving_boxes(self, world: World) -> tuple[np.ndarray, np.ndarray]:
+        """Bounding boxes of the world's moving obstacles where they are written, ``(M, 2)`` twice."""
+        def build():
+            boxes = [world.obstacles[i].bounds for i in world.moving]
+            return np.array([lo for lo, _ in boxes]), np.array([hi for _, hi in boxes])
+        return world.cached("moving_boxes", build)
 
     def observe(self, positions: np.ndarray, robots: np.ndarray | None = None,
                 t: np.ndarray | float = 0.0) -> np.ndarray:
@@ -267,6 +309,7 @@ class VisitMemory:
         self.num = int(num)
         self.size = int(size)
         self.cap = int(cap)
+        self._everyone = np.arange(self.num)
         self.dims = np.ones((self.num, 2), dtype=np.intp)          # cells per robot's map: (columns, rows)
         self.counts = np.zeros((self.num, 1, 1), dtype=np.int32)   # (N, columns, rows), grown as needed
         half = self.size // 2

@@ -109,6 +109,27 @@ class World:
         """Indices (in :attr:`obstacles`) of the obstacles that move."""
         return self.cached("moving", lambda: tuple(i for i, o in enumerate(self.obstacles) if o.motion is not None))
 
+    def moving_offsets(self, t: np.ndarray | float) -> np.ndarray:
+        """``(..., M, 2)``: the route offset of each moving obstacle (in :attr:`moving` order) at steps ``t``.
+
+        Whole steps (episodes are at whole steps) are read from a table built once and grown as
+        needed; fractional steps are computed.
+        """
+        t = np.asarray(t, float)
+        if not self.moving:
+            return np.zeros(t.shape + (0, 2))
+        whole = np.round(t)
+        if np.any(whole != t) or t.size == 0 or whole.min() < -1:
+            return np.stack([self.obstacles[i].motion.offset(t) for i in self.moving], axis=-2)
+        steps = whole.astype(np.intp) + 1                       # the table starts at step -1
+        table = self._cache.get("motion_table")
+        if table is None or steps.max() >= table.shape[0]:
+            length = max(256, 2 * int(steps.max()) + 1)
+            at = np.arange(length) - 1.0
+            table = np.stack([self.obstacles[i].motion.offset(at) for i in self.moving], axis=1)   # (T, M, 2)
+            self._cache["motion_table"] = table
+        return table[steps]
+
     def obstacles_at(self, t: float = 0.0) -> tuple[Obstacle, ...]:
         """Every obstacle where it is at control step ``t``."""
         if not self.moving:

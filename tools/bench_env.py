@@ -10,12 +10,15 @@ Prints, from one process:
   each N, and with ``--vmas`` VMAS's ``navigation`` scenario (CPU, one agent per env,
   continuous random actions, one torch thread) at the same N, and their ratio. Aims: ours
   never falls as N grows, and ≥ 400,000 robot-steps/s at N = 1024.
-- how many robots per step needed pymunk (the others moved without it).
+- how many robots per step needed pymunk (the others moved without it);
+- the cost of an observation in fixed20 with 8 moving discs beside the same discs frozen
+  (aim ≤ 2×).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import time
 
@@ -24,6 +27,8 @@ import numpy as np
 
 import apf_physics  # noqa: F401  (registers the ids)
 from apf_physics.envs import NavigateVectorEnv
+from apf_physics.obstacles import CircleObstacle, Motion
+from apf_physics.observation import Observer, ObserverConfig
 
 
 def single_rate(env_id: str, steps: int, **kwargs) -> float:
@@ -75,6 +80,33 @@ def vmas_rate(num_envs: int, steps: int) -> float:
     return steps * num_envs / (time.perf_counter() - t)
 
 
+def moving_world(frozen: bool):
+    """fixed20 with 8 discs moving back and forth across it (or standing where they start)."""
+    base = apf_physics.load_world("fixed20")
+    rng = np.random.default_rng(0)
+    discs = []
+    for k in range(8):
+        centre = np.array([2.0 + 2.0 * k, rng.uniform(3, 6)])
+        motion = None if frozen else Motion(np.array([[0.0, 10.0]]), float(rng.uniform(0.15, 0.6)),
+                                            phase=float(rng.uniform(0, 10)))
+        discs.append(CircleObstacle(centre, 0.5, motion))
+    return dataclasses.replace(base, obstacles=base.obstacles + tuple(discs), _cache={})
+
+
+def observation_cost(world, robots: int = 256, repeats: int = 200) -> float:
+    """µs per robot of an observation (one Observer call for all robots, at varied steps)."""
+    observer = Observer(ObserverConfig(), robots, [world])
+    rng = np.random.default_rng(1)
+    positions = world.random_free_positions(rng, robots)
+    observer.reset(np.arange(robots), positions, [world] * robots)
+    steps = rng.integers(0, 100, robots).astype(float)
+    observer.observe(positions, t=steps)
+    t = time.perf_counter()
+    for k in range(repeats):
+        observer.observe(positions, t=steps + k)
+    return (time.perf_counter() - t) / (repeats * robots) * 1e6
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=20000, help="single-environment steps (default 20000)")
@@ -102,6 +134,10 @@ def main() -> None:
             theirs = vmas_rate(n, args.vector_steps)
             line += f" {theirs:>17,.0f} {rate / theirs:>12.2f}"
         print(line)
+    frozen, moving = observation_cost(moving_world(True)), observation_cost(moving_world(False))
+    print("observations (256 robots, one call) in fixed20 with 8 discs")
+    print(f"  discs frozen (in the static raster)     {frozen:7.2f} us/robot")
+    print(f"  discs moving (added near where they are) {moving:7.2f} us/robot   {moving / frozen:5.2f} x (aim <= 2)")
     print(f"load average at end: {os.getloadavg()[0]:.2f}")
 
 
