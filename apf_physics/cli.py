@@ -59,8 +59,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         return int(args.func(args) or 0)
-    except UserError as exc:
-        print(f"apf-physics: error: {exc}", file=sys.stderr)
+    except UserError as exc:   # one line per problem, each with the prefix
+        for line in str(exc).splitlines() or [""]:
+            print(f"apf-physics: error: {line}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("apf-physics: interrupted", file=sys.stderr)

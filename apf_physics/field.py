@@ -307,6 +307,8 @@ class Atlas:
             scaled = (np.asarray(offsets, float) * self.resolution).astype(np.float32)
             map_x = index[:, 0:1] + scaled[None, :, 0]
             map_y = index[:, 1:2] + scaled[None, :, 1]
+        if not len(map_x):  # no points (e.g. a batch step where every slot is restarting): remap refuses empty maps
+            return np.zeros(len(map_x), np.float32) if offsets is None else np.zeros(map_x.shape, np.float32)
         values = cv2.remap(self._image, np.ascontiguousarray(map_x), np.ascontiguousarray(map_y), cv2.INTER_LINEAR,
                            borderMode=cv2.BORDER_REPLICATE)
         return values[:, 0] if offsets is None else values

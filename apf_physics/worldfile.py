@@ -33,7 +33,7 @@ from apf_physics import geometry
 from apf_physics.bundled import resolve_world
 from apf_physics.errors import UserError, WorldError
 from apf_physics.field import FIELD_PRESETS, FieldParams
-from apf_physics.obstacles import CircleObstacle, Obstacle, PolygonObstacle
+from apf_physics.obstacles import CircleObstacle, Motion, Obstacle, PolygonObstacle
 from apf_physics.world import FormationSpec, World
 
 T = TypeVar("T")
@@ -66,6 +66,8 @@ MAX_STARTS = 10_000
 """Most starts (each is one robot in an evaluation)."""
 MAX_FOLLOWERS = 32
 """Most followers in a formation."""
+MAX_ROUTE_POINTS = 100
+"""Most points of a moving obstacle's route."""
 MIN_ROBOT_RADIUS = 0.01
 """Smallest robot radius [units]: keeps the physics at most 256 substeps per control step."""
 MIN_GOAL_TOLERANCE = 0.25
@@ -82,13 +84,14 @@ MEMORY_BUDGET = 2 * 2**30
 ``APF_PHYSICS_MEMORY_BUDGET`` (bytes, or a number with K, M, G or T) overrides it."""
 MEMORY_BUDGET_VARIABLE = "APF_PHYSICS_MEMORY_BUDGET"
 RASTER_MARGIN = 16.0
-"""How far beyond the map rasters reach [units] (observation windows of up to 27 × 27)."""
+"""How far beyond the map rasters reach [units] (observation windows of up to 29 × 29)."""
 RASTER_BYTES_PER_UNIT2 = 6_000
 """Peak bytes per square unit of rasters (map plus margin) an evaluation builds: measured
 4,600–5,000 (the physics' clearance raster at 8 nodes per unit dominates; then the potential,
 observation and A* rasters at 4), rounded up."""
-RASTER_BYTES_PER_TARGET = 400
-"""Further peak bytes per square unit per target (U is computed from a column per target)."""
+RASTER_BYTES_PER_TARGET = 1_500
+"""Further peak bytes per square unit per target: U is computed from a column per target
+(measured 370 at the default 4 nodes per unit; 1,500 covers a model's observer at 8)."""
 
 _TOP_KEYS = {"name", "size", "robot_radius", "goal_tolerance", "field", "obstacles", "targets", "starts", "formation"}
 _REQUIRED = ("size", "field", "targets")
@@ -124,8 +127,8 @@ def _short(value: Any, limit: int = 60) -> str:
 
 
 def _kind(value: Any) -> str:
-    """``list [1, 2, ...]``: the type and the shortened value."""
-    return f"{type(value).__name__} {_short(value)}"
+    """``list [1, 2, ...]``: the type and the shortened value (``null`` for an empty YAML value)."""
+    return "null" if value is None else f"{type(value).__name__} {_short(value)}"
 
 
 def _key_text(key: Any) -> str:
@@ -294,14 +297,35 @@ def _outside(size: tuple[float, float] | None, lower: np.ndarray, upper: np.ndar
     return None
 
 
+def _parse_motion(check: _Checker, value: Any, key: str) -> Motion:
+    problems = len(check.problems)
+    body = check.mapping(value, key, {"path", "speed", "loop", "phase"}, required=("path", "speed"))
+    path = (check.attempt(check.points, body["path"], f"{key}.path", at_least=1, at_most=MAX_ROUTE_POINTS)
+            if "path" in body else None)
+    speed = check.attempt(check.number, body["speed"], f"{key}.speed", positive=True) if "speed" in body else None
+    if speed is not None and speed > 1:
+        check.bad(f"{key}.speed", f"at most 1 unit per control step, got {speed:g}")
+    loop = body.get("loop", False)
+    if not isinstance(loop, bool):
+        check.bad(f"{key}.loop", f"expected true or false, got {_kind(loop)}")
+    phase = check.attempt(check.number, body.get("phase", 0.0), f"{key}.phase", nonnegative=True)
+    if len(check.problems) > problems:
+        raise _Invalid
+    return Motion(path, speed, loop, phase)
+
+
 def _parse_obstacle(check: _Checker, value: Any, key: str, size: tuple[float, float] | None) -> Obstacle:
     problems = len(check.problems)
-    body = check.mapping(value, key, {"polygon", "circle"})
+    body = check.mapping(value, key, {"polygon", "circle", "motion"})
     shapes = [k for k in ("polygon", "circle") if k in body]
     if len(shapes) != 1:
         if len(check.problems) == problems:
-            check.bad(key, "each obstacle is exactly one of 'polygon: [[x, y], ...]' or 'circle: {center, radius}'")
+            check.bad(key, "each obstacle is exactly one of 'polygon: [[x, y], ...]' or 'circle: {center, radius}' "
+                           "(and an optional 'motion')")
         raise _Invalid
+    motion = check.attempt(_parse_motion, check, body["motion"], f"{key}.motion") if "motion" in body else None
+    # the box it sweeps along its route (the route starts where it is written)
+    reach = motion.reach if motion is not None else (np.zeros(2), np.zeros(2))
     if "polygon" in body:
         k = f"{key}.polygon"
         vertices = check.points(body["polygon"], k, at_least=3, at_most=MAX_POLYGON_VERTICES, what="vertices")
@@ -310,12 +334,12 @@ def _parse_obstacle(check: _Checker, value: Any, key: str, size: tuple[float, fl
         area = geometry.polygon_area(vertices)
         if abs(area) < 1e-12:
             raise check.bad(k, "polygon has zero area (its vertices are collinear)")
-        outside = _outside(size, vertices.min(axis=0), vertices.max(axis=0))
+        outside = _outside(size, vertices.min(axis=0) + reach[0], vertices.max(axis=0) + reach[1])
         if outside:
-            raise check.bad(k, f"polygon {outside}")
+            raise check.bad(k, f"polygon {outside}" + (" on its route" if motion is not None else ""))
         if len(check.problems) > problems:
             raise _Invalid
-        return PolygonObstacle(vertices if area > 0 else vertices[::-1].copy())
+        return PolygonObstacle(vertices if area > 0 else vertices[::-1].copy(), motion)
     k = f"{key}.circle"
     circle = check.mapping(body["circle"], k, {"center", "radius"}, required=("center", "radius"))
     center = check.attempt(check.point, circle["center"], f"{k}.center") if "center" in circle else None
@@ -323,10 +347,10 @@ def _parse_obstacle(check: _Checker, value: Any, key: str, size: tuple[float, fl
     if center is None or radius is None or len(check.problems) > problems:
         raise _Invalid
     c = np.array(center)
-    outside = _outside(size, c - radius, c + radius)
+    outside = _outside(size, c - radius + reach[0], c + radius + reach[1])
     if outside:
-        raise check.bad(k, f"circle {outside}")
-    return CircleObstacle(c, radius)
+        raise check.bad(k, f"circle {outside}" + (" on its route" if motion is not None else ""))
+    return CircleObstacle(c, radius, motion)
 
 
 def _parse_obstacles(check: _Checker, value: Any, size: tuple[float, float] | None) -> tuple[Obstacle, ...]:
@@ -413,11 +437,23 @@ def raster_memory(size: Sequence[float], targets: int) -> float:
     return area * (RASTER_BYTES_PER_UNIT2 + RASTER_BYTES_PER_TARGET * int(targets))
 
 
+def raster_memory_problem(size: Sequence[float], targets: int) -> str | None:
+    """What to say when the rasters of a map of ``size`` with ``targets`` targets exceed :func:`memory_budget`, else None."""
+    need, budget = raster_memory(size, targets), memory_budget()
+    if need <= budget:
+        return None
+    return (f"a {size[0]:g} x {size[1]:g} map with {targets} target(s) needs about {_gib(need)} of rasters "
+            f"(the physics' clearance at 8 nodes per unit, the planners' at 4), over the budget of {_gib(budget)}; "
+            f"use a smaller map, or set {MEMORY_BUDGET_VARIABLE} (e.g. {math.ceil(need / 2**30)}G) on a machine "
+            f"with that much memory")
+
+
 def _gib(n: float) -> str:
     return f"{n / 2**30:.1f} GiB" if n >= 2**30 else f"{n / 2**20:.0f} MiB"
 
 
-def _field_bounds(params: FieldParams, size: tuple[float, float], targets: int, obstacles: int) -> dict[str, tuple[float, float]]:
+def _field_bounds(params: FieldParams, size: tuple[float, float], targets: int,
+                  obstacles: int) -> dict[str, tuple[float, float]]:
     """Upper bounds of |U| and |∇U| from each term of the field anywhere the rasters reach.
 
     ``U_att ≤ katt/2 · T · D²`` and ``|∇U_att| ≤ katt · T · D`` with ``D`` the diagonal of the
@@ -437,7 +473,7 @@ def _field_bounds(params: FieldParams, size: tuple[float, float], targets: int, 
         }
 
 
-def _check_together(check: _Checker, size, robot_radius, goal_tolerance, params, obstacles, targets, starts) -> None:
+def _check_together(check: _Checker, size, robot_radius, goal_tolerance, params, obstacles, targets) -> None:
     """The limits that depend on several values (each checked when its values are valid)."""
     if size is not None:
         if robot_radius is not None and robot_radius >= min(size) / 2:
@@ -448,12 +484,9 @@ def _check_together(check: _Checker, size, robot_radius, goal_tolerance, params,
             check.bad("goal_tolerance", f"{goal_tolerance:g} is not less than half the map's diagonal "
                                         f"({half_diagonal:.4g}): nearly every point would count as reached")
     if size is not None and targets is not None:
-        need, budget = raster_memory(size, len(targets)), memory_budget()
-        if need > budget:
-            check.bad("size", f"a {size[0]:g} x {size[1]:g} map with {len(targets)} target(s) needs about {_gib(need)} "
-                              f"of rasters (the physics' clearance at 8 nodes per unit, the planners' at 4), over the "
-                              f"budget of {_gib(budget)}; use a smaller map, or set {MEMORY_BUDGET_VARIABLE} "
-                              f"(e.g. {math.ceil(need / 2**30)}G) on a machine with that much memory")
+        problem = raster_memory_problem(size, len(targets))
+        if problem:
+            check.bad("size", problem)
     if size is not None and targets is not None and params is not None and obstacles is not None:
         bounds = _field_bounds(params, size, len(targets), len(obstacles))
         for index, what in ((0, "|U|"), (1, "the slope of U")):
@@ -493,7 +526,9 @@ def _check_placement(check: _Checker, world: World) -> None:
         if not len(pts):
             continue
         edge = world.edge_distance(pts)
-        inside = _near(world, pts, margin + 1e-6).obstacle_distance(pts)
+        inside = np.full(len(pts), np.inf)
+        in_map = np.flatnonzero(edge >= margin)
+        inside[in_map] = _near(world, pts[in_map], margin + 1e-6).obstacle_distance(pts[in_map])
         reached = world.distance_to_target(pts) <= world.goal_tolerance if key == "starts" else np.zeros(len(pts), bool)
         for i in np.flatnonzero((edge < margin) | (inside < margin) | (inside <= 0) | reached).tolist():
             where, at = f"{key}[{i}]", pts[i].tolist()
@@ -507,6 +542,23 @@ def _check_placement(check: _Checker, world: World) -> None:
                 check.bad(where, f"{at} is closer than the robot radius {radius:g} to an obstacle")
             else:
                 check.bad(where, f"{at} is already within goal_tolerance {world.goal_tolerance:g} of a target")
+
+
+def _check_routes(check: _Checker, world: World) -> None:
+    """Moving obstacles: a route of some length, and no target anywhere they sweep."""
+    for i in world.moving:
+        obstacle = world.obstacles[i]
+        motion = obstacle.motion
+        if motion.length <= 1e-9:
+            check.bad(f"obstacles[{i}].motion.path", "the route has no length (every offset is [0, 0])")
+            continue
+        # where the obstacle is along its route, at most 0.05 apart (it moves in straight legs)
+        travel = np.linspace(0.0, motion.period, max(2, int(np.ceil(motion.period / 0.05)) + 1))
+        offsets = Motion(motion.path, 1.0, motion.loop).offset(travel)
+        for k, target in enumerate(world.targets):
+            d, _ = obstacle.signed_distance(target[None] - offsets)
+            if d.min() <= 0:
+                check.bad(f"obstacles[{i}].motion", f"the obstacle sweeps over targets[{k}] {target.tolist()}")
 
 
 def _build(check: _Checker, data: Any, source: str) -> World | None:
@@ -526,11 +578,12 @@ def _build(check: _Checker, data: Any, source: str) -> World | None:
     starts = check.attempt(check.points, data.get("starts") or [], "starts", at_most=MAX_STARTS, what="starts")
     formation = (check.attempt(_parse_formation, check, data["formation"])
                  if data.get("formation") is not None else None)
-    _check_together(check, size, robot_radius, goal_tolerance, params, obstacles, targets, starts)
+    _check_together(check, size, robot_radius, goal_tolerance, params, obstacles, targets)
     if check.problems:
         return None
     world = World(name, size, robot_radius, goal_tolerance, params, obstacles, targets, starts, formation, source)
     _check_placement(check, world)
+    _check_routes(check, world)
     return world
 
 
@@ -756,7 +809,8 @@ def read_yaml_file(path: str | Path, kind: str, error: type[UserError] = UserErr
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise error(f"{source}: cannot read the {kind} file (not UTF-8 text: byte {exc.start:,} is {data[exc.start]:#04x})") from None
+        raise error(f"{source}: cannot read the {kind} file (not UTF-8 text: byte {exc.start:,} "
+                    f"is {data[exc.start]:#04x})") from None
     try:
         return _load_yaml(text)
     except _YamlLimit as exc:

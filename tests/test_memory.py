@@ -11,10 +11,10 @@ import torch
 import apf_physics  # noqa: F401  (registers the ids)
 from apf_physics import load_world
 from apf_physics.envs import NavigateEnv, NavigateVectorEnv
-from apf_physics.observation import VisitMemory, WindowSampler
-from apf_physics.planners.dqn import DQNPlanner, observe
 from apf_physics.models.files import model_meta, save_model
 from apf_physics.models.network import QNetwork, relative_log
+from apf_physics.observation import Observer, ObserverConfig, VisitMemory
+from apf_physics.planners.dqn import DQNPlanner
 
 
 @pytest.fixture
@@ -116,15 +116,16 @@ def test_transform_leaves_memory_channel_untouched():
 
 
 def test_planner_observation_matches_environment(fixed20):
+    """The planner's observer, fed the positions, sees what the environment gave the network."""
     env = NavigateEnv(world=fixed20, starts="random", memory=True)
     obs, info = env.reset(seed=5)
-    sampler = WindowSampler([env.world], 11)
-    memory = VisitMemory(1, 11)
-    memory.reset(np.arange(1), info["position"][None], [env.world])
+    observer = Observer(env.observer, 1, [env.world])
+    observer.reset(np.arange(1), info["position"][None], [env.world])
     rng = np.random.default_rng(2)
     for step in range(25):
-        mine = observe(sampler, memory, info["position"][None], step > 0)[0]
-        np.testing.assert_allclose(mine, obs, atol=1e-3)
+        if step > 0:
+            observer.visit(info["position"][None])
+        np.testing.assert_allclose(observer.observe(info["position"][None])[0], obs, atol=1e-3)
         obs, _, terminated, _, info = env.step(int(rng.integers(0, 8)))
         if terminated:
             break
@@ -136,37 +137,36 @@ def test_dqn_planner_runs_a_memory_model(tmp_path, fixed20):
     world = load_world(fixed20)
     torch.manual_seed(0)
     net = QNetwork((2, 11, 11), obs_transform="relative-log-memory")
-    path = save_model(tmp_path / "m.pt", net, model_meta(net, world.field, {}, {}))
+    observer = ObserverConfig(channels=("potential", "memory"))
+    path = save_model(tmp_path / "m.pt", net, model_meta(net, world.field, {}, {}, observer))
     planner = DQNPlanner(path)
     episodes = list(rollout(world, planner, world.starts[:2]))
     assert len(episodes) == 2
-    assert planner.memory is not None and planner.memory.counts.sum() > 2
+    assert planner.observer.memory is not None and planner.observer.memory.counts.sum() > 2
 
 
 @pytest.mark.parametrize("name", ["general-memory", "general-revisit"])
 def test_general_memory_presets_train_a_two_channel_network(tmp_path, name):
-    from apf_physics.envs.reward import reward_weights
     from apf_physics.errors import UserError
     from apf_physics.models.files import load_model
-    from apf_physics.rl.general import DEFAULT_PRESET, GeneralConfig, general_preset, train_general
+    from apf_physics.rl import CURRICULUM_DEFAULT, TrainConfig, phases_for_curriculum, preset, train
 
-    weights = reward_weights(general_preset(name).dqn.reward)
+    weights = preset(name).reward_weights
     if name == "general-revisit":
-        assert name == DEFAULT_PRESET
+        assert name == CURRICULUM_DEFAULT
         assert weights.revisit < 0 and weights.length < 0 and weights.w2 == 1000
     else:
         assert weights.revisit == 0 and weights.length == 0
-    config = general_preset(name, total_steps=300, time_limit=None, num_envs=4, batch_size=16,
-                            learning_starts=32, buffer_size=2_000, pool_size=2, pool_starts=2,
-                            max_episode_steps=30, validation_worlds=1, validation_starts=2,
-                            eval_every=200, log_every=100, checkpoint_every=200)
-    assert config.memory and config.dqn.obs_transform == "relative-log-memory"
+    config = preset(name, total_steps=300, time_limit=None, num_envs=4, batch_size=16, learning_starts=32,
+                    buffer_size=2_000, pool_size=2, pool_starts=2, max_episode_steps=30, validation_worlds=1,
+                    validation_starts=2, eval_every=200, log_every=100, checkpoint_every=200, seed=1)
+    assert config.memory and config.obs_transform == "relative-log-memory" and config.observer.shape == (2, 11, 11)
     assert config.world_start_fraction == 0.5
-    assert GeneralConfig.from_dict(config.to_dict()) == config
-    assert not general_preset("general").memory
+    assert TrainConfig.from_dict(config.to_dict()) == config
+    assert not preset("general").memory
     with pytest.raises(UserError, match="memory"):
-        general_preset("general", memory=True)          # relative-log would transform the memory too
-    result = train_general(config, out_dir=tmp_path, seed=1)
+        preset("general", memory=True)          # relative-log would transform the memory too
+    result = train(config, phases_for_curriculum([], config), out_dir=tmp_path)
     assert result.global_step >= 300
     model = load_model(tmp_path / "best.pt", expect_obs_shape=(2, 11, 11))
-    assert model.meta["config"]["memory"] is True
+    assert model.meta["config"]["memory"] is True and model.observer == config.observer

@@ -135,3 +135,61 @@ def test_planners_run_on_the_field_at_step_t():
         assert len(episodes) == 3 and all(e.steps > 0 for e in episodes)
     replanning = rollout(world, make_planner("astar"), world.starts, max_steps=80)
     assert sum(e.success for e in replanning) >= 2
+
+
+# -- the world-file contract -------------------------------------------------------------------
+
+def moving_world_dict(**motion):
+    return simple_world_dict(obstacles=[
+        {"circle": {"center": [10, 5], "radius": 1.0}, "motion": {"path": [[0, 8]], "speed": 0.4, **motion}},
+        {"polygon": [[2, 12], [5, 12], [5, 13], [2, 13]],
+         "motion": {"path": [[6, 0], [6, 3]], "speed": 0.3, "loop": True, "phase": 4.0}}])
+
+
+def test_world_file_motion_round_trips(tmp_path):
+    from apf_physics import load_world, save_world
+
+    world = world_from_dict(moving_world_dict())
+    assert world.moving == (0, 1)
+    save_world(world, tmp_path / "m.yaml")
+    again = load_world(tmp_path / "m.yaml")
+    for t in (0, 7, 33.5):
+        np.testing.assert_allclose(again.moving_offsets(t), world.moving_offsets(t))
+
+
+@pytest.mark.parametrize("motion, problem", [
+    ({"speed": 1.5}, "speed"),
+    ({"speed": 0.0}, "speed"),
+    ({"path": [[0, 0]]}, "no length"),
+    ({"path": [[0, 40]]}, "outside the map"),
+    ({"path": [[5, 10]]}, "sweeps over targets"),     # through the target at (15, 15)
+    ({"phase": -1}, "phase"),
+])
+def test_world_file_motion_problems_are_one_line_each(motion, problem):
+    from apf_physics import WorldError
+
+    with pytest.raises(WorldError, match=problem):
+        world_from_dict(moving_world_dict(**motion))
+
+
+def test_a_start_touching_a_moving_obstacle_at_step_0_is_refused():
+    from apf_physics import WorldError
+
+    data = moving_world_dict()
+    data["starts"] = [[10.0, 6.1]]
+    with pytest.raises(WorldError, match=r"starts\[0\]"):
+        world_from_dict(data)
+
+
+def test_generated_moving_worlds_are_valid_and_solvable():
+    from apf_physics.generate import generate_world
+    from apf_physics.search import reachable
+
+    rng = np.random.default_rng(3)
+    for _ in range(4):
+        world = generate_world("moving", rng, n_starts=3)
+        assert 3 <= len(world.moving) <= 8 + 10
+        speeds = [world.obstacles[i].motion.speed for i in world.moving]
+        assert min(speeds) >= 0.15 and max(speeds) <= 0.6
+        assert all(reachable(world, s) for s in world.starts)
+        assert np.all(world.clearance(world.starts, 0.0) >= world.robot_radius)

@@ -1,12 +1,19 @@
-"""The DQN learner: network, experience pool, training loop, checkpoints and model files.
+"""The DQN trainer: network, configuration, experience pool, evaluation, the loop, checkpoints and resume.
 
-Training runs use the tiny grid world of ``rl_stub_env`` so the learner is tested alone
-and fast.
+Training runs use the 8×8 world of ``rl_worlds`` (real physics, learned in seconds).
 """
 
 from __future__ import annotations
 
 import csv
+import io
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -14,31 +21,38 @@ import torch
 import torch.nn.functional as F
 
 from apf_physics.errors import ModelError, UserError
+from apf_physics.evaluate import evaluate
+from apf_physics.models import DQNPolicy, QNetwork, load_model
+from apf_physics.models.files import MAGIC, read_file, write_file
+from apf_physics.models.network import max_pool_2x2_stride1, relative_log
+from apf_physics.planners import make_planner
 from apf_physics.rl import (
-    DQNPolicy,
-    QNetwork,
+    PRESETS,
     ReplayBuffer,
+    TrainConfig,
     epsilon_schedule,
-    load_model,
-    max_pool_2x2_stride1,
+    load_checkpoint_config,
+    phases_for_world,
     preset,
-    relative_log,
     train,
 )
-from apf_physics.models.files import MAGIC, read_file, write_file
-from apf_physics.rl.dqn import CSV_COLUMNS, DQNConfig, load_checkpoint_config
-from rl_stub_env import StubVectorEnv, StubWorld, stub_env_factory
+from apf_physics.rl import evaluation
+from apf_physics.rl.config import replace
+from apf_physics.rl.phases import reachable_mask, training_starts, validation_starts
+from apf_physics.rl.rundir import RunDir
+from apf_physics.rl.trainer import CSV_COLUMNS
+from rl_worlds import TINY_OPTIONS, tiny_world, write_tiny_world
 
-STUB_FIELD = StubWorld().field
+TINY_FIELD = tiny_world().field
 
 
-def stub_config(**overrides) -> DQNConfig:
-    """The ``fast`` recipe scaled to the 7×7 stub world."""
-    options = dict(obs_size=5, filters=(8, 8), num_envs=16, batch_size=64, learning_starts=200,
-                   exploration_episodes=300, total_steps=3_000, eval_every=1_000, log_every=500,
-                   checkpoint_every=1_000, max_episode_steps=30, seed=0, train_starts="random")
-    options.update(overrides)
-    return preset("fast", **options)
+def tiny_config(**overrides) -> TrainConfig:
+    return preset("fast", **{**TINY_OPTIONS, **overrides})
+
+
+def read_csv(path):
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
 
 
 # ---------------------------------------------------------------------------- network
@@ -66,7 +80,8 @@ def test_max_pool_ties_send_the_gradient_where_max_pool2d_does():
         assert torch.equal(max_pool_2x2_stride1(x), F.max_pool2d(x, 2, 1))
 
 
-@pytest.mark.parametrize("name, k, params", [("thesis-fixed", 11, 25_705), ("thesis-general", 9, 4_673)])
+@pytest.mark.parametrize("name, k, params", [("thesis-fixed", 11, 25_705), ("thesis-general-world", 9, 4_673),
+                                             ("thesis-general", 9, 4_673)])
 def test_thesis_networks_have_the_tables_layers(name, k, params):
     config = preset(name)
     assert config.obs_size == k
@@ -74,8 +89,7 @@ def test_thesis_networks_have_the_tables_layers(name, k, params):
     assert sum(p.numel() for p in net.parameters()) == params
     assert [c.out_channels for c in net.convs] == list(config.filters)
     assert [layer.out_features for layer in net.hidden] == [32, 32]
-    out = net(torch.zeros(5, 1, k, k))
-    assert out.shape == (5, 9)
+    assert net(torch.zeros(5, 1, k, k)).shape == (5, 9)
 
 
 def test_relative_log_centres_and_keeps_walls_highest():
@@ -90,7 +104,7 @@ def test_relative_log_centres_and_keeps_walls_highest():
     assert out[0, 0, 0].min() > out[0, 0, 1:].max()
 
 
-def test_observation_transform_is_part_of_the_saved_network(tmp_path):
+def test_observation_transform_is_part_of_the_saved_network():
     raw = QNetwork(obs_shape=(1, 5, 5), filters=(4, 4), obs_transform="raw")
     logged = QNetwork(obs_shape=(1, 5, 5), filters=(4, 4), obs_transform="relative-log")
     logged.load_state_dict(raw.state_dict())
@@ -98,32 +112,75 @@ def test_observation_transform_is_part_of_the_saved_network(tmp_path):
     torch.testing.assert_close(logged(obs), raw(relative_log(obs)))
 
 
-# ---------------------------------------------------------------------------- config
+# ---------------------------------------------------------------------------- configuration
 
 
 def test_thesis_presets_stay_as_written():
     fixed = preset("thesis-fixed")
     assert (fixed.loss, fixed.batch_size, fixed.target_update, fixed.obs_transform) == ("mse", 7, "none", "raw")
     assert (fixed.gamma, fixed.learning_rate, fixed.epsilon_initial, fixed.epsilon_final) == (0.95, 1e-3, 0.95, 0.05)
-    assert fixed.exploration_episodes == fixed.total_episodes == 30_000
+    assert fixed.exploration_episodes == fixed.total_episodes == 30_000 and fixed.max_episode_steps == 100
     assert fixed.filters == (10, 10, 20) and not fixed.double_dqn and fixed.reward_scale == 1.0
-    general = preset("thesis-general")
-    assert (general.obs_size, general.filters, general.exploration_episodes) == (9, (4, 4), 150)
+    assert fixed.reward == "thesis-fixed" and fixed.num_envs == 1 and fixed.train_starts == "world"
+    for name in ("thesis-general-world", "thesis-general"):  # Table 4
+        general = preset(name)
+        assert (general.obs_size, general.filters, general.exploration_episodes) == (9, (4, 4), 150)
+        assert (general.reward, general.batch_size, general.loss, general.target_update) == (
+            "thesis-general", 7, "mse", "none")
+    assert preset("thesis-general-world").total_episodes == 150
+    curriculum = preset("thesis-general")
+    assert curriculum.stage_episodes == 150 and curriculum.restart_exploration and curriculum.total_episodes is None
     fast = preset("fast")
     assert (fast.num_envs, fast.batch_size, fast.loss, fast.double_dqn, fast.target_update, fast.tau) == (
-        64, 128, "huber", True, "soft", 0.01)
-    assert (fast.reward_scale, fast.obs_transform, fast.train_starts) == (1e-3, "relative-log", "lattice")
+        64, 64, "huber", True, "soft", 0.01)
+    assert (fast.reward_scale, fast.obs_transform, fast.train_starts, fast.target_success) == (
+        1e-3, "relative-log", "lattice", 1.0)
+    assert not fast.eval_shield and fast.select == ("success", "random_success")
 
 
-def test_preset_rejects_unknown_names_keys_and_values():
-    with pytest.raises(UserError, match="unknown training preset"):
-        preset("nope")
-    with pytest.raises(UserError, match="unknown training option.*batchsize"):
+def test_general_presets_keep_their_recipes():
+    general = preset("general")
+    assert (general.num_envs, general.batch_size, general.max_episode_steps, general.world_start_fraction) == (
+        32, 128, 200, 0.25)
+    assert general.families and general.time_limit == 1500 and general.eval_shield
+    assert general.select == ("-collisions", "spl", "success") and not general.memory
+    memory = preset("general-memory")
+    assert memory.memory and memory.obs_transform == "relative-log-memory" and memory.world_start_fraction == 0.5
+    revisit = preset("general-revisit")
+    assert revisit.reward == "general" and revisit.reward_weights.revisit < 0 and revisit.reward_weights.length < 0
+    assert {k: v for k, v in revisit.to_dict().items() if k not in ("preset", "reward")} == \
+        {k: v for k, v in memory.to_dict().items() if k not in ("preset", "reward")}
+
+
+def test_unknown_names_keys_and_bad_values_are_refused():
+    with pytest.raises(UserError, match="unknown training preset 'fsat' \\(did you mean 'fast'\\?\\)"):
+        preset("fsat")
+    with pytest.raises(UserError, match="unknown training option 'batchsize' \\(did you mean 'batch_size'\\?\\)"):
         preset("fast", batchsize=3)
+    with pytest.raises(UserError, match="unknown training option"):
+        TrainConfig.from_dict({**preset("fast").to_dict(), "no_such_option": 1})
     with pytest.raises(UserError, match="loss"):
         preset("fast", loss="l1")
-    assert preset("fast", filters=[4, 4], max_grad_norm=1).filters == (4, 4)
-    assert DQNConfig.from_dict(preset("fast").to_dict()) == preset("fast")
+    with pytest.raises(UserError, match="total_steps must be int or null"):
+        preset("fast", total_steps="many")
+    with pytest.raises(UserError, match="double_dqn must be bool"):
+        preset("fast", double_dqn="yes")
+    with pytest.raises(UserError, match="memory needs obs_transform"):
+        preset("fast", memory=True)
+    with pytest.raises(UserError, match="held-out"):
+        preset("general", validation_seed=100)
+    with pytest.raises(UserError, match="select"):
+        preset("fast", select=["succes"])
+
+
+def test_values_from_yaml_take_the_fields_types_and_round_trip():
+    config = preset("fast", filters=[4, 4], max_grad_norm=1, time_limit=60, total_steps=5e4, select="-collisions")
+    assert config.filters == (4, 4) and config.max_grad_norm == 1.0 and isinstance(config.time_limit, float)
+    assert config.total_steps == 50_000 and config.select == ("-collisions",)
+    for name in PRESETS:
+        assert TrainConfig.from_dict(preset(name).to_dict()) == preset(name)
+    custom = preset("fast", reward={"w1": -1, "w2": 1, "w3": 0, "beta": -1})
+    assert TrainConfig.from_dict(custom.to_dict()) == custom and custom.reward_weights.w2 == 1
 
 
 def test_epsilon_schedule_is_specs_eq_34():
@@ -132,6 +189,14 @@ def test_epsilon_schedule_is_specs_eq_34():
     assert epsilon_schedule(config, 50) == pytest.approx(0.475)
     assert epsilon_schedule(config, 99) == pytest.approx(0.05)
     assert epsilon_schedule(config, 10_000) == 0.05
+
+
+def test_curriculum_presets_are_refused_on_one_world():
+    world = tiny_world()
+    with pytest.raises(UserError, match="trains a curriculum"):
+        phases_for_world(world, preset("thesis-general"))
+    (phase,) = phases_for_world(world, preset("thesis-general-world"))
+    assert phase.worlds == (world,) and phase.starts == "world" and phase.validation.starts == 6
 
 
 # ---------------------------------------------------------------------------- buffer
@@ -158,95 +223,232 @@ def test_replay_buffer_wraps_samples_and_round_trips():
     np.testing.assert_array_equal(copy.next_observations, buffer.next_observations)
 
 
-def test_stub_env_autoresets_next_step():
-    env = StubVectorEnv(StubWorld(), num_envs=1, starts=np.array([[4, 5]]), obs_size=5)
-    env.reset(seed=0)
-    _, reward, terminated, _, info = env.step(np.array([3]))  # right: onto the target
-    assert terminated[0] and info["success"][0] and reward[0] > 900
-    obs, reward, terminated, truncated, _ = env.step(np.array([3]))
-    assert reward[0] == 0 and not terminated[0] and not truncated[0]
-    assert env.pos.tolist() == [[4, 5]] and obs[0, 0, 2, 3] < obs[0, 0, 2, 2]
+# ---------------------------------------------------------------------------- evaluation
+
+
+def _episode(success: bool, length: float, outcome: str | None = None):
+    return SimpleNamespace(success=success, path_length=length, outcome=outcome or ("reached" if success else "trapped"))
+
+
+def test_summary_figures_spl_and_length_ratio():
+    evalset = evaluation.EvalSet((), np.array([True, True, False, False]), np.array([4.0, 5.0, 2.0, np.nan]))
+    episodes = [_episode(True, 8.0), _episode(False, 3.0, "collision"), _episode(True, 2.0), _episode(True, 7.0)]
+    s = evaluation.summarise(episodes, evalset)
+    assert s["success"] == 0.75 and s["trap_success"] == 0.5 and s["collisions"] == 1
+    assert s["length_ratio"] == pytest.approx((8 + 2) / (4 + 2))     # successes with an A* length
+    assert s["spl"] == pytest.approx((4 / 8 + 0 + 1 + 1) / 4)          # no A* length: counts as 1
+    none = evaluation.summarise([_episode(False, 1.0)], evaluation.EvalSet((), np.array([False]), np.array([3.0])))
+    assert none["trap_success"] is None and none["length_ratio"] is None and none["spl"] == 0
+
+
+def test_score_orders_by_the_selected_figures():
+    a = {"success": 0.9, "collisions": 0, "spl": 0.7}
+    b = {"success": 1.0, "collisions": 2, "spl": 0.8}
+    assert evaluation.score(b, ("success",)) > evaluation.score(a, ("success",))
+    assert evaluation.score(a, ("-collisions", "spl")) > evaluation.score(b, ("-collisions", "spl"))
+    assert evaluation.score(a, ("success", "random_success")) == (0.9, -np.inf)  # a missing figure ranks lowest
 
 
 # ---------------------------------------------------------------------------- training
 
 
-def read_csv(path):
-    with open(path, newline="") as f:
-        return list(csv.DictReader(f))
+def test_training_learns_the_tiny_world():
+    """Can fail: the greedy policy must reach the target from every start, trap starts included."""
+    config = tiny_config(total_steps=20_000)
+    result = train(config, phases_for_world(tiny_world(), config))
+    evaluations = [row["eval_success"] for row in result.history if row["eval_success"] != ""]
+    assert evaluations[0] < 1.0                                   # not solved before learning
+    assert result.best["success"] == 1.0 and result.best["trap_success"] == 1.0 and result.stopped_early
+    assert result.counters.time_to_target is not None and result.global_step < 20_000
 
 
-def test_training_writes_log_plot_and_checkpoints(tmp_path):
-    result = train(stub_config(total_steps=1_500), StubWorld(), out_dir=tmp_path,
-                   env_factory=stub_env_factory, progress=False)
-    assert result.global_step >= 1_500 and result.updates > 0 and result.episodes > 0
+def test_training_writes_log_plot_and_models_evaluated_as_eval_runs_them(tmp_path):
+    world = tiny_world()
+    config = tiny_config(total_steps=2_000, target_success=None)
+    result = train(config, phases_for_world(world, config), out_dir=tmp_path)
     rows = read_csv(tmp_path / "train.csv")
     assert tuple(rows[0]) == CSV_COLUMNS
     steps = [int(r["global_step"]) for r in rows]
-    assert steps == sorted(steps) and steps[-1] <= result.global_step
-    assert any(r["eval_success"] != "" for r in rows)
-    png = (tmp_path / "train.png").read_bytes()
-    assert png.startswith(b"\x89PNG")
+    assert steps == sorted(steps) and steps[-1] == result.global_step >= 2_000
+    assert (tmp_path / "train.png").read_bytes().startswith(b"\x89PNG")
+    assert {p.name for p in result.written} >= {"train.csv", "best.pt", "last.pt", "train.png"}
+    assert not (tmp_path / "train.lock").exists() and not list(tmp_path.glob(".*.tmp"))
     for name in ("best.pt", "last.pt"):
-        model = load_model(tmp_path / name, expect_obs_shape=(1, 5, 5), expect_field=STUB_FIELD)
-        assert model.meta["config"]["preset"] == "fast" and model.obs_shape == (1, 5, 5)
-        assert model.meta["obs_transform"] == "relative-log"
-        assert model.field == {"katt": 2.0, "krep": 20.0, "kstr": 8.0, "p0": 0.5, "ps": 8.0, "u_max": 100.0}
+        model = load_model(tmp_path / name, expect_obs_shape=(1, 5, 5), expect_field=TINY_FIELD)
+        assert model.observer == config.observer and model.meta["obs_transform"] == "relative-log"
+        assert load_checkpoint_config(tmp_path / name) == config
+    best = load_model(tmp_path / "best.pt").meta["training"]
+    assert best["evaluation"] == result.best and best["evaluation_step"] == result.counters.best_step
+    # the trainer's figures are those of `apf-physics eval --planner dqn-unshielded --model best.pt`
+    episodes = evaluate(make_planner("dqn-unshielded", str(tmp_path / "best.pt")), [world]).episodes
+    assert np.mean([e.success for e in episodes]) == result.best["success"]
+    assert sum(e.outcome == "collision" for e in episodes) == result.best["collisions"]
     policy = DQNPolicy.load(tmp_path / "best.pt")
     obs = np.random.default_rng(0).random((7, 1, 5, 5), dtype=np.float32) * 50
-    actions = policy.act(obs)
-    assert actions.shape == (7,) and actions.dtype == np.int64 and ((0 <= actions) & (actions < 9)).all()
-    np.testing.assert_array_equal(actions, policy.q_values(obs).argmax(1))
-    assert load_checkpoint_config(tmp_path / "last.pt") == result.config
+    np.testing.assert_array_equal(policy.act(obs), policy.q_values(obs).argmax(1))
 
 
-class InterruptingFactory:
-    """Builds stub envs whose training env raises KeyboardInterrupt after ``after`` steps."""
-
-    def __init__(self, after: int):
-        self.after = after
-
-    def __call__(self, world, *, num_envs, seed, starts, config):
-        env = stub_env_factory(world, num_envs=num_envs, seed=seed, starts=starts, config=config)
-        if isinstance(starts, str):
-            step, calls = env.step, [0]
-
-            def interrupting_step(actions):
-                calls[0] += 1
-                if calls[0] > self.after:
-                    raise KeyboardInterrupt
-                return step(actions)
-
-            env.step = interrupting_step
-        return env
+def test_resumed_run_continues_exactly_as_an_uninterrupted_one(tmp_path):
+    config = tiny_config(total_steps=3_000, checkpoint_every=1_500, eval_every=500, target_success=None,
+                         save_buffer=True)
+    phases = phases_for_world(tiny_world(), config)
+    straight = train(config, phases, out_dir=tmp_path / "straight")
+    # stopped where the uninterrupted run writes its first checkpoint, then resumed
+    first = train(replace(config, total_steps=1_500), phases, out_dir=tmp_path / "resumed")
+    assert first.global_step >= 1_500 and first.stop_reason == "total_steps 1500 reached"
+    resumed = train(config, phases, out_dir=tmp_path / "resumed", resume=True)
+    assert resumed.history[0]["global_step"] > first.global_step          # it went on from the checkpoint
+    assert resumed.global_step == straight.global_step and resumed.episodes == straight.episodes
+    assert resumed.updates == straight.updates and resumed.best == straight.best
+    for name, value in straight.network.state_dict().items():
+        assert torch.equal(resumed.network.state_dict()[name], value), name
+    a, b = (read_csv(tmp_path / d / "train.csv") for d in ("straight", "resumed"))
+    assert [{k: v for k, v in r.items() if k != "wall_time"} for r in a] == \
+        [{k: v for k, v in r.items() if k != "wall_time"} for r in b]
 
 
-def test_interrupted_training_resumes_where_it_stopped(tmp_path):
-    config = stub_config(total_steps=2_400, checkpoint_every=100_000, save_buffer=True)
-    with pytest.raises(KeyboardInterrupt):
-        train(config, StubWorld(), out_dir=tmp_path, env_factory=InterruptingFactory(after=60), progress=False)
-    counters = read_file(tmp_path / "last.pt")[0]["counters"]
-    assert counters["vector_steps"] == 60 and counters["global_step"] > 0
-    first_rows = read_csv(tmp_path / "train.csv")
-    interrupted_step = counters["global_step"]
-    resumed = train(config, StubWorld(), out_dir=tmp_path, resume=True, env_factory=stub_env_factory, progress=False)
-    assert resumed.global_step >= 2_400
-    # counters continued instead of starting again: fewer steps were collected in this session
-    assert resumed.history[0]["global_step"] > interrupted_step
-    assert resumed.history[0]["episodes"] > int(first_rows[-1]["episodes"])
-    steps = [int(r["global_step"]) for r in read_csv(tmp_path / "train.csv")]
-    assert steps == sorted(steps) and len(set(steps)) == len(steps)
-    with pytest.raises(UserError, match="different options.*batch_size"):
-        train(stub_config(total_steps=2_400, batch_size=32), StubWorld(), out_dir=tmp_path, resume=True,
-              env_factory=stub_env_factory, progress=False)
+def test_resume_refuses_other_options_and_a_finished_run_trains_no_more(tmp_path):
+    config = tiny_config(total_steps=1_000, target_success=None)
+    phases = phases_for_world(tiny_world(), config)
+    train(config, phases, out_dir=tmp_path)
+    with pytest.raises(UserError, match="already holds a training run"):
+        train(config, phases, out_dir=tmp_path)
+    with pytest.raises(UserError, match="different options \\(batch_size\\)"):
+        train(tiny_config(total_steps=1_000, target_success=None, batch_size=32), phases, out_dir=tmp_path, resume=True)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()}
+    again = train(config, phases, out_dir=tmp_path, resume=True)
+    assert again.already_finished and again.stop_reason == "total_steps 1000 reached" and again.written == []
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()} == before
+    longer = train(tiny_config(total_steps=1_500, target_success=None), phases, out_dir=tmp_path, resume=True)
+    assert not longer.already_finished and longer.global_step >= 1_500
 
 
-def test_training_learns_the_stub_world():
-    """Can fail: the greedy policy must reach the target from every evaluation start."""
-    result = train(stub_config(total_steps=20_000, target_success=1.0), StubWorld(),
-                   env_factory=stub_env_factory, progress=False)
-    assert result.best_eval_success == 1.0 and result.stopped_early
-    assert result.time_to_target is not None and result.global_step < 20_000
+def test_output_folder_is_locked_and_names_the_holder(tmp_path):
+    with RunDir(tmp_path, CSV_COLUMNS):
+        with pytest.raises(UserError, match=f"in use by another training run \\(pid {os.getpid()} on "):
+            RunDir(tmp_path, CSV_COLUMNS)
+        config = tiny_config(total_steps=500)
+        with pytest.raises(UserError, match="in use by another training run"):
+            train(config, phases_for_world(tiny_world(), config), out_dir=tmp_path)
+    with RunDir(tmp_path, CSV_COLUMNS):  # released
+        pass
+
+
+def test_stale_temporaries_are_removed_when_a_run_takes_the_folder(tmp_path):
+    stale = tmp_path / ".last.pt.abc123.tmp"
+    stale.write_bytes(b"half a file")
+    keep = tmp_path / "notes.tmp"
+    keep.write_text("not ours")
+    with RunDir(tmp_path, CSV_COLUMNS) as run:
+        assert run.removed_temporaries == [stale]
+    assert not stale.exists() and keep.exists()
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_progress_bar_measures_the_stop_rule_and_shows_the_latest_evaluation(monkeypatch):
+    world = tiny_world()
+    texts = []
+    for options in ({"total_steps": 20_000}, {"total_steps": None, "time_limit": 2.0, "target_success": None}):
+        terminal = _Terminal()
+        monkeypatch.setattr(sys, "stderr", terminal)
+        config = tiny_config(**options)
+        train(config, phases_for_world(world, config), progress=True)
+        texts.append(terminal.getvalue())
+    target, timed = texts
+    # a target_success run shows its step budget and says it stops at the target; it ends on 100 %
+    assert "/20000 [" in target and "until 100% of the validation starts" in target
+    assert "eval -" in target and "eval 100%" in target.split("\r")[-1]
+    # a time-limited run counts seconds up to its limit, and says nothing of a target
+    assert re.search(r"2\.0/2\.0 \[.*s/s", timed) and "until" not in timed and re.search(r"eval \d+%", timed)
+    quiet = io.StringIO()  # not a terminal: no bar
+    monkeypatch.setattr(sys, "stderr", quiet)
+    train(config, phases_for_world(world, config), progress=True)
+    assert quiet.getvalue() == ""
+
+
+def test_tensorboard_logs_beside_train_csv(tmp_path):
+    pytest.importorskip("tensorboard", reason="the [tensorboard] extra is not installed")
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    config = tiny_config(total_steps=1_000, target_success=None)
+    result = train(config, phases_for_world(tiny_world(), config), out_dir=tmp_path)
+    events = EventAccumulator(str(tmp_path / "tensorboard"))
+    events.Reload()
+    rows = [r for r in read_csv(tmp_path / "train.csv") if r["eval_success"] != ""]
+    assert [(e.step, round(e.value, 4)) for e in events.Scalars("eval_success")] == \
+        [(int(r["global_step"]), float(r["eval_success"])) for r in rows]
+    assert tmp_path / "tensorboard" in result.written
+
+
+# ---------------------------------------------------------------------------- the command line
+
+
+def _cli(*args: str, **kwargs) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "apf_physics.cli", "train", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, **kwargs)
+
+
+def _wait_for(condition, proc: subprocess.Popen, timeout: float = 120) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() < deadline, "training did not get there in time"
+        time.sleep(0.05)
+
+
+def test_kill_9_leaves_loadable_models_and_resume_carries_on(tmp_path):
+    world = write_tiny_world(tmp_path)
+    out = tmp_path / "run"
+    options = [f"--set={k}={v}" for k, v in {**TINY_OPTIONS, "filters": "[8, 8]", "total_steps": 10**7,
+                                             "target_success": "null", "checkpoint_every": 500}.items()]
+    proc = _cli("--world", str(world), "--out", str(out), "--no-progress", *options)
+    _wait_for(lambda: (out / "best.pt").exists() and (out / "last.pt").exists(), proc)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    step = read_file(out / "last.pt")[0]["trainer"]["counters"]["global_step"]
+    assert load_model(out / "best.pt").network is not None and step >= 500
+    (out / ".last.pt.killed.tmp").write_bytes(b"half")        # what a kill during a write leaves
+    done = _cli("--world", str(world), "--out", str(out), "--resume", "--no-progress",
+                f"--set=total_steps={step + 700}")
+    stdout, stderr = done.communicate(timeout=300)
+    assert done.returncode == 0, stderr
+    assert "trained" in stdout and not (out / ".last.pt.killed.tmp").exists()
+    assert read_file(out / "last.pt")[0]["trainer"]["counters"]["global_step"] >= step + 700
+    again = _cli("--world", str(world), "--out", str(out), "--resume")
+    stdout, _ = again.communicate(timeout=300)
+    assert again.returncode == 0 and "already finished" in stdout
+
+
+def test_interrupt_saves_and_prints_the_resume_command_and_a_second_run_is_refused(tmp_path):
+    world = write_tiny_world(tmp_path)
+    out = tmp_path / "run"
+    options = [f"--set={k}={v}" for k, v in {**TINY_OPTIONS, "filters": "[8, 8]", "total_steps": 10**7,
+                                             "target_success": "null", "eval_every": 10**6}.items()]
+    proc = _cli("--world", str(world), "--out", str(out), *options)
+    _wait_for(lambda: len(read_csv(out / "train.csv")) >= 2 if (out / "train.csv").exists() else False, proc)
+    second = _cli("--world", str(world), "--out", str(out), "--resume")
+    _, err = second.communicate(timeout=300)
+    assert second.returncode == 2 and f"is in use by another training run (pid {proc.pid} on " in err
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130
+    assert f"apf-physics train --world {world} --out {out} --resume" in stderr
+    assert not (out / "best.pt").exists() and "wrote" not in stdout       # no evaluation ran
+    assert read_file(out / "last.pt")[0]["trainer"]["counters"]["global_step"] > 0
+
+
+def test_cli_overrides_are_read_as_yaml():
+    from apf_physics.commands.train import parse_overrides
+
+    assert parse_overrides(["total_steps=5000", "double_dqn=false", "filters=[4, 4]", "max_grad_norm=null",
+                            "learning_rate=1e-4"]) == {
+        "total_steps": 5000, "double_dqn": False, "filters": [4, 4], "max_grad_norm": None, "learning_rate": 1e-4}
+    with pytest.raises(UserError, match="KEY=VALUE"):
+        parse_overrides(["total_steps"])
 
 
 # ---------------------------------------------------------------------------- model files
@@ -255,8 +457,8 @@ def test_training_learns_the_stub_world():
 @pytest.fixture(scope="module")
 def model_file(tmp_path_factory):
     out = tmp_path_factory.mktemp("model")
-    train(stub_config(total_steps=1_000, eval_every=500), StubWorld(), out_dir=out,
-          env_factory=stub_env_factory, progress=False)
+    config = tiny_config(total_steps=500, eval_every=250)
+    train(config, phases_for_world(tiny_world(), config), out_dir=out)
     return out / "best.pt"
 
 
@@ -288,18 +490,17 @@ def test_load_model_refuses_truncated_and_corrupt_files(model_file, tmp_path):
 
 
 def test_load_model_refuses_another_format_version(model_file, tmp_path):
-    data = model_file.read_bytes()
     newer = tmp_path / "newer.pt"
-    newer.write_bytes(data.replace(b'"format_version": 1', b'"format_version": 99', 1))
+    newer.write_bytes(model_file.read_bytes().replace(b'"format_version": 1', b'"format_version": 99', 1))
     with pytest.raises(ModelError, match="newer.pt: model file format version 99"):
         load_model(newer)
 
 
 def test_load_model_refuses_a_mismatched_observation_or_field(model_file):
-    assert load_model(model_file, expect_obs_shape=(1, 5, 5), expect_field=STUB_FIELD).obs_shape == (1, 5, 5)
+    assert load_model(model_file, expect_obs_shape=(1, 5, 5), expect_field=TINY_FIELD).obs_shape == (1, 5, 5)
     with pytest.raises(ModelError, match=r"best.pt: the model expects observations of shape \(1, 5, 5\)"):
         load_model(model_file, expect_obs_shape=(1, 11, 11))
-    other = {**STUB_FIELD.__dict__, "p0": 3.0}
+    other = {**TINY_FIELD.as_dict(), "p0": 3.0}
     with pytest.raises(ModelError, match=r"best.pt: the model was trained in another field: p0=0.5 \(world: 3\)"):
         load_model(model_file, expect_field=other)
     with pytest.raises(ModelError, match="best.pt: the model expects"):
@@ -309,35 +510,18 @@ def test_load_model_refuses_a_mismatched_observation_or_field(model_file):
 def test_write_file_replaces_atomically_and_leaves_no_temporaries(tmp_path):
     path = tmp_path / "m.pt"
     net = QNetwork(obs_shape=(1, 5, 5), filters=(4, 4))
-    meta = {"arch": net.arch, "obs_shape": [1, 5, 5], "field": STUB_FIELD.__dict__, "kind": "model"}
+    meta = {"arch": net.arch, "obs_shape": [1, 5, 5], "field": TINY_FIELD.as_dict(), "kind": "model"}
     write_file(path, meta, {"q_network": net.state_dict()})
     write_file(path, meta, {"q_network": net.state_dict()})
     assert [p.name for p in tmp_path.iterdir()] == ["m.pt"]
-    loaded = load_model(path)
-    torch.testing.assert_close(loaded.network.state_dict(), net.state_dict())
-
-
-# ---------------------------------------------------------------------------- command line
-
-
-def test_cli_overrides_are_read_as_yaml():
-    from apf_physics.commands.train import parse_overrides
-
-    assert parse_overrides(["total_steps=5000", "double_dqn=false", "filters=[4, 4]", "max_grad_norm=null",
-                            "learning_rate=1e-4"]) == {
-        "total_steps": 5000, "double_dqn": False, "filters": [4, 4], "max_grad_norm": None, "learning_rate": 1e-4}
-    with pytest.raises(UserError, match="KEY=VALUE"):
-        parse_overrides(["total_steps"])
+    torch.testing.assert_close(load_model(path).network.state_dict(), net.state_dict())
 
 
 # ---------------------------------------------------------------------------- starts
 
 
 def test_reachable_mask_is_integer_moves_within_the_tolerance(worlds_dir):
-    from apf_physics import load_world
-    from apf_physics.rl.dqn import reachable_mask
-
-    from types import SimpleNamespace
+    from apf_physics.worldfile import load_world
 
     points = np.array([[1.0, 1.0], [12.5, 15.5], [3.3, 7.2], [3.4, 7.4], [16.6, 16.0]])
     half = SimpleNamespace(targets=np.array([[16.0, 16.0]]), goal_tolerance=0.5)
@@ -349,8 +533,7 @@ def test_reachable_mask_is_integer_moves_within_the_tolerance(worlds_dir):
 
 
 def test_lattice_reachable_and_validation_starts(worlds_dir):
-    from apf_physics import load_world
-    from apf_physics.rl.dqn import reachable_mask, training_starts, validation_starts
+    from apf_physics.worldfile import load_world
 
     world = load_world(worlds_dir / "fixed20.yaml")
     lattice = training_starts(world, "lattice", seed=0)
@@ -364,3 +547,5 @@ def test_lattice_reachable_and_validation_starts(worlds_dir):
     assert val.shape == (50, 2) and reachable_mask(world, val).all()
     assert np.array_equal(val, validation_starts(world, 50, seed=0))
     assert not np.isin(val, reachable).any()  # a stream of its own
+    (phase,) = phases_for_world(world, preset("fast", eval_random_starts=20))
+    assert phase.random_validation.starts == 20 and phase.validation.starts == 40

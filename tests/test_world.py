@@ -1,12 +1,15 @@
 """The world-file contract: valid files load; each kind of bad input gets one clear error."""
 
 import json
+import os
+from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 
 from apf_physics import WorldError, load_world, world_from_dict
+from apf_physics.errors import UserError
 from apf_physics.worldfile import dump_world_yaml, load_worlds
 from conftest import simple_world_dict
 
@@ -116,3 +119,238 @@ def test_cli_reports_error_without_traceback(tmp_path, capsys):
     assert main(["eval", str(path)]) == 2
     err = capsys.readouterr().err
     assert "starts[0]" in err and str(path) in err and "Traceback" not in err
+
+
+# -- hostile input: every problem one short line, limits checked before the work they protect ------
+
+def one_line_error(load) -> str:
+    with pytest.raises(WorldError) as err:
+        load()
+    message = str(err.value)
+    assert "\n" not in message and len(message) <= 500, message[:600]
+    return message
+
+
+def test_yaml_alias_bomb_is_refused_from_its_definition(tmp_path):
+    # 537 bytes that expand to 9**10 values: nine levels of nine aliases each
+    bomb = "size: &x0 [1,1,1,1,1,1,1,1,1]\n" + "".join(
+        f"l{i}: &x{i} [" + ",".join([f"*x{i - 1}"] * 9) + "]\n" for i in range(1, 10))
+    message = one_line_error(lambda: load_world(write(tmp_path, bomb)))
+    assert "more than 500,000 values" in message and "line 6" in message
+
+
+@pytest.mark.parametrize("text, words", [
+    ("field: thesis-fixed\ntargets: [[5, 5]]\nsize: [1" + "0" * 400 + ", 20]",
+     "size[0]: too large for a number: <an integer of about 401 digits>"),
+    ("size: [1" + "0" * 5000 + ", 20]", "a value of 5,001 characters"),
+    ("size: " + "[" * 1000 + "]" * 1000, "nested deeper than 32 levels"),
+    ("size: &a [1, *a]", "alias *a is inside the collection it names"),
+    ("size: [20, 20]\nsize: [30, 30]", "line 2: key 'size' appears twice in one mapping"),
+    ("size: !!python/object/apply:os.system [echo]", "unsupported tag"),
+    ("targets: 2024-13-45", "not valid YAML: 'month must be in 1..12'"),
+    ("--- {}\n--- {}", "a second document"),
+])
+def test_yaml_beyond_the_limits_is_one_line(tmp_path, text, words):
+    assert words in one_line_error(lambda: load_world(write(tmp_path, text + "\n")))
+
+
+def test_yaml_merge_keys_and_shared_values_read_as_safe_load_reads_them(tmp_path, worlds_dir):
+    from apf_physics.worldfile import read_yaml_file
+
+    text = ("base: &field {katt: 1, krep: 20}\nfield:\n  <<: *field\n  krep: 5\n"
+            "point: &p [1, 2]\npoints: [*p, *p]\nmany:\n  <<: [{a: 1}, {a: 2, b: 3}]\n")
+    assert read_yaml_file(write(tmp_path, text), "world") == yaml.safe_load(text)
+    for path in worlds_dir.rglob("*.yaml"):
+        assert read_yaml_file(path, "world") == yaml.safe_load(path.read_text())
+
+
+def test_json_style_exponents_are_numbers(tmp_path):
+    # YAML 1.1 reads 1e-3 as a string; JSON and YAML 1.2 read it as a number
+    world = load_world(write(tmp_path, json.dumps(simple_world_dict(robot_radius=2.5e-1, goal_tolerance=5e-1)), "w.json"))
+    assert world.robot_radius == 0.25
+    assert "must be at least 0.01" in one_line_error(lambda: load_world(write(tmp_path, "robot_radius: 1e-9\n" + yaml.safe_dump(
+        {k: v for k, v in simple_world_dict().items() if k != "robot_radius"}))))
+
+
+def test_field_preset_that_is_not_a_name(tmp_path):
+    message = one_line_error(lambda: load_world(write(tmp_path, simple_world_dict(field={"preset": [1]}))))
+    assert ": field.preset: unknown preset [1]" in message
+
+
+def test_only_regular_files_are_read(tmp_path):
+    fifo = tmp_path / "fifo.yaml"
+    os.mkfifo(fifo)
+    assert "it is a FIFO, not a regular file" in one_line_error(lambda: load_world(fifo))
+    assert "it is a directory" in one_line_error(lambda: load_world(tmp_path))
+    if Path("/dev/zero").exists():
+        assert "character device" in one_line_error(lambda: load_world("/dev/zero"))
+
+
+def test_a_file_over_the_size_limit_is_refused_before_it_is_read(tmp_path):
+    from apf_physics.worldfile import MAX_FILE_BYTES
+
+    path = tmp_path / "big.yaml"
+    with open(path, "wb") as f:
+        f.truncate(MAX_FILE_BYTES + 1)   # sparse: nothing to read, only its size says no
+    assert f"over the limit of {MAX_FILE_BYTES:,}" in one_line_error(lambda: load_world(path))
+
+
+@pytest.mark.parametrize("overrides, key, words", [
+    ({"robot_radius": 1e-9}, "robot_radius", "at least 0.01 (smaller robots need more than 256 physics substeps"),
+    ({"robot_radius": 5e-324, "size": [1e308, 1e308]}, "size[0]", "between 1 and 10,000 units"),
+    ({"robot_radius": 12}, "robot_radius", "does not fit in the 20 x 20 map"),
+    ({"goal_tolerance": 1e300}, "goal_tolerance", "not less than half the map's diagonal (14.14)"),
+    ({"goal_tolerance": 0.1}, "goal_tolerance", "at least 0.25"),
+    ({"field": {"preset": "thesis-fixed", "ps": 1e300}}, "field", "|U| would reach infinity"),
+    ({"field": {"preset": "thesis-fixed", "kstr": 1e300}}, "field", "|U| would reach about 3.2e+301"),
+    ({"field": {"preset": "thesis-fixed", "p0": 5e-324}}, "field", "the slope of U would reach infinity"),
+    ({"size": [1e5, 1e5]}, "size[0]", "between 1 and 10,000 units, got 100000"),
+    ({"size": [2000, 2000]}, "size", "GiB of rasters (the physics' clearance at 8 nodes per unit, the planners' at 4), "
+                                     "over the budget of 2.0 GiB"),
+    ({"starts": [[15.2, 15.2]]}, "starts[0]", "already within goal_tolerance 0.5 of a target"),
+    ({"name": "x" * 300}, "name", "at most 200 characters"),
+    ({"name": "two\nlines"}, "name", "printable on one line"),
+])
+def test_values_that_would_break_the_layers_above_are_refused(tmp_path, overrides, key, words):
+    path = write(tmp_path, json.dumps(simple_world_dict(**overrides)), "w.json")
+    with pytest.raises(WorldError) as err:
+        load_world(path)
+    lines = str(err.value).split("\n")
+    assert all(len(line) <= 500 for line in lines)
+    assert any(line.startswith(f"{path}: {key}: ") and words in line for line in lines), lines
+
+
+def test_the_smallest_allowed_robot_keeps_the_physics_within_256_substeps():
+    from apf_physics.physics import substeps_for
+    from apf_physics.worldfile import MIN_ROBOT_RADIUS
+
+    world = world_from_dict(simple_world_dict(robot_radius=MIN_ROBOT_RADIUS))
+    assert substeps_for(world.robot_radius) == 256
+
+
+def test_the_memory_budget_can_be_raised_for_big_machines(monkeypatch):
+    data = simple_world_dict(size=[2000, 2000])
+    with pytest.raises(WorldError, match="APF_PHYSICS_MEMORY_BUDGET"):
+        world_from_dict(data)
+    monkeypatch.setenv("APF_PHYSICS_MEMORY_BUDGET", "32G")
+    assert world_from_dict(data).size == (2000.0, 2000.0)
+    monkeypatch.setenv("APF_PHYSICS_MEMORY_BUDGET", "lots")
+    with pytest.raises(UserError, match="expected a size such as 8G"):
+        world_from_dict(data)
+
+
+RASTER_PEAK = """
+import resource, sys
+from apf_physics.observation import observation_raster
+from apf_physics.physics import CLEARANCE_CAP, CLEARANCE_RESOLUTION
+from apf_physics.search import SearchGrid
+from apf_physics.worldfile import raster_memory, world_from_dict
+world = world_from_dict({"size": [150, 150], "field": "thesis-general", "targets": [[75, 75], [140, 20]],
+                         "obstacles": [{"circle": {"center": [30, 30], "radius": 2}}], "starts": [[2, 2]]})
+before = int(open("/proc/self/statm").read().split()[1]) * resource.getpagesize()
+world.clearance_raster(CLEARANCE_RESOLUTION, CLEARANCE_CAP)   # the physics'
+observation_raster(world, 7, 4)                                # the DQN planner's (and u_wall's potential raster)
+world.start_cells()                                            # --random-starts
+SearchGrid.of(world).cost_to_go                                # the A* planner's
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+print(peak - before, raster_memory(world.size, len(world.targets)))
+"""
+
+
+@pytest.mark.skipif(not Path("/proc/self/statm").exists(), reason="reads the resident set from /proc")
+def test_the_raster_memory_estimate_covers_what_an_evaluation_builds():
+    """The peak resident memory the rasters of an evaluation of a 150 x 150 map add (every
+    planner's, and random starts'), in a fresh process, stays within the loader's estimate."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", RASTER_PEAK], capture_output=True, text=True, check=True).stdout
+    used, estimate = (int(float(v)) for v in out.split())
+    assert 0 < used <= estimate
+
+
+def test_a_polygon_of_20k_vertices_is_refused_before_its_simplicity_is_checked(tmp_path, monkeypatch):
+    from apf_physics import geometry
+
+    angles = np.linspace(0, 2 * np.pi, 20_000, endpoint=False)
+    ring = np.column_stack([10 + 5 * np.cos(angles), 10 + 5 * np.sin(angles)]).round(6).tolist()
+    monkeypatch.setattr(geometry, "polygon_is_simple", lambda v: pytest.fail("checked a refused polygon"))
+    message = one_line_error(lambda: world_from_dict(simple_world_dict(obstacles=[{"polygon": ring}]), "w.yaml"))
+    assert "obstacles[0].polygon: at most 1,000 vertices, got 20,000" in message
+
+
+def test_too_many_obstacles_or_vertices_are_refused_before_any_is_parsed(tmp_path, monkeypatch):
+    from apf_physics import worldfile
+
+    monkeypatch.setattr(worldfile, "_parse_obstacle", lambda *a: pytest.fail("parsed an obstacle of a refused list"))
+    points = [{"circle": {"center": [10, 10], "radius": 0}}] * 10_001
+    assert "obstacles: at most 10,000 obstacles, got 10,001" in one_line_error(
+        lambda: world_from_dict(simple_world_dict(obstacles=points), "w.yaml"))
+    triangle = [[1, 1], [2, 1], [1, 2]] * 340
+    assert "at most 100,000 polygon vertices in all, got 102,000" in one_line_error(
+        lambda: world_from_dict(simple_world_dict(obstacles=[{"polygon": triangle}] * 100), "w.yaml"))
+
+
+def test_a_file_of_100k_obstacles_is_refused_by_the_reader(tmp_path):
+    circles = [{"circle": {"center": [10, 10], "radius": 0}}] * 100_000
+    message = one_line_error(lambda: load_world(write(tmp_path, json.dumps(simple_world_dict(obstacles=circles)), "w.json")))
+    assert "more than 500,000 values" in message
+
+
+def test_every_problem_is_reported_one_line_each_with_did_you_mean(tmp_path):
+    path = write(tmp_path, {"size": [20, "wide"], "robot_radus": 0.3, "field": {"katt": "a", "krep": None},
+                            "targets": [[1, 2, 3]], "starts": [[1, None]]})
+    with pytest.raises(WorldError) as err:
+        load_world(path)
+    lines = str(err.value).split("\n")
+    assert [line.split(": ")[1] for line in lines] == [
+        "robot_radus", "size[1]", "field.katt", "field.krep", "field.kstr", "field.p0", "field.ps", "field.u_max",
+        "targets[0]", "starts[0][1]"]
+    assert all(line.startswith(f"{path}: ") for line in lines)
+    assert "did you mean 'robot_radius'?" in lines[0]
+
+
+def test_problems_stop_at_a_cap(tmp_path):
+    from apf_physics.worldfile import MAX_PROBLEMS
+
+    with pytest.raises(WorldError) as err:
+        world_from_dict(simple_world_dict(starts=[["x", "y"]] * 100), "w.yaml")
+    lines = str(err.value).split("\n")
+    assert len(lines) == MAX_PROBLEMS + 1 and lines[-1] == f"w.yaml: stopped after {MAX_PROBLEMS} problems"
+
+
+def test_values_are_shortened_in_messages():
+    message = one_line_error(lambda: world_from_dict(simple_world_dict(size=[20, "x" * 4000]), "w.yaml"))
+    assert message.startswith("w.yaml: size[1]: expected a number, got str 'xxxx") and len(message) < 120
+    message = one_line_error(lambda: world_from_dict(simple_world_dict(size=[20, 10**5000]), "w.yaml"))
+    assert "<an integer of about 5001 digits>" in message
+    deep: list = []
+    for _ in range(5000):
+        deep = [deep]
+    assert "got list [[[[...]]]]" in one_line_error(lambda: world_from_dict(simple_world_dict(targets=[deep]), "w.yaml"))
+
+
+def test_a_bounded_number_of_generated_worlds_stay_within_the_limits():
+    from apf_physics.generate import FAMILIES, generate_world
+
+    rng = np.random.default_rng(3)
+    for family in FAMILIES:
+        for size in (20, 100):
+            world = generate_world(family, rng, size=size, n_starts=2)
+            assert world_from_dict(world.to_dict()).size == (size, size)
+
+
+def test_moving_obstacles_round_trip_and_their_routes_stay_inside_the_map():
+    moving = {"circle": {"center": [10, 4], "radius": 0.5}, "motion": {"path": [[0, 8]], "speed": 0.5, "phase": 2}}
+    world = world_from_dict(simple_world_dict(obstacles=[moving]))
+    assert world.moving == (0,)
+    assert world_from_dict(yaml.safe_load(dump_world_yaml(world))).to_dict() == world.to_dict()
+    far = {**moving, "motion": {"path": [[0, 30]], "speed": 0.5}}
+    assert "obstacles[0].circle: circle reaches outside the map [0, 20] x [0, 20] on its route" in one_line_error(
+        lambda: world_from_dict(simple_world_dict(obstacles=[far]), "w.yaml"))
+    fast = {**moving, "motion": {"path": [[0, 8]], "speed": 3, "loop": "yes"}}
+    with pytest.raises(WorldError) as err:
+        world_from_dict(simple_world_dict(obstacles=[fast]), "w.yaml")
+    assert str(err.value).split("\n") == [
+        "w.yaml: obstacles[0].motion.speed: at most 1 unit per control step, got 3",
+        "w.yaml: obstacles[0].motion.loop: expected true or false, got str 'yes'"]

@@ -7,6 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
+from apf_physics.errors import UserError
+from apf_physics.render.output import check_writable
+from apf_physics.worldfile import MAX_STARTS, load_worlds
+
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("eval", help="run planners from every start of every world; print a table, write JSON",
@@ -42,17 +46,29 @@ def random_starts(world, count: int, seed: int) -> np.ndarray:
 def run(args: argparse.Namespace) -> int:
     from apf_physics.evaluate import evaluate, format_table, write_json
     from apf_physics.planners import make_planner
-    from apf_physics.worldfile import load_worlds
 
+    if args.json:
+        check_writable(args.json, create_parent=True)
     if args.html:
-        from apf_physics.render.output import check_writable
         from apf_physics.render.page import PAGE
 
         check_writable(Path(args.html) / PAGE, create_parent=True)
+    if args.random_starts is not None and not 1 <= args.random_starts <= MAX_STARTS:
+        raise UserError(f"--random-starts: must be from 1 to {MAX_STARTS:,} (as a world file's starts), "
+                        f"got {args.random_starts}")
     worlds = load_worlds(args.worlds)
     starts = None
     if args.random_starts is not None:
+        for world in worlds:
+            if not len(world.start_cells()):
+                raise UserError(f"{world.label}: no free position for a robot farther than goal_tolerance "
+                                f"{world.goal_tolerance:g} from every target, so no random start")
         starts = {w.name: random_starts(w, args.random_starts, args.seed) for w in worlds}
+    else:
+        empty = [w.label for w in worlds if not len(w.starts)]
+        if empty:
+            raise UserError(f"{', '.join(empty)}: no starts to run from (add 'starts: [[x, y], ...]' to the "
+                            f"world file, or use --random-starts N)")
     names = [n.strip() for n in args.planner.split(",") if n.strip()]
     evaluations = []
     for name in names:

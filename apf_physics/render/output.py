@@ -42,7 +42,9 @@ def check_writable(path: str | Path, extensions: Sequence[str] | None = None, *,
         raise UserError(f"cannot write {path}: it is {kind}, not a regular file")
     parent = path.parent
     if not parent.is_dir():
-        if parent.exists() or not create_parent:
+        if parent.exists():
+            raise UserError(f"cannot write {path}: {parent} is not a directory")
+        if not create_parent:
             raise UserError(f"cannot write {path}: directory {parent} does not exist")
         try:
             parent.mkdir(parents=True, exist_ok=True)

@@ -14,7 +14,7 @@ preset                    trains on   what it is
 ``thesis-general-world``  a world     Table 4's network and weights (9×9, filters 4/4, 150 searches)
                                       on one world.
 ``fast``                  a world     the Table 3 network trained the way it learns one world fastest
-                                      here (64 envs, batch 128, double DQN, Huber loss, soft target,
+                                      here (64 envs, batch 64, double DQN, Huber loss, soft target,
                                       rewards ÷ 1000, signed-log relative observations, lattice starts),
                                       stopped when every start of the world succeeds.
 ``thesis-general``        curriculum  Table 4 through the curriculum's stages, 150 searches each, with
@@ -285,7 +285,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         exploration_episodes=150, total_episodes=150, eval_every=2_000, checkpoint_every=5_000, log_every=500,
     ),
     "fast": dict(
-        obs_transform="relative-log", train_starts="lattice", num_envs=64, batch_size=128,
+        obs_transform="relative-log", train_starts="lattice", num_envs=64, batch_size=64,
         learning_starts=2_000, loss="huber", double_dqn=True, target_update="soft", tau=0.01,
         max_grad_norm=10.0, reward_scale=1e-3, exploration_episodes=3_000,
         total_episodes=None, total_steps=3_000_000, eval_every=3_200, target_success=1.0,
@@ -300,7 +300,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 PRESETS["general"] = {
     **PRESETS["fast"],
-    "train_starts": "random", "max_episode_steps": 200, "buffer_size": 300_000, "learning_starts": 10_000,
+    "train_starts": "random", "max_episode_steps": 200, "batch_size": 128, "buffer_size": 300_000,
+    "learning_starts": 10_000,
     "num_envs": 32, "exploration_episodes": 12_000, "epsilon_final": 0.03,
     "families": FAMILIES, "pool_size": 80, "pool_starts": 6, "refresh_every": 500_000, "world_start_fraction": 0.25,
     "total_steps": None, "time_limit": 1500.0, "target_success": None,

@@ -72,7 +72,7 @@ def plot_training_curve(csv_path: str | os.PathLike, png_path: str | os.PathLike
     """Draw the training log: success rates above, mean episode return below.
 
     Args:
-        csv_path: Training log written by :func:`apf_physics.rl.dqn.train`.
+        csv_path: Training log written by :func:`apf_physics.rl.train`.
         png_path: Where to write the PNG (not written if None).
 
     Returns:

@@ -642,7 +642,7 @@ class ProgressBar:
         self.multi = len(phases) > 1
         target = "" if config.target_success is None else f"until {config.target_success:.0%} of the validation starts"
         self.bar = tqdm(total=total, initial=self._value(c), unit=unit, desc=target or None, dynamic_ncols=True,
-                        smoothing=0.05, file=sys.stderr, disable=None)
+                        smoothing=0.05, file=sys.stderr, disable=None)  # disable=None: off unless a terminal
         self._desc = target
 
     def _value(self, c: Counters) -> float:
@@ -663,7 +663,8 @@ class ProgressBar:
                 self.bar.set_description_str(desc, refresh=False)
         self.bar.set_postfix_str(f"ε {epsilon:.2f}, eval {'-' if latest is None else format(latest['success'], '.0%')}",
                                  refresh=False)
-        self.bar.update(self._value(c) - self.bar.n)
+        value = self._value(c) if self.bar.total is None else min(self._value(c), self.bar.total)
+        self.bar.update(value - self.bar.n)
 
     def close(self) -> None:
         self.bar.close()
