@@ -486,6 +486,7 @@ def _train(config: TrainConfig, phases: list[Phase], run: Optional[RunDir], resu
             envs.close()
             if reason is None:  # a segment ends at a checkpoint
                 save_checkpoint(run, config, phases, learner, collector, c, rng, evals)
+                save_curve(run)
                 next_checkpoint = next_multiple(c.global_step, config.checkpoint_every)
         if c.last_eval_step != c.global_step:  # a last evaluation, so the end of the run can be the best
             phase = phases[min(c.phase, len(phases) - 1)]
@@ -502,9 +503,7 @@ def _train(config: TrainConfig, phases: list[Phase], run: Optional[RunDir], resu
     finally:
         if bar is not None:
             bar.close()
-    if run is not None:
-        plot_training_curve(run.csv, run.png)
-        run.wrote(run.png)
+    save_curve(run)
     return TrainResult(config, c, learner.updates, evals.best, evals.latest, reason, False,
                        None if run is None else run.path, [] if run is None else list(run.written), q_network,
                        evals.best_state, history)
@@ -561,6 +560,13 @@ def save_best(run: Optional[RunDir], network: QNetwork, config: TrainConfig, pha
     if run is not None:
         save_model(run.best, network, _meta(network, config, phases, c, best, updates))
         run.wrote(run.best)
+
+
+def save_curve(run: Optional[RunDir]) -> None:
+    """Draw ``train.csv`` to ``train.png``."""
+    if run is not None:
+        plot_training_curve(run.csv, run.png)
+        run.wrote(run.png)
 
 
 def save_checkpoint(run: Optional[RunDir], config: TrainConfig, phases: Sequence[Phase], learner: Learner,
