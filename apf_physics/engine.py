@@ -140,15 +140,20 @@ class Stepper:
         max_steps: An episode that has run this many control steps ends as ``timeout``
             (None: never).
         trap: Trap detection for the leaders (None: none).
+        crowds: Slots with the same crowd number share the map and their robots meet: several
+            formations in one world, a slot each (default: every slot on its own). Start a
+            crowd's slots together.
     """
 
     def __init__(self, worlds: Sequence[World], num_slots: int, robots_per_slot: int = 1,
-                 max_steps: int | None = None, trap: TrapDetector | None = None):
+                 max_steps: int | None = None, trap: TrapDetector | None = None,
+                 crowds: Sequence[int] | None = None):
         self.worlds = list(worlds)
         self.num_slots = int(num_slots)
         self.robots_per_slot = int(robots_per_slot)
         self.max_steps = max_steps
-        self.physics = Physics([self.worlds[0]] * self.num_slots, self.robots_per_slot, other_worlds=self.worlds)
+        self.physics = Physics([self.worlds[0]] * self.num_slots, self.robots_per_slot, other_worlds=self.worlds,
+                               crowds=crowds)
         self.world_of = np.zeros(self.num_slots, np.intp)
         self.positions = np.zeros((self.num_slots, self.robots_per_slot, 2))
         self.steps = np.zeros(self.num_slots, np.intp)
@@ -181,18 +186,29 @@ class Stepper:
         return np.hypot(d[..., 0], d[..., 1]).min(axis=1)
 
     def _leader_potential(self, slots: np.ndarray) -> np.ndarray:
+        """U at each leader of ``slots``, at its episode's step (for the ``"descent"`` trap rule)."""
         if self.trap is None or self.trap.rule != "descent":
             return np.zeros(len(slots))
         out = np.empty(len(slots))
-        for w in np.unique(self.world_of[slots]):
-            mine = self.world_of[slots] == w
-            out[mine] = self.worlds[w].potential(self.positions[slots[mine], 0])
+        keys = self.world_of[slots] * (self.steps.max(initial=0) + 1) + self.steps[slots]
+        for key in np.unique(keys).tolist():
+            mine = keys == key
+            world = self.worlds[self.world_of[slots[mine][0]]]
+            out[mine] = world.potential(self.positions[slots[mine], 0], float(self.steps[slots[mine][0]]))
         return out
 
-    def start(self, slots: np.ndarray, positions: np.ndarray, world_ids: np.ndarray | None = None) -> None:
-        """Begin episodes in ``slots``: robots at ``positions`` (k, m, 2), in ``worlds[world_ids]`` (default 0)."""
+    def start(self, slots: np.ndarray, positions: np.ndarray, world_ids: np.ndarray | None = None,
+              present: np.ndarray | None = None) -> None:
+        """Begin episodes in ``slots``: robots at ``positions`` (k, m, 2), in ``worlds[world_ids]`` (default 0).
+
+        ``present``: (k, m) bool, the robots that exist (a formation smaller than the slot has
+        absent ones, which never move or touch anything); default all.
+        """
         slots = np.asarray(slots, np.intp).reshape(-1)
         positions = np.asarray(positions, float).reshape(len(slots), self.robots_per_slot, 2)
+        m = self.robots_per_slot
+        exists = np.ones((len(slots), m), bool) if present is None else np.asarray(present, bool).reshape(len(slots), m)
+        self.physics.present[(slots[:, None] * m + np.arange(m)).ravel()] = exists.ravel()
         if world_ids is not None:
             self.world_of[slots] = world_ids
             for s in slots.tolist():

@@ -153,6 +153,20 @@ def repulsive_gradient(points: np.ndarray, obstacles: Sequence[Obstacle], params
     return grad
 
 
+def discs_repulsive(points: np.ndarray, centres: np.ndarray, radius: float, params: FieldParams) -> np.ndarray:
+    """``Σ_D U_rep,D`` of discs of one radius at ``centres`` (K, 2) (other robots): all at once."""
+    d = np.hypot(points[:, None, 0] - centres[None, :, 0], points[:, None, 1] - centres[None, :, 1]) - radius
+    return repulsive_term(d, params.krep, params.p0, params.u_max).sum(axis=1)
+
+
+def discs_repulsive_gradient(points: np.ndarray, centres: np.ndarray, radius: float, params: FieldParams) -> np.ndarray:
+    """``∇`` of :func:`discs_repulsive`."""
+    diff = points[:, None, :] - centres[None, :, :]                     # (N, K, 2)
+    r = np.hypot(diff[..., 0], diff[..., 1])
+    slope = repulsive_term_slope(r - radius, params.krep, params.p0, params.u_max)
+    return np.einsum("nk,nkj->nj", np.where(r > 0, slope / np.where(r > 0, r, 1.0), 0.0), diff)
+
+
 def potential(points: np.ndarray, targets: np.ndarray, obstacles: Sequence[Obstacle], params: FieldParams) -> np.ndarray:
     """Total ``U = U_att + U_rep + U_bh`` (SPEC eq. 11) at each point."""
     points = np.asarray(points, dtype=float).reshape(-1, 2)

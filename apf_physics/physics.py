@@ -138,6 +138,8 @@ class Physics:
             (see the module docstring).
         other_worlds: Worlds that slots may be put in later (:meth:`set_world`): counted for the
             substeps.
+        crowds: Slots with the same crowd number share one tile and their robots meet (several
+            formations in one world, one slot each); default: every slot on its own.
 
     Moving obstacles are kinematic bodies, lent like the robots' proxies to the slots whose
     robots need physics near them, and put where their route has them at the slot's step.
@@ -146,12 +148,22 @@ class Physics:
     """
 
     def __init__(self, worlds: Sequence[World], robots_per_slot: int = 1, control_dt: float = 1.0,
-                 max_speed: float = MAX_SPEED, substeps: int | None = None, other_worlds: Sequence[World] = ()):
+                 max_speed: float = MAX_SPEED, substeps: int | None = None, other_worlds: Sequence[World] = (),
+                 crowds: Sequence[int] | None = None):
         if not worlds:
             raise ValueError("Physics needs at least one world")
         self.num_slots = len(worlds)
         self.robots_per_slot = int(robots_per_slot)
         self.num_robots = self.num_slots * self.robots_per_slot
+        self.crowd = np.arange(self.num_slots) if crowds is None else np.asarray(crowds, np.intp).reshape(self.num_slots)
+        numbers, size = np.unique(self.crowd, return_counts=True)
+        self._shared = size[np.searchsorted(numbers, self.crowd)] > 1     # (S,) the slot meets other slots
+        # robots that meet robots of other slots: one group per crowd of several slots
+        m = self.robots_per_slot
+        self._crowd_robots = [(np.flatnonzero(self.crowd == c)[:, None] * m + np.arange(m)).ravel()
+                              for c in numbers[size > 1]]
+        self.present = np.ones(self.num_robots, bool)
+        """(N,) bool: robots that exist (a slot of a formation smaller than ``robots_per_slot`` has absent ones)."""
         self.control_dt = float(control_dt)
         self.max_speed = float(max_speed)
         every = list(worlds) + list(other_worlds)
@@ -204,6 +216,7 @@ class Physics:
         self._proxy_robot = np.zeros(0, np.intp)     # robot each proxy simulates, -1: parked
         self._proxy_dirty = np.zeros(0, bool)        # parked this step; may carry solver state
         self._proxy_radius = np.zeros(0)
+        self._proxy_solo = np.zeros(0, bool)          # in the collision group of proxies that never meet
         self._proxy_ids = np.zeros(0, np.uintp)      # their body ids
         self._proxy_target = np.zeros((0, 2))         # where a proxy is to be put before pymunk next steps
         self._proxy_moved = np.zeros(0, bool)         # ... for those that must be put there
@@ -219,10 +232,17 @@ class Physics:
 
     # -- worlds and tiles ------------------------------------------------------------------
     def _lane(self, slot: int, world: World) -> int:
+        if self._shared[slot]:
+            return -1 - int(self.crowd[slot])    # the crowd's own tile
         return slot + 1 if self.robots_per_slot > 1 or world.moving else 0
 
+    def _solo(self, slot: int) -> bool:
+        """Whether the slot's robots are in a tile they share with other slots' robots they must not meet."""
+        return self.robots_per_slot == 1 and not self._shared[slot] and not self.worlds[slot].moving
+
     def _assign(self, slot: int, world: World) -> None:
-        key = (id(world), self._lane(slot, world))
+        # a tile is the world's geometry: worlds that differ only in targets (several formations) share it
+        key = (id(world.obstacles), self._lane(slot, world))
         if key not in self._tiles:
             self._tiles[key] = self._build_tile(world)
         if id(world) not in self._atlas_ids:
@@ -300,13 +320,13 @@ class Physics:
         self._assign(slot, world)
 
     # -- proxies ---------------------------------------------------------------------------
-    def _new_proxy(self, radius: float) -> int:
+    def _new_proxy(self, radius: float, solo: bool) -> int:
         body = pymunk.Body(1.0, math.inf)
         shape = pymunk.Circle(body, radius)
         shape.collision_type = CollisionType.ROBOT
         shape.friction = 0.0
         shape.elasticity = 0.0
-        if self.robots_per_slot == 1:
+        if solo:
             shape.filter = pymunk.ShapeFilter(group=_PROXY_GROUP)
         k = len(self._proxy_body)
         body.position = self._parking(k)
@@ -315,6 +335,7 @@ class Physics:
         self._proxy_robot = np.append(self._proxy_robot, -1)
         self._proxy_dirty = np.append(self._proxy_dirty, False)
         self._proxy_radius = np.append(self._proxy_radius, radius)
+        self._proxy_solo = np.append(self._proxy_solo, solo)
         self._proxy_ids = np.append(self._proxy_ids, np.uintp(body.id))
         self._proxy_target = np.vstack([self._proxy_target, self._parking(k)])
         self._proxy_moved = np.append(self._proxy_moved, False)
@@ -339,15 +360,18 @@ class Physics:
         self._proxy_dirty[proxies] = True
 
     def _lend(self, robots: np.ndarray) -> None:
-        """Give each of ``robots`` (none holding one) a clean proxy of its radius, placed where it is."""
+        """Give each of ``robots`` (none holding one) a clean proxy of its radius and kind, placed where it is."""
         if not len(robots):
             return
-        radius = self._slot_radius[robots // self.robots_per_slot]
-        for r in np.unique(radius).tolist():
-            mine = robots[radius == r]
-            free = np.flatnonzero((self._proxy_robot < 0) & ~self._proxy_dirty & (self._proxy_radius == r))
+        slots = robots // self.robots_per_slot
+        radius = self._slot_radius[slots]
+        solo = np.array([self._solo(s) for s in slots.tolist()], bool)
+        for r, alone in {(float(a), bool(b)) for a, b in zip(radius, solo)}:
+            mine = robots[(radius == r) & (solo == alone)]
+            free = np.flatnonzero((self._proxy_robot < 0) & ~self._proxy_dirty & (self._proxy_radius == r)
+                                  & (self._proxy_solo == alone))
             while len(free) < len(mine):
-                free = np.append(free, self._new_proxy(r))
+                free = np.append(free, self._new_proxy(r, alone))
             proxies = free[:len(mine)]
             self._proxy_robot[proxies] = mine
             self._robot_proxy[mine] = proxies
@@ -388,19 +412,23 @@ class Physics:
         robots = np.asarray(robots, dtype=np.intp).ravel()
         self._release(robots)
         self._positions[robots] = np.asarray(positions, dtype=float).reshape(-1, 2)
-        for slot in np.unique(robots // self.robots_per_slot).tolist():
-            self._separate(slot)
+        m = self.robots_per_slot
+        for crowd in np.unique(self.crowd[robots // m]).tolist():
+            slots = np.flatnonzero(self.crowd == crowd)
+            mine = (slots[:, None] * m + np.arange(m)).ravel()
+            self._separate(int(slots[0]), mine[self.present[mine]])
 
-    def _separate(self, slot: int) -> None:
-        """Move the robots of ``slot`` out of each other and off obstacles' edges without crossing anything."""
-        world, m = self.worlds[slot], self.robots_per_slot
-        mine = slice(slot * m, (slot + 1) * m)
+    def _separate(self, slot: int, mine: np.ndarray) -> None:
+        """Move robots ``mine`` (of one crowd, in ``slot``'s world) out of each other and off
+        obstacles' edges without crossing anything."""
+        world = self.worlds[slot]
+        m = len(mine)
         p = self._positions[mine].copy()
         r, t = world.robot_radius, float(self._slot_time[slot])
         clearance = world.clearance(p, t)
         if np.any(clearance <= 0):
             k = int(np.argmin(clearance))
-            raise UserError(f"{world.label}: robot {slot * m + k} placed at {np.round(p[k], 4).tolist()} has its "
+            raise UserError(f"{world.label}: robot {int(mine[k])} placed at {np.round(p[k], 4).tolist()} has its "
                             f"centre inside an obstacle or outside the map")
         need = 2 * r + 1e-6
         for _ in range(200):
@@ -432,7 +460,7 @@ class Physics:
                 ok = world.path_clearance(p, p + scale * push, 0.01, t=t, during=False) >= bar
                 step[ok] = scale * push[ok]
             p = p + step
-        raise UserError(f"{world.label}: robots {slot * m}..{slot * m + m - 1} placed on top of each other "
+        raise UserError(f"{world.label}: robots {mine.tolist()} placed on top of each other "
                         f"could not be moved apart in free space")
 
     @property
@@ -461,8 +489,15 @@ class Physics:
             p = self._positions.reshape(-1, m, 2)
             dp = moves.reshape(-1, m, 2)
             close = _closest_approach(p, dp) < 2 * self._slot_radius[:, None, None] + CONTACT_MARGIN
+            close &= self.present.reshape(-1, m)[:, None, :]
             close[:, np.arange(m), np.arange(m)] = False
             needs |= close.any(axis=2).ravel()
+        for group in self._crowd_robots:   # robots of several slots that meet: every pair near each other
+            group = group[self.present[group]]
+            close = _closest_approach(self._positions[group][None], moves[group][None])[0]
+            close = close < 2 * self._slot_radius[group // m][:, None] + CONTACT_MARGIN
+            np.fill_diagonal(close, False)
+            needs[group] |= close.any(axis=1)
         self._movers_needed = []
         for slots, world, index, near in self._near_movers(moves):
             robots = (slots[:, None] * m + np.arange(m)).ravel()
@@ -514,7 +549,7 @@ class Physics:
             v = v.copy()
             v[too_fast] *= (self.max_speed / speed[too_fast])[:, None]
         moves = v * self.control_dt
-        simulate = self.needs_physics(moves)
+        simulate = self.needs_physics(moves) & self.present
         if active is not None:
             simulate &= active
             moves = moves * active[:, None]

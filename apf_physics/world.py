@@ -10,7 +10,7 @@ obstacles and the map's edge, free positions, and a cache of what is derived fro
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Hashable, TypeVar
 
 import numpy as np
@@ -19,7 +19,7 @@ from apf_physics import field as apf
 from apf_physics import geometry
 from apf_physics.errors import WorldError
 from apf_physics.field import FieldParams
-from apf_physics.obstacles import Obstacle, obstacle_at
+from apf_physics.obstacles import CircleObstacle, Obstacle, obstacle_at
 
 T = TypeVar("T")
 
@@ -56,6 +56,24 @@ class FormationSpec:
 
 
 @dataclass(frozen=True, eq=False)
+class FormationTask:
+    """One of several formations of a world, each with its own start and target (issue 14's ``formations:``).
+
+    Attributes:
+        start: The leader's start.
+        target: The formation's target.
+        spec: Its shape, followers, spacing and communication range.
+    """
+
+    start: np.ndarray
+    target: np.ndarray
+    spec: FormationSpec
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"start": self.start.tolist(), "target": self.target.tolist(), **self.spec.to_dict()}
+
+
+@dataclass(frozen=True, eq=False)
 class World:
     """A validated world.
 
@@ -70,6 +88,10 @@ class World:
         starts: ``(S, 2)`` evaluation start positions (may be empty).
         formation: The formation, if the world file defines one.
         source: The file the world came from, for messages.
+        formations: Several formations, each to its own target (the world file's ``formations:``).
+        crowd: ``(K, 2)`` centres of other robots, discs of :attr:`robot_radius` that repel and
+            block like obstacles: the robots of other formations, as one leader sees them
+            (:meth:`among`). Empty for a world as read from its file.
     """
 
     name: str
@@ -82,12 +104,30 @@ class World:
     starts: np.ndarray
     formation: FormationSpec | None = None
     source: str | None = None
+    formations: tuple[FormationTask, ...] = ()
+    crowd: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def label(self) -> str:
         """What messages call the world: its file, else its name."""
         return self.source or self.name
+
+    def among(self, robots: np.ndarray) -> World:
+        """This world with other robots at ``robots`` (K, 2) as discs in the field and in the way.
+
+        A view: it shares this world's cache (rasters of the static field stay valid; the
+        crowd's discs are added where they are, like moving obstacles).
+        """
+        return replace(self, crowd=np.asarray(robots, float).reshape(-1, 2), _cache=self._cache)
+
+    def formation_world(self, index: int) -> World:
+        """The world as formation ``index`` sees it: its own target and start (and formation); cached."""
+        def build() -> World:
+            task = self.formations[index]
+            return replace(self, name=f"{self.name}#{index}", targets=task.target.reshape(1, 2),
+                           starts=task.start.reshape(1, 2), formation=task.spec, formations=(), _cache={})
+        return self.cached(("formation_world", int(index)), build)
 
     def cached(self, key: Hashable, build: Callable[[], T]) -> T:
         """What ``build()`` returns, built once per world and key (rasters, free cells, search grids).
@@ -131,19 +171,30 @@ class World:
         return table[steps]
 
     def obstacles_at(self, t: float = 0.0) -> tuple[Obstacle, ...]:
-        """Every obstacle where it is at control step ``t``."""
+        """Every obstacle where it is at control step ``t`` (and the crowd's discs)."""
+        crowd = tuple(CircleObstacle(c, self.robot_radius) for c in self.crowd)
         if not self.moving:
-            return self.obstacles
-        return tuple(obstacle_at(o, t) for o in self.obstacles)
+            return self.obstacles + crowd
+        return tuple(obstacle_at(o, t) for o in self.obstacles) + crowd
 
     # -- the field ---------------------------------------------------------------------
     def potential(self, points: np.ndarray, t: float = 0.0) -> np.ndarray:
         """Total potential U at ``(N, 2)`` points at control step ``t`` (SPEC §1)."""
-        return apf.potential(points, self.targets, self.obstacles_at(t), self.field)
+        u = apf.potential(points, self.targets, self._shapes_at(t), self.field)
+        if len(self.crowd):
+            u += apf.discs_repulsive(np.asarray(points, float).reshape(-1, 2), self.crowd, self.robot_radius, self.field)
+        return u
 
     def gradient(self, points: np.ndarray, t: float = 0.0) -> np.ndarray:
         """``∇U`` at ``(N, 2)`` points at control step ``t``."""
-        return apf.gradient(points, self.targets, self.obstacles_at(t), self.field)
+        g = apf.gradient(points, self.targets, self._shapes_at(t), self.field)
+        if len(self.crowd):
+            g += apf.discs_repulsive_gradient(np.asarray(points, float).reshape(-1, 2), self.crowd, self.robot_radius,
+                                              self.field)
+        return g
+
+    def _shapes_at(self, t: float) -> tuple[Obstacle, ...]:
+        return self.obstacles if not self.moving else tuple(obstacle_at(o, t) for o in self.obstacles)
 
     def raster(self, resolution: int = 4) -> apf.Raster:
         """U at step 0 at the nodes of a grid over the map, ``resolution`` nodes per unit; built once and cached."""
@@ -191,6 +242,9 @@ class World:
             else:   # measure in the obstacle's own frame: points moved back by its offset at t
                 d, _ = obstacle.signed_distance(points - obstacle.motion.offset(t))
             best = np.minimum(best, d)
+        if len(self.crowd) and not static:
+            gap = np.hypot(points[:, None, 0] - self.crowd[None, :, 0], points[:, None, 1] - self.crowd[None, :, 1])
+            best = np.minimum(best, gap.min(axis=1) - self.robot_radius)
         return best
 
     def edge_distance(self, points: np.ndarray) -> np.ndarray:
@@ -333,4 +387,6 @@ class World:
         }
         if self.formation is not None:
             data["formation"] = self.formation.to_dict()
+        if self.formations:
+            data["formations"] = [task.to_dict() for task in self.formations]
         return data

@@ -34,7 +34,7 @@ from apf_physics.bundled import resolve_world
 from apf_physics.errors import UserError, WorldError
 from apf_physics.field import FIELD_PRESETS, FieldParams
 from apf_physics.obstacles import CircleObstacle, Motion, Obstacle, PolygonObstacle
-from apf_physics.world import FormationSpec, World
+from apf_physics.world import FormationSpec, FormationTask, World
 
 T = TypeVar("T")
 
@@ -93,7 +93,8 @@ RASTER_BYTES_PER_TARGET = 1_500
 """Further peak bytes per square unit per target: U is computed from a column per target
 (measured 370 at the default 4 nodes per unit; 1,500 covers a model's observer at 8)."""
 
-_TOP_KEYS = {"name", "size", "robot_radius", "goal_tolerance", "field", "obstacles", "targets", "starts", "formation"}
+_TOP_KEYS = {"name", "size", "robot_radius", "goal_tolerance", "field", "obstacles", "targets", "starts", "formation",
+             "formations"}
 _REQUIRED = ("size", "field", "targets")
 
 
@@ -370,34 +371,66 @@ def _parse_obstacles(check: _Checker, value: Any, size: tuple[float, float] | No
     return tuple(parsed)
 
 
-def _parse_formation(check: _Checker, value: Any) -> FormationSpec:
+MAX_FORMATIONS = 64
+"""Most formations in one world."""
+
+
+def _parse_formations(check: _Checker, value: Any) -> tuple[FormationTask, ...]:
+    if not isinstance(value, list) or not value:
+        check.bad("formations", f"expected a non-empty list of formations, got {_kind(value)}")
+        raise _Invalid
+    if len(value) > MAX_FORMATIONS:
+        check.bad("formations", f"at most {MAX_FORMATIONS} formations, got {len(value):,}")
+        raise _Invalid
+    tasks = []
+    for i, entry in enumerate(value):
+        key = f"formations[{i}]"
+        body = check.attempt(check.mapping, entry, key, _FORMATION_KEYS | {"start", "target"},
+                             required=("start", "target"))
+        if body is None:
+            continue
+        start = check.attempt(check.point, body["start"], f"{key}.start")
+        target = check.attempt(check.point, body["target"], f"{key}.target")
+        spec = check.attempt(_parse_formation, check, {k: v for k, v in body.items() if k not in ("start", "target")},
+                             key)
+        if start is not None and target is not None and spec is not None:
+            tasks.append(FormationTask(np.asarray(start, float), np.asarray(target, float), spec))
+    if len(tasks) < len(value):
+        raise _Invalid
+    return tuple(tasks)
+
+
+_FORMATION_KEYS = {"followers", "comm_range", "spacing", "shape", "offsets"}
+
+
+def _parse_formation(check: _Checker, value: Any, key: str = "formation") -> FormationSpec:
     problems = len(check.problems)
-    body = check.mapping(value, "formation", {"followers", "comm_range", "spacing", "shape", "offsets"})
+    body = check.mapping(value, key, _FORMATION_KEYS)
     default = FormationSpec()
     followers = body.get("followers", default.followers)
     if isinstance(followers, bool) or not isinstance(followers, int) or not 0 <= followers <= MAX_FOLLOWERS:
-        check.bad("formation.followers", f"expected a whole number from 0 to {MAX_FOLLOWERS}, got {_kind(followers)}")
+        check.bad(f"{key}.followers", f"expected a whole number from 0 to {MAX_FOLLOWERS}, got {_kind(followers)}")
         followers = None
-    comm_range = check.attempt(check.number, body.get("comm_range", default.comm_range), "formation.comm_range",
+    comm_range = check.attempt(check.number, body.get("comm_range", default.comm_range), f"{key}.comm_range",
                                positive=True)
-    spacing = check.attempt(check.number, body.get("spacing", default.spacing), "formation.spacing", positive=True)
+    spacing = check.attempt(check.number, body.get("spacing", default.spacing), f"{key}.spacing", positive=True)
     if spacing is not None and comm_range is not None and spacing > comm_range:
-        check.bad("formation.spacing", f"spacing {spacing:g} exceeds comm_range {comm_range:g}")
+        check.bad(f"{key}.spacing", f"spacing {spacing:g} exceeds comm_range {comm_range:g}")
     shape = body.get("shape", default.shape)
     if shape not in ("line", "wedge", "offsets"):
-        check.bad("formation.shape", f"expected 'line', 'wedge' or 'offsets', got {_kind(shape)}")
+        check.bad(f"{key}.shape", f"expected 'line', 'wedge' or 'offsets', got {_kind(shape)}")
     offsets: tuple[tuple[float, float], ...] = ()
     if shape == "offsets":
         if "offsets" not in body:
-            check.bad("formation.offsets", "missing (required when shape is 'offsets')")
+            check.bad(f"{key}.offsets", "missing (required when shape is 'offsets')")
         else:
-            pts = check.attempt(check.points, body["offsets"], "formation.offsets", at_least=1, at_most=MAX_FOLLOWERS)
+            pts = check.attempt(check.points, body["offsets"], f"{key}.offsets", at_least=1, at_most=MAX_FOLLOWERS)
             if pts is not None and followers is not None and len(pts) != followers:
-                check.bad("formation.offsets", f"{len(pts)} offsets for {followers} followers")
+                check.bad(f"{key}.offsets", f"{len(pts)} offsets for {followers} followers")
             elif pts is not None:
                 offsets = tuple((float(a), float(b)) for a, b in pts)
     elif "offsets" in body:
-        check.bad("formation.offsets", "only allowed when shape is 'offsets'")
+        check.bad(f"{key}.offsets", "only allowed when shape is 'offsets'")
     if len(check.problems) > problems:
         raise _Invalid
     return FormationSpec(followers, comm_range, spacing, shape, offsets)
@@ -529,7 +562,9 @@ def _check_placement(check: _Checker, world: World) -> None:
         inside = np.full(len(pts), np.inf)
         in_map = np.flatnonzero(edge >= margin)
         inside[in_map] = _near(world, pts[in_map], margin + 1e-6).obstacle_distance(pts[in_map])
-        reached = world.distance_to_target(pts) <= world.goal_tolerance if key == "starts" else np.zeros(len(pts), bool)
+        # (a formation's start is checked against its own target: _check_formations)
+        reached = (world.distance_to_target(pts) <= world.goal_tolerance if key == "starts" and not world.formations
+                   else np.zeros(len(pts), bool))
         for i in np.flatnonzero((edge < margin) | (inside < margin) | (inside <= 0) | reached).tolist():
             where, at = f"{key}[{i}]", pts[i].tolist()
             if edge[i] < 0:
@@ -542,6 +577,25 @@ def _check_placement(check: _Checker, world: World) -> None:
                 check.bad(where, f"{at} is closer than the robot radius {radius:g} to an obstacle")
             else:
                 check.bad(where, f"{at} is already within goal_tolerance {world.goal_tolerance:g} of a target")
+
+
+def _check_formations(check: _Checker, world: World) -> None:
+    """Several formations: their targets and starts placed like the world's, leaders apart."""
+    if not world.formations:
+        return
+    r = world.robot_radius
+    for i, task in enumerate(world.formations):
+        for what, point, margin in (("target", task.target, 0.0), ("start", task.start, r)):
+            clear = float(world.clearance(point[None])[0])
+            if clear < margin or clear <= 0:
+                check.bad(f"formations[{i}].{what}", f"{point.tolist()} is "
+                          + ("not clear of the obstacles and the map's edge by the robot radius" if what == "start"
+                             else "inside an obstacle or outside the map"))
+        if np.hypot(*(task.start - task.target)) <= world.goal_tolerance:
+            check.bad(f"formations[{i}].start", f"already within goal_tolerance {world.goal_tolerance:g} of its target")
+        for j in range(i):
+            if np.hypot(*(task.start - world.formations[j].start)) < 2 * r:
+                check.bad(f"formations[{i}].start", f"overlaps the leader of formations[{j}]")
 
 
 def _check_routes(check: _Checker, world: World) -> None:
@@ -565,7 +619,10 @@ def _build(check: _Checker, data: Any, source: str) -> World | None:
     if not isinstance(data, Mapping):
         check.bad("", f"a world file must be a mapping of keys, got {_kind(data)}")
         return None
-    check.mapping(data, "", _TOP_KEYS, required=_REQUIRED)
+    several = data.get("formations") is not None
+    check.mapping(data, "", _TOP_KEYS, required=("size", "field") if several else _REQUIRED)
+    if several and data.get("formation") is not None:
+        check.bad("formation", "'formation' and 'formations' together: give one formation, or a list of them")
     size = check.attempt(_parse_size, check, data["size"]) if "size" in data else None
     default_name = Path(source).stem if source != "<dict>" else "world"
     name = check.attempt(_parse_name, check, data.get("name", default_name))
@@ -577,13 +634,21 @@ def _build(check: _Checker, data: Any, source: str) -> World | None:
                if "targets" in data else None)
     starts = check.attempt(check.points, data.get("starts") or [], "starts", at_most=MAX_STARTS, what="starts")
     formation = (check.attempt(_parse_formation, check, data["formation"])
-                 if data.get("formation") is not None else None)
+                 if data.get("formation") is not None and not several else None)
+    formations = check.attempt(_parse_formations, check, data["formations"]) if several else ()
+    if several and formations:   # the formations' own starts and targets, unless also given at the top
+        if "targets" not in data:
+            targets = np.array([task.target for task in formations])
+        if not data.get("starts"):
+            starts = np.array([task.start for task in formations])
     _check_together(check, size, robot_radius, goal_tolerance, params, obstacles, targets)
     if check.problems:
         return None
-    world = World(name, size, robot_radius, goal_tolerance, params, obstacles, targets, starts, formation, source)
+    world = World(name, size, robot_radius, goal_tolerance, params, obstacles, targets, starts, formation, source,
+                  formations or ())
     _check_placement(check, world)
     _check_routes(check, world)
+    _check_formations(check, world)
     return world
 
 

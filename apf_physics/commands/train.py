@@ -84,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
     overrides = parse_overrides(args.set)
     if args.seed is not None:
         overrides["seed"] = args.seed
+    world = load_world(args.world) if args.world else None
+    stages = None if args.world else load_curriculum(args.curriculum)
     with RunDir(args.out, CSV_COLUMNS) as out:  # locked from here on: a second run into --out is refused
         if args.resume:
             if not out.last.is_file():
@@ -97,10 +99,7 @@ def run(args: argparse.Namespace) -> int:
                 raise UserError(f"{out.path} already holds a training run; continue it with --resume "
                                 "or train into another --out")
             config = preset(args.preset or (WORLD_DEFAULT if args.world else CURRICULUM_DEFAULT), **overrides)
-        if args.world:
-            phases = phases_for_world(load_world(args.world), config)
-        else:
-            phases = phases_for_curriculum(load_curriculum(args.curriculum), config)
+        phases = phases_for_world(world, config) if world is not None else phases_for_curriculum(stages, config)
         try:
             result = train(config, phases, out_dir=out, resume=args.resume, progress=not args.no_progress)
         except KeyboardInterrupt:
