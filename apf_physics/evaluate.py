@@ -11,7 +11,7 @@ import numpy as np
 
 from apf_physics.planners.base import Planner
 from apf_physics.render.output import check_writable, write_text
-from apf_physics.rollout import Episode, rollout
+from apf_physics.rollout import Episode, rollout, rollout_formations
 from apf_physics.world import World
 
 
@@ -67,8 +67,11 @@ def evaluate(planner: Planner, worlds: Sequence[World], starts: dict[str, np.nda
     """
     episodes: list[Episode] = []
     for world in worlds:
-        s = world.starts if starts is None else starts[world.name]
-        episodes.extend(rollout(world, planner, s, max_steps=max_steps, formation=formation))
+        if formation and world.formations:   # several formations at once, each to its own target
+            episodes.extend(rollout_formations(world, planner, max_steps=max_steps))
+        else:
+            s = world.starts if starts is None else starts[world.name]
+            episodes.extend(rollout(world, planner, s, max_steps=max_steps, formation=formation))
         if progress is not None:
             progress(world)
     return Evaluation(f"{planner.name}+formation" if formation else planner.name, episodes)

@@ -128,16 +128,20 @@ class FollowerController:
             u += repulsive_term(surface, self.krep, self.robot_range, self.u_max)
         return u
 
-    def act(self, positions: np.ndarray, leader_move: np.ndarray) -> np.ndarray:
+    def act(self, positions: np.ndarray, leader_move: np.ndarray, world: World | None = None) -> np.ndarray:
         """Moves of all followers given every robot's position and the leader's chosen move.
 
         Args:
             positions: ``(1 + n, 2)``, the leader first.
             leader_move: The leader's displacement this step.
+            world: The world as it stands now (default the controller's), e.g. with the
+                robots of other formations in it (:meth:`World.among`): moves must keep clear
+                of them too.
 
         Returns:
             ``(n, 2)`` displacements.
         """
+        world = world if world is not None else self.world
         n = len(positions) - 1
         moves = np.zeros((n + 1, 2))
         moves[0] = leader_move
@@ -157,12 +161,13 @@ class FollowerController:
                 # (known to be free) until the slot is in clear sight again.
                 anchor = self._trail_point(0, ahead[0], float(np.hypot(*self.offsets[i - 1])))
             candidates = positions[i] + ACTIONS                           # (9, 2)
-            u = self.potential(i, candidates, positions, anchor)
+            # other robots where they will be: ahead in the order, after their decided move
+            u = self.potential(i, candidates, ahead, anchor)
             # Safe: every point along the move keeps clear of obstacles and the edge, and
             # the swept distance to every robot stays above contact (robots ahead of this
             # one move as already decided; those behind have not moved yet).
             path = positions[i] + self.fractions[None, :, None] * ACTIONS[:, None, :]   # (9, 4, 2)
-            clear = self.world.clearance(path.reshape(-1, 2)).reshape(9, -1).min(axis=1)
+            clear = world.clearance(path.reshape(-1, 2)).reshape(9, -1).min(axis=1)
             margin = clear - (r + SAFETY)
             for j in range(n + 1):
                 if j == i:
@@ -269,3 +274,154 @@ class FormationTeam:
         followers = positions[..., 1:, :]
         ahead = positions[..., self.followed, :]
         return np.hypot(*(followers - ahead).transpose(-1, *range(followers.ndim - 1)))
+
+
+def right_of_way(world: World, positions: np.ndarray, moves: np.ndarray, order: np.ndarray, t: float = 0.0,
+                 keep: np.ndarray | None = None, exists: np.ndarray | None = None) -> np.ndarray:
+    """Moves of robots that must not touch one another, decided one robot at a time in ``order``.
+
+    Each robot keeps its proposed move when its disc sweeps clear (by :data:`SAFETY`) of the
+    moves already decided and of the robots not decided yet where they stand; otherwise it
+    takes the nearest of the nine moves that does and keeps clear of the obstacles, or stays.
+    Because every robot decided before another keeps clear of that one standing still,
+    staying is always safe: no two robots ever touch, whatever the planners proposed.
+
+    Args:
+        world: The world (obstacles at step ``t``).
+        positions: (R, 2) robot centres.
+        moves: (R, 2) proposed moves.
+        order: Robot indices, highest priority first (robots left out stay).
+        t: The step.
+        keep: (R,) bool, robots whose proposal is kept without checks (default none).
+        exists: (R,) bool, the robots that exist (default all); the others are ignored.
+
+    Returns:
+        (R, 2) the moves.
+    """
+    contact = 2 * world.robot_radius + SAFETY
+    out = np.zeros_like(moves)
+    decided = np.zeros(len(positions), bool)
+    exists = np.ones(len(positions), bool) if exists is None else np.asarray(exists, bool)
+    for k in np.asarray(order).tolist():
+        others = np.flatnonzero(exists & (np.arange(len(positions)) != k))
+        if keep is not None and keep[k]:
+            out[k], decided[k] = moves[k], True
+            continue
+        # the proposal first, then the nine moves from the nearest to the proposal
+        candidates = np.vstack([moves[k], ACTIONS[np.argsort(np.hypot(*(ACTIONS - moves[k]).T), kind="stable")]])
+        other_moves = np.where(decided[others, None], out[others], 0.0)
+        gap = swept_distance(positions[k][None, None], candidates[:, None], positions[others][None],
+                             other_moves[None]) if len(others) else np.full((len(candidates), 1), np.inf)
+        clear_of_robots = np.all(gap >= contact, axis=1)
+        path = positions[k] + np.array([0.25, 0.5, 0.75, 1.0])[None, :, None] * candidates[1:, None, :]
+        room = world.clearance(path.reshape(-1, 2), t).reshape(len(candidates) - 1, -1).min(axis=1)
+        clear_of_obstacles = np.concatenate([[True], room >= world.robot_radius + SAFETY])
+        ok = np.flatnonzero(clear_of_robots & clear_of_obstacles)
+        out[k] = candidates[ok[0]] if len(ok) else 0.0
+        decided[k] = True
+    return out
+
+
+class FormationCrowd:
+    """Several formations in one world, each to its own target, as one crowd of stepper slots.
+
+    Formation ``f`` is slot ``f``; its robots are the first ``1 + followers`` of the slot's
+    ``robots`` (the others are absent). Each formation's followers follow by their own rule,
+    keeping clear of the other formations' robots as they stand; then every move goes
+    through :func:`right_of_way`, in priority order (formation order, each leader before
+    its followers), so no two robots ever touch. A formation whose leader makes no progress
+    for :attr:`window` steps while another formation's robot is near is in a deadlock: it
+    takes the first place in the order for :attr:`boost` steps (the others give way); each
+    such event is counted in :attr:`deadlocks`.
+
+    Args:
+        world: A world with ``formations``.
+    """
+
+    window = 20      # steps without progress (and someone near) that make a deadlock
+    progress = 0.5   # the distance to the target a leader must gain within the window [units]
+    near = 3.0       # another formation's robot this close to the leader [units]
+    boost = 15       # steps a deadlocked formation goes first
+
+    def __init__(self, world: World):
+        self.world = world
+        self.tasks = world.formations
+        self.count = len(self.tasks)
+        self.worlds = [world.formation_world(f) for f in range(self.count)]
+        self.sizes = [task.spec.followers + 1 for task in self.tasks]
+        self.robots = max(self.sizes)
+        self.present = np.zeros((self.count, self.robots), bool)
+        for f, size in enumerate(self.sizes):
+            self.present[f, :size] = True
+        self.followed = [task.spec.followed for task in self.tasks]
+
+    def starts(self) -> np.ndarray:
+        """(F, m, 2) every robot's start: each leader at its start, its followers behind it, clear of the others.
+
+        Raises:
+            UserError: A follower finds no free position near its leader.
+        """
+        out = np.zeros((self.count, self.robots, 2))
+        placed = np.array([task.start for task in self.tasks])
+        for f, task in enumerate(self.tasks):
+            others = np.delete(placed, f, axis=0)
+            followers = initial_followers(self.worlds[f].among(others), task.spec, task.start)
+            out[f, 0], out[f, 1:self.sizes[f]] = task.start, followers
+            out[f, self.sizes[f]:] = task.start          # absent robots: anywhere (they never take part)
+            placed = np.vstack([placed, followers])
+        return out
+
+    def reset(self, positions: np.ndarray) -> None:
+        """Start every formation at ``positions`` (F, m, 2)."""
+        self.controllers = []
+        for f in range(self.count):
+            controller = FollowerController(self.worlds[f], self.tasks[f].spec)
+            controller.reset(positions[f, :self.sizes[f]])
+            self.controllers.append(controller)
+        self.best = np.array([float(w.distance_to_target(p[None, 0])[0]) for w, p in zip(self.worlds, positions)])
+        self.since = np.zeros(self.count, np.intp)
+        self.first_until = np.full(self.count, -1)
+        self.deadlocks = np.zeros(self.count, np.intp)
+
+    def others(self, positions: np.ndarray, f: int) -> np.ndarray:
+        """(K, 2) the robots of every formation but ``f``."""
+        mask = self.present.copy()
+        mask[f] = False
+        return positions[mask]
+
+    def view(self, positions: np.ndarray, f: int) -> World:
+        """Formation ``f``'s world with the other formations' robots in it, as they stand."""
+        return self.worlds[f].among(self.others(positions, f))
+
+    def commands(self, positions: np.ndarray, leader_moves: np.ndarray, active: np.ndarray, step: int) -> np.ndarray:
+        """(F, m, 2) every robot's move: leaders as proposed, followers by their rule, all given right of way."""
+        proposed = np.zeros(positions.shape)
+        for f in np.flatnonzero(active).tolist():
+            proposed[f, 0] = leader_moves[f]
+            size = self.sizes[f]
+            proposed[f, 1:size] = self.controllers[f].act(positions[f, :size], leader_moves[f], self.view(positions, f))
+        order = sorted(range(self.count), key=lambda f: (self.first_until[f] < step, f))
+        robots = np.array([f * self.robots + r for f in order if active[f] for r in range(self.sizes[f])], np.intp)
+        flat = right_of_way(self.world, positions.reshape(-1, 2), proposed.reshape(-1, 2), robots, step,
+                            exists=self.present.ravel())
+        return flat.reshape(positions.shape)
+
+    def watch(self, positions: np.ndarray, active: np.ndarray, step: int) -> None:
+        """After a step: note each leader's progress; a stalled leader with company is in a deadlock."""
+        for f in np.flatnonzero(active).tolist():
+            distance = float(self.worlds[f].distance_to_target(positions[f, :1])[0])
+            if distance < self.best[f] - self.progress:
+                self.best[f], self.since[f] = distance, 0
+                continue
+            self.since[f] += 1
+            company = self.others(positions, f)
+            crowded = len(company) and np.min(np.hypot(*(company - positions[f, 0]).T)) < self.near
+            if self.since[f] >= self.window and crowded and self.first_until[f] < step:
+                self.deadlocks[f] += 1
+                self.first_until[f] = step + self.boost
+                self.since[f] = 0
+
+    def links(self, positions: np.ndarray) -> list[np.ndarray]:
+        """Per formation, the distance of each follower to the robot it follows."""
+        return [np.hypot(*(positions[f, 1:self.sizes[f]] - positions[f, self.followed[f]]).T)
+                for f in range(self.count)]

@@ -174,15 +174,16 @@ class Observer:
         return before
 
     def potential_at(self, positions: np.ndarray, robots: np.ndarray | None = None,
-                     t: np.ndarray | float = 0.0) -> np.ndarray:
+                     t: np.ndarray | float = 0.0, discs: np.ndarray | None = None) -> np.ndarray:
         """(n,) U at ``positions`` of ``robots`` (default all) at step ``t``, as the windows read it."""
         robots = self._everyone if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
         positions = np.asarray(positions, float).reshape(-1, 2)
         u = self._atlas.sample(positions, self.world_of[robots]).astype(float)
-        return self._add_moving(u[:, None], positions, robots, t, np.zeros((1, 2)))[:, 0]
+        return self._add_moving(u[:, None], positions, robots, t, np.zeros((1, 2)), discs)[:, 0]
 
     def potential_windows(self, positions: np.ndarray, robots: np.ndarray | None = None,
-                          t: np.ndarray | float = 0.0, centre: np.ndarray | None = None) -> np.ndarray:
+                          t: np.ndarray | float = 0.0, centre: np.ndarray | None = None,
+                          discs: np.ndarray | None = None) -> np.ndarray:
         """(n, k, k) float32 windows of U at step ``t`` around ``positions`` of ``robots`` (default all).
 
         ``centre``: with ``scale="log"``, the U the window is taken relative to (default its own centre).
@@ -191,7 +192,7 @@ class Observer:
         positions = np.asarray(positions, float).reshape(-1, 2)
         k = self.config.size
         windows = self._atlas.sample(positions, self.world_of[robots], self._offsets)
-        windows = self._add_moving(windows, positions, robots, t, self._offsets).reshape(-1, k, k)
+        windows = self._add_moving(windows, positions, robots, t, self._offsets, discs).reshape(-1, k, k)
         if self.config.scale == "log":
             middle = windows[:, k // 2, k // 2, None, None] if centre is None else centre[:, None, None]
             d = windows - middle
@@ -199,65 +200,81 @@ class Observer:
         return windows
 
     def _add_moving(self, values: np.ndarray, positions: np.ndarray, robots: np.ndarray, t: np.ndarray | float,
-                    offsets: np.ndarray) -> np.ndarray:
-        """Add the moving obstacles' terms at step ``t`` to ``values`` (n, Q) sampled at ``positions + offsets``.
+                    offsets: np.ndarray, discs: np.ndarray | None = None) -> np.ndarray:
+        """Add the moving obstacles' terms at step ``t`` (and those of ``discs``, other robots) to
+        ``values`` (n, Q) sampled at ``positions + offsets``.
 
         ``offsets`` is the window's lattice (``self._offsets``) or one point (``[[0, 0]]``). Only
         the window points within ``p0`` of an obstacle's box are measured (a few points of the
         k²), for all robots and obstacles of a world at once.
         """
-        if not self._moving:
+        crowd = discs is not None and len(discs) > 0
+        if not self._moving and not crowd:
             return values
-        k, h = self.config.size, self.config.size // 2
-        lattice = len(offsets) == k * k
         worlds = self.world_of[robots]
         when = np.broadcast_to(np.asarray(t, float), (len(robots),))
         for w in np.unique(worlds).tolist():
             world = self.worlds[w]
-            if not world.moving:
-                continue
             mine = np.flatnonzero(worlds == w)
-            field = world.field
-            shift = world.moving_offsets(when[mine])                                    # (m, M, 2)
-            lo, hi = self._moving_boxes(world)                                          # (M, 2) each
-            local = positions[mine][:, None, :] - shift                                 # robots in each obstacle's frame
-            if lattice:   # window columns dx / rows dy within p0 of each obstacle's box, clipped to the window
-                first = np.clip(np.ceil(lo - field.p0 - local), -h, h + 1).astype(np.intp)
-                last = np.clip(np.floor(hi + field.p0 - local), -h - 1, h).astype(np.intp)
-            else:
-                first = last = np.zeros(local.shape, np.intp)
-                inside_box = np.all((local >= lo - field.p0) & (local <= hi + field.p0), axis=-1)
-                last = np.where(inside_box[..., None], last, -1)
-            robot, obstacle = np.nonzero(np.all(first <= last, axis=-1))
-            if not len(robot):
-                continue
-            first, last, base = first[robot, obstacle], last[robot, obstacle], local[robot, obstacle]
-            span = (last - first).max(axis=0) + 1
-            a, b = np.meshgrid(np.arange(span[0]), np.arange(span[1]), indexing="ij")
-            dx = first[:, None, 0] + a.ravel()[None]                                    # (pairs, S)
-            dy = first[:, None, 1] + b.ravel()[None]
-            valid = (dx <= last[:, None, 0]) & (dy <= last[:, None, 1])
-            px, py = base[:, None, 0] + dx, base[:, None, 1] + dy                       # in the obstacle's frame
-            centre, radius = self._moving_discs(world)
-            disc = ~np.isnan(radius[obstacle])
-            # discs all at once; polygons one by one
-            d = np.hypot(px - centre[obstacle, 0, None], py - centre[obstacle, 1, None]) - radius[obstacle, None]
-            for index in np.unique(obstacle[~disc]).tolist():
-                pairs = obstacle == index
-                shape = world.obstacles[world.moving[index]]
-                dist, _ = shape.signed_distance(np.stack([px[pairs], py[pairs]], -1).reshape(-1, 2))
-                d[pairs] = dist.reshape(-1, dx.shape[1])
-            term = np.where(valid, apf.repulsive_term(d, field.krep, field.p0, field.u_max), 0.0)
-            flat = (h - dy) * k + (dx + h) if lattice else np.zeros_like(dx)            # window point [h - dy, h + dx]
-            near, which = np.unique(robot, return_inverse=True)                          # the robots concerned
-            cell = (which[:, None] * values.shape[1] + flat)[valid]
-            size = len(near) * values.shape[1]
-            added = np.bincount(cell, weights=term[valid], minlength=size).reshape(len(near), -1)
-            blocked = np.bincount(cell[d[valid] <= 0], minlength=size).reshape(len(near), -1) > 0
-            rows = mine[near]
-            # u_wall stays the highest reading: points inside read it, none above it
-            values[rows] = np.where(blocked, world.u_wall, np.minimum(values[rows] + added, world.u_wall))
+            if world.moving:
+                shift = world.moving_offsets(when[mine])                                # (m, M, 2)
+                lo, hi = self._moving_boxes(world)
+                centre, radius = self._moving_discs(world)
+                shapes = [world.obstacles[i] for i in world.moving]
+                self._add_near(values, mine, positions[mine][:, None, :] - shift, lo, hi, centre, radius, shapes,
+                               world, len(offsets) > 1)
+            if crowd:   # other robots: discs of the robot radius where they are (in the world's frame)
+                centre = np.asarray(discs, float).reshape(-1, 2)
+                r = np.full(len(centre), world.robot_radius)
+                local = np.broadcast_to(positions[mine][:, None, :], (len(mine), len(centre), 2))
+                self._add_near(values, mine, local, centre - world.robot_radius, centre + world.robot_radius,
+                               centre, r, [None] * len(centre), world, len(offsets) > 1)
         return values
+
+    def _add_near(self, values: np.ndarray, mine: np.ndarray, local: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                  centre: np.ndarray, radius: np.ndarray, shapes: list, world: World, lattice: bool) -> None:
+        """Add, in place, the repulsive terms of M shapes to the windows of robots ``mine``.
+
+        ``local`` (m, M, 2): each robot in each shape's frame; ``lo``, ``hi`` (M, 2): the shapes'
+        boxes in their frames; discs by ``centre`` and ``radius`` (NaN radius: a polygon,
+        measured by ``shapes[i].signed_distance``).
+        """
+        k, h = self.config.size, self.config.size // 2
+        field = world.field
+        if lattice:   # window columns dx / rows dy within p0 of each shape's box, clipped to the window
+            first = np.clip(np.ceil(lo - field.p0 - local), -h, h + 1).astype(np.intp)
+            last = np.clip(np.floor(hi + field.p0 - local), -h - 1, h).astype(np.intp)
+        else:
+            first = np.zeros(local.shape, np.intp)
+            inside_box = np.all((local >= lo - field.p0) & (local <= hi + field.p0), axis=-1)
+            last = np.where(inside_box[..., None], first, -1)
+        robot, shape = np.nonzero(np.all(first <= last, axis=-1))
+        if not len(robot):
+            return
+        first, last, base = first[robot, shape], last[robot, shape], local[robot, shape]
+        span = (last - first).max(axis=0) + 1
+        a, b = np.meshgrid(np.arange(span[0]), np.arange(span[1]), indexing="ij")
+        dx = first[:, None, 0] + a.ravel()[None]                                        # (pairs, S)
+        dy = first[:, None, 1] + b.ravel()[None]
+        valid = (dx <= last[:, None, 0]) & (dy <= last[:, None, 1])
+        px, py = base[:, None, 0] + dx, base[:, None, 1] + dy                           # in the shape's frame
+        # discs all at once; polygons one by one
+        d = np.hypot(px - centre[shape, 0, None], py - centre[shape, 1, None]) - radius[shape, None]
+        polygon = np.isnan(radius[shape])
+        for index in np.unique(shape[polygon]).tolist():
+            pairs = shape == index
+            dist, _ = shapes[index].signed_distance(np.stack([px[pairs], py[pairs]], -1).reshape(-1, 2))
+            d[pairs] = dist.reshape(-1, dx.shape[1])
+        term = np.where(valid, apf.repulsive_term(d, field.krep, field.p0, field.u_max), 0.0)
+        flat = (h - dy) * k + (dx + h) if lattice else np.zeros_like(dx)                # window point [h - dy, h + dx]
+        near, which = np.unique(robot, return_inverse=True)                              # the robots concerned
+        cell = (which[:, None] * values.shape[1] + flat)[valid]
+        size = len(near) * values.shape[1]
+        added = np.bincount(cell, weights=term[valid], minlength=size).reshape(len(near), -1)
+        blocked = np.bincount(cell[d[valid] <= 0], minlength=size).reshape(len(near), -1) > 0
+        rows = mine[near]
+        # u_wall stays the highest reading: points inside read it, none above it
+        values[rows] = np.where(blocked, world.u_wall, np.minimum(values[rows] + added, world.u_wall))
 
     def _moving_discs(self, world: World) -> tuple[np.ndarray, np.ndarray]:
         """Centres ``(M, 2)`` and radii ``(M,)`` of the moving discs where they are written (NaN for polygons)."""
@@ -276,15 +293,20 @@ class Observer:
         return world.cached("moving_boxes", build)
 
     def observe(self, positions: np.ndarray, robots: np.ndarray | None = None,
-                t: np.ndarray | float = 0.0) -> np.ndarray:
-        """(n, C, k, k) float32 observations of ``robots`` (default all) at ``positions``, at step ``t``."""
+                t: np.ndarray | float = 0.0, discs: np.ndarray | None = None) -> np.ndarray:
+        """(n, C, k, k) float32 observations of ``robots`` (default all) at ``positions``, at step ``t``.
+
+        ``discs``: (K, 2) centres of other robots (of other formations), seen as discs of the
+        robot radius that repel like obstacles (the same for every robot observed).
+        """
         robots = self._everyone if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
         out = np.empty((len(robots), *self.config.shape), np.float32)
-        out[:, 0] = self.potential_windows(positions, robots, t)
+        out[:, 0] = self.potential_windows(positions, robots, t, discs=discs)
         channels = self.config.channels
         if "previous" in channels:
-            centre = self.potential_at(positions, robots, t) if self.config.scale == "log" else None
-            out[:, channels.index("previous")] = self.potential_windows(positions, robots, np.asarray(t) - 1.0, centre)
+            centre = self.potential_at(positions, robots, t, discs) if self.config.scale == "log" else None
+            out[:, channels.index("previous")] = self.potential_windows(positions, robots, np.asarray(t) - 1.0, centre,
+                                                                        discs)
         if self.config.memory:
             out[:, channels.index("memory")] = self.memory.window(positions, robots)
         return out

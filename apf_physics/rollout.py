@@ -8,13 +8,14 @@ decision (reached, collision, trapped, timeout), with the planner's trap rule.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
 
 from apf_physics.engine import Outcome, Stepper, TrapDetector
-from apf_physics.formation import FormationTeam, formation_spec
+from apf_physics.formation import FormationCrowd, FormationTeam, formation_spec
 from apf_physics.planners.base import Planner
 from apf_physics.world import World
 
@@ -30,6 +31,10 @@ class FormationRecord:
         robot_robot_collisions: Control steps in which two robots touched.
         robot_obstacle_collisions: Control steps in which a robot touched an obstacle or the edge.
         link_in_range: Per link (follower i and the robot it follows), the share of steps within range.
+        crowd: The world, when this formation was one of several in it (else None).
+        index: Which of the world's formations it was.
+        between_collisions: Control steps in which one of its robots touched a robot of another formation.
+        deadlocks: Times it was found blocked by other formations (and given the right of way).
     """
 
     positions: np.ndarray
@@ -38,6 +43,10 @@ class FormationRecord:
     robot_robot_collisions: int
     robot_obstacle_collisions: int
     link_in_range: list[float]
+    crowd: str | None = None
+    index: int = 0
+    between_collisions: int = 0
+    deadlocks: int = 0
 
     @property
     def min_robot_distance(self) -> float:
@@ -113,6 +122,10 @@ class Episode:
             data["robot_robot_collisions"] = f.robot_robot_collisions
             data["robot_obstacle_collisions"] = f.robot_obstacle_collisions
             data["link_in_range"] = [round(v, 4) for v in f.link_in_range]
+            data["trajectory"] = np.round(f.positions, 4).tolist()
+            if f.crowd is not None:
+                data["crowd"], data["formation"] = f.crowd, f.index
+                data["between_collisions"], data["deadlocks"] = f.between_collisions, f.deadlocks
         return data
 
 
@@ -197,4 +210,85 @@ def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | 
                                      int(obstacle_steps[i]), list(in_range[i] / max(steps, 1)))
         episodes.append(Episode(world.name, starts[i], Outcome(stepper.outcome[i]).label, steps,
                                 positions[:, 0].copy(), contacts[i], record))
+    return episodes
+
+
+CROWD_TRAP_WINDOW = 40
+"""Trap window of a leader among other formations: waiting for one to pass is not being trapped."""
+
+
+def rollout_formations(world: World, planner: Planner, max_steps: int | None = None,
+                       trap: TrapDetector = TrapDetector()) -> list[Episode]:
+    """Run every formation of a world with ``formations`` at once, each to its own target.
+
+    Each leader is steered by its own copy of ``planner`` in its own field (its target,
+    the obstacles, and the other formations' robots as discs where they stand); followers
+    follow; every move gets the right of way of :class:`~apf_physics.formation.FormationCrowd`.
+
+    Returns:
+        One episode per formation, in the world's order (:attr:`FormationRecord.crowd` names the world).
+    """
+    crowd = FormationCrowd(world)
+    count, m = crowd.count, crowd.robots
+    max_steps = default_max_steps(world) if max_steps is None else int(max_steps)
+    initial = crowd.starts()
+    planners = [copy.copy(planner) for _ in range(count)]
+    for f, p in enumerate(planners):
+        p.reset(crowd.worlds[f], initial[f, :1].copy())
+    window = max(planner.trap_window or trap.window, *(p.trap_window or trap.window for p in planners), CROWD_TRAP_WINDOW)
+    stepper = Stepper(crowd.worlds, count, m, max_steps=max_steps,
+                      trap=TrapDetector(planner.trap_rule, window, trap.radius, trap.min_drop), crowds=[0] * count)
+    slots = np.arange(count)
+    stepper.start(slots, initial, world_ids=slots, present=crowd.present)
+    crowd.reset(initial)
+    stepper.finish(slots[stepper.distance() <= np.array([w.goal_tolerance for w in crowd.worlds])], Outcome.REACHED)
+
+    history = [initial.copy()]
+    contacts: list[list[str]] = [[] for _ in range(count)]
+    within = np.zeros(count, int)
+    between = np.zeros(count, int)
+    obstacle_steps = np.zeros(count, int)
+    in_range = [np.zeros(size - 1) for size in crowd.sizes]
+    step = 0
+    while stepper.running.any():
+        active = stepper.running
+        positions = stepper.positions
+        leader = np.zeros((count, 2))
+        gave_up = np.zeros(count, bool)
+        for f in np.flatnonzero(active).tolist():
+            planners[f].world = crowd.view(positions, f)
+            leader[f] = planners[f].act(positions[f, :1], np.ones(1, bool), step)[0]
+            stuck = planners[f].stuck()
+            gave_up[f] = bool(stuck[0]) if stuck is not None else False
+        commands = crowd.commands(positions, leader, active & ~gave_up, step)
+        report = stepper.step(commands, gave_up)
+        step += 1
+        crowd.watch(report.positions, report.moved, step)
+        history.append(report.positions)
+        touched = report.contacts
+        pairs = touched.pairs
+        robot_pairs = pairs[pairs[:, 1] == 2] if len(pairs) else pairs
+        for f in np.flatnonzero(report.moved).tolist():
+            mine = (robot_pairs[:, 0] // m == f) if len(robot_pairs) else np.zeros(0, bool)
+            others = robot_pairs[mine, 2] // m if len(robot_pairs) else np.zeros(0, int)
+            within[f] += bool(np.any(others == f))
+            between[f] += bool(np.any(others != f))
+            robots = slice(f * m, f * m + crowd.sizes[f])
+            obstacle_steps[f] += bool((touched.obstacle[robots] | touched.wall[robots] | touched.moving[robots]).any())
+            links = crowd.links(report.positions)[f]
+            in_range[f] += links <= crowd.tasks[f].spec.comm_range
+        for f in np.flatnonzero(report.collided).tolist():
+            contacts[f] = sorted({c.kind for c in touched.contacts if c.robot // m == f})
+
+    trajectory = np.stack(history)                                     # (T, F, m, 2)
+    episodes = []
+    for f in range(count):
+        steps = int(stepper.steps[f])
+        size = crowd.sizes[f]
+        positions = trajectory[: steps + 1, f, :size]
+        record = FormationRecord(positions, crowd.tasks[f].spec.comm_range, crowd.followed[f], int(within[f] + between[f]),
+                                 int(obstacle_steps[f]), list(in_range[f] / max(steps, 1)), crowd=world.name, index=f,
+                                 between_collisions=int(between[f]), deadlocks=int(crowd.deadlocks[f]))
+        episodes.append(Episode(world.name, crowd.tasks[f].start, Outcome(stepper.outcome[f]).label, steps,
+                                positions[:, 0].copy(), contacts[f], record))
     return episodes

@@ -61,7 +61,7 @@ class DQNPlanner(Planner):
         if self._started:  # the first call sees the starts, which reset() counted already
             self.observer.visit(positions)
         self._started = True
-        obs = self.observer.observe(positions, t=t)
+        obs = self.observer.observe(positions, t=t, discs=self.world.crowd)
         if not self.shield:
             return ACTIONS[self._policy.act(obs)] * active[:, None]
         room = move_clearance(self.world, positions, t=t) - (self.world.robot_radius + SAFETY)
