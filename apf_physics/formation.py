@@ -329,7 +329,9 @@ class FormationCrowd:
     ``robots`` (the others are absent). Each formation's followers follow by their own rule,
     keeping clear of the other formations' robots as they stand; then every move goes
     through :func:`right_of_way`, in priority order (formation order, each leader before
-    its followers), so no two robots ever touch. A formation whose leader makes no progress
+    its followers), so no two robots ever touch. Giving way can hold a follower back: a
+    leader whose follower has fallen more than :attr:`slack` of the communication range
+    behind waits for it. A formation whose leader makes no progress
     for :attr:`window` steps while another formation's robot is near is in a deadlock: it
     takes the first place in the order for :attr:`boost` steps (the others give way); each
     such event is counted in :attr:`deadlocks`.
@@ -342,6 +344,7 @@ class FormationCrowd:
     progress = 0.5   # the distance to the target a leader must gain within the window [units]
     near = 3.0       # another formation's robot this close to the leader [units]
     boost = 15       # steps a deadlocked formation goes first
+    slack = 0.8      # share of comm_range beyond which a leader waits for its followers
 
     def __init__(self, world: World):
         self.world = world
@@ -396,8 +399,10 @@ class FormationCrowd:
     def commands(self, positions: np.ndarray, leader_moves: np.ndarray, active: np.ndarray, step: int) -> np.ndarray:
         """(F, m, 2) every robot's move: leaders as proposed, followers by their rule, all given right of way."""
         proposed = np.zeros(positions.shape)
+        links = self.links(positions)
         for f in np.flatnonzero(active).tolist():
-            proposed[f, 0] = leader_moves[f]
+            behind = len(links[f]) and links[f].max() > self.slack * self.tasks[f].spec.comm_range
+            proposed[f, 0] = 0.0 if behind else leader_moves[f]
             size = self.sizes[f]
             proposed[f, 1:size] = self.controllers[f].act(positions[f, :size], leader_moves[f], self.view(positions, f))
         order = sorted(range(self.count), key=lambda f: (self.first_until[f] < step, f))

@@ -435,7 +435,7 @@ class Physics:
             diff = p[:, None, :] - p[None, :, :]
             d = np.hypot(diff[..., 0], diff[..., 1]) + np.eye(m) * 1e9
             overlap = np.clip(need - d, 0.0, None)
-            edge = np.clip(r + 1e-6 - world.clearance(p, t), 0.0, None)
+            edge = np.clip(r + 1e-6 - clearance, 0.0, None)
             if not overlap.any() and not edge.any():
                 self._positions[mine] = p
                 return
@@ -454,12 +454,13 @@ class Physics:
             length = np.hypot(push[:, 0], push[:, 1])
             push *= np.minimum(1.0, 0.05 / np.maximum(length, 1e-12))[:, None]
             # never through anything: take the longest of these steps that keeps the radius all along
-            bar = np.minimum(r, world.clearance(p, t))
+            bar = np.minimum(r, clearance)
             step = np.zeros_like(push)
             for scale in (0.25, 0.5, 1.0):
                 ok = world.path_clearance(p, p + scale * push, 0.01, t=t, during=False) >= bar
                 step[ok] = scale * push[ok]
             p = p + step
+            clearance = world.clearance(p, t)   # computed once per move: it is most of a reset's cost
         raise UserError(f"{world.label}: robots {mine.tolist()} placed on top of each other "
                         f"could not be moved apart in free space")
 

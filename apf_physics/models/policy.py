@@ -13,6 +13,10 @@ from apf_physics.models.network import QNetwork
 from apf_physics.observation import ObserverConfig
 
 
+SMALL_BATCH = 256
+"""Batches smaller than this run on one torch thread."""
+
+
 class DQNPolicy:
     """Greedy (argmax) actions of a Q-network.
 
@@ -62,8 +66,7 @@ class DQNPolicy:
         Returns:
             (N, 9) float32 action values.
         """
-        with torch.inference_mode():
-            return self.network(torch.as_tensor(np.asarray(obs, np.float32))).numpy()
+        return self._forward(np.asarray(obs, np.float32)).numpy()
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Greedy actions for a batch of raw observations.
@@ -77,5 +80,18 @@ class DQNPolicy:
         obs = np.asarray(obs, np.float32)
         if obs.shape[1:] != self.obs_shape:
             raise ValueError(f"expected observations of shape (N, {', '.join(map(str, self.obs_shape))}), got {obs.shape}")
-        with torch.inference_mode():
-            return self.network(torch.from_numpy(obs)).argmax(1).numpy()
+        return self._forward(obs).argmax(1).numpy()
+
+    def _forward(self, obs: np.ndarray) -> torch.Tensor:
+        """The network on a batch; small batches on one thread (two threads on a busy machine
+        wait on each other longer than a small network takes)."""
+        threads = torch.get_num_threads()
+        small = len(obs) < SMALL_BATCH and threads > 1
+        if small:
+            torch.set_num_threads(1)
+        try:
+            with torch.inference_mode():
+                return self.network(torch.from_numpy(np.ascontiguousarray(obs)))
+        finally:
+            if small:
+                torch.set_num_threads(threads)
