@@ -30,13 +30,30 @@ class Evaluation:
         formations = [e.formation for e in eps if e.formation is not None]
         if formations and len(formations) == n:  # formations: link and robot–robot figures
             steps = np.array([max(e.steps, 1) for e in eps], float)
-            shares = np.array([f.link_in_range for f in formations], float).reshape(n, -1)
+            links = [np.asarray(f.link_in_range, float) for f in formations]
+            in_range = sum(float(np.sum(share) * s) for share, s in zip(links, steps))
+            link_steps = sum(len(share) * s for share, s in zip(links, steps))
             extra = {
-                "link_in_range": [round(float(v), 4) for v in (shares * steps[:, None]).sum(0) / steps.sum()],
-                "episodes_all_links_99": int(np.sum(shares.min(axis=1) >= 0.99)) if shares.size else n,
+                "links_in_range": round(in_range / link_steps, 4) if link_steps else 1.0,
+                "episodes_all_links_99": int(sum(share.min(initial=1.0) >= 0.99 for share in links)),
                 "robot_robot_collisions": int(sum(f.robot_robot_collisions for f in formations)),
                 "min_robot_distance": round(float(min(f.min_robot_distance for f in formations)), 4),
             }
+            if len({len(share) for share in links}) == 1:   # the same formation everywhere: per link
+                shares = np.array(links).reshape(n, -1)
+                extra["link_in_range"] = [round(float(v), 4) for v in (shares * steps[:, None]).sum(0) / steps.sum()]
+            crowds = {}
+            for e in eps:
+                if e.formation.crowd is not None:
+                    crowds.setdefault(e.formation.crowd, []).append(e)
+            if crowds:   # several formations per world: whole-world figures
+                extra.update(
+                    worlds=len(crowds),
+                    worlds_all_arrived=sum(all(e.success for e in members) for members in crowds.values()),
+                    between_collisions=int(sum(f.between_collisions for f in formations)),
+                    within_collisions=int(sum(f.robot_robot_collisions - f.between_collisions for f in formations)),
+                    deadlocks=int(sum(f.deadlocks for f in formations)),
+                )
         return {
             "episodes": n,
             "successes": len(ok),
@@ -97,11 +114,16 @@ def format_table(evaluations: Sequence[Evaluation]) -> str:
         if len(names) > 1:
             lines.append(row(ev.planner, "(all)", ev.summary()))
         summary = ev.summary()
-        if "link_in_range" in summary:
-            shares = ", ".join(f"{v:.1%}" for v in summary["link_in_range"])
+        if "links_in_range" in summary:
+            shares = (", ".join(f"{v:.1%}" for v in summary["link_in_range"]) if "link_in_range" in summary
+                      else f"{summary['links_in_range']:.1%} (all links)")
             notes.append(f"{ev.planner}: steps each link in range {shares}; episodes with every link >= 99%: "
                          f"{summary['episodes_all_links_99']}/{summary['episodes']}; robot-robot collisions "
                          f"{summary['robot_robot_collisions']}; closest robots {summary['min_robot_distance']:.2f}")
+        if "worlds" in summary:
+            notes.append(f"{ev.planner}: worlds where every formation arrived {summary['worlds_all_arrived']}/"
+                         f"{summary['worlds']}; robot-robot collisions between formations {summary['between_collisions']}, "
+                         f"within {summary['within_collisions']}; deadlocks resolved {summary['deadlocks']}")
     return "\n".join(lines + notes)
 
 

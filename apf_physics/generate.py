@@ -17,6 +17,9 @@ Families (:data:`FAMILIES`):
 - ``moving``: one of the families above plus 3–8 moving obstacles (discs and boxes) whose
   routes cross the axis between the starts and the target, at 0.15–0.6 units per step:
   back and forth across it, or round a loop through three points.
+- ``crossing``: 2–4 formations of 3 robots (a line or a wedge) whose routes cross near the
+  middle of the map, each from its start to a target across it, among 2–4 obstacles kept
+  off the crossing (the world file's ``formations:``).
 
 Every world goes through :func:`~apf_physics.worldfile.world_from_dict` (so it honours the
 world-file contract), and every start is reachable: a path with the robot's clearance
@@ -45,7 +48,8 @@ FAMILIES = ("point", "line", "two_points", "concave", "bent_line", "clutter")
 """The families of static worlds the thesis's general curriculum and the project's general recipes train on."""
 STATIC_FAMILIES = FAMILIES
 MOVING_FAMILIES = ("moving",)
-ALL_FAMILIES = FAMILIES + MOVING_FAMILIES
+FORMATION_FAMILIES = ("crossing",)
+ALL_FAMILIES = FAMILIES + MOVING_FAMILIES + FORMATION_FAMILIES
 """Every family :func:`generate_world` draws."""
 
 ROBOT_RADIUS = 0.25
@@ -269,6 +273,8 @@ def generate_world(family: str, rng: np.random.Generator, size: float = 50, fiel
     """
     if family not in ALL_FAMILIES:
         raise UserError(f"--family: unknown family {family!r} (known: {', '.join(ALL_FAMILIES)})")
+    if family == "crossing":
+        return _crossing_world(rng, float(size), field, name)
     if field not in FIELD_PRESETS:
         raise UserError(f"--field: unknown field preset {field!r} (known: {', '.join(FIELD_PRESETS)})")
     size = float(size)
@@ -327,3 +333,46 @@ def _draw_starts(world: World, rng: np.random.Generator, target: np.ndarray, u: 
             continue
         out.append(p)
     return np.array(out).reshape(-1, 2) if len(out) == count else None
+
+
+def _crossing_world(rng: np.random.Generator, size: float, field: str, name: str | None) -> World:
+    """2–4 formations whose straight routes cross near the middle, among a few obstacles off the crossing."""
+    scale = size / 50.0
+    for _ in range(MAX_ATTEMPTS):
+        centre = size / 2 + rng.uniform(-4, 4, 2) * scale
+        count = int(rng.integers(2, 5))
+        angles = rng.uniform(0, 2 * math.pi) + np.arange(count) * 2 * math.pi / count + rng.uniform(-0.3, 0.3, count)
+        formations, ends = [], []
+        for angle in angles:
+            u = np.array([math.cos(angle), math.sin(angle)])
+            v = np.array([-u[1], u[0]])
+            start = centre + rng.uniform(15, 20) * scale * u + rng.uniform(-2, 2) * scale * v
+            target = centre - rng.uniform(15, 20) * scale * u + rng.uniform(-2, 2) * scale * v
+            shape = "line" if rng.random() < 0.5 else "wedge"
+            formations.append({"start": np.round(start, 3).tolist(), "target": np.round(target, 3).tolist(),
+                               "followers": 2, "shape": shape, "spacing": 1.0, "comm_range": 3.0})
+            ends += [start, target]
+        ends = np.array(ends)
+        if ends.min() < 3 or ends.max() > size - 3:
+            continue
+        if np.min(np.hypot(*(ends[:, None] - ends[None]).transpose(2, 0, 1)) + 99 * np.eye(len(ends))) < 4:
+            continue
+        obstacles = []
+        for _ in range(int(rng.integers(2, 5))):
+            p = centre + rng.uniform(-14, 14, 2) * scale
+            if np.hypot(*(p - centre)) < 5 * scale or np.min(np.hypot(*(ends - p).T)) < 5:
+                continue   # off the crossing, and off every start and target
+            obstacles.append(_disc(p, rng.uniform(0.5, 2.0)) if rng.random() < 0.5 else _box(rng, p))
+        if not all(_inside(o, size, 0.5) for o in obstacles):
+            continue
+        data = {"name": name or "crossing", "size": [size, size], "robot_radius": ROBOT_RADIUS,
+                "goal_tolerance": GOAL_TOLERANCE, "field": field, "obstacles": _round(obstacles),
+                "formations": formations}
+        try:
+            world = world_from_dict(data, source="<generated crossing>")
+        except UserError:
+            continue
+        if all(world.clearance(task.start[None])[0] >= 2.0 and reachable(world.formation_world(f), task.start)
+               for f, task in enumerate(world.formations)):
+            return world
+    raise UserError(f"no valid 'crossing' world found in {MAX_ATTEMPTS} draws on a {size:g} x {size:g} map")

@@ -460,7 +460,7 @@ class Physics:
                 ok = world.path_clearance(p, p + scale * push, 0.01, t=t, during=False) >= bar
                 step[ok] = scale * push[ok]
             p = p + step
-            clearance = world.clearance(p, t)   # computed once per move: it is most of a reset's cost
+            clearance = world.clearance(p, t)   # once per move: clearance is most of the cost of placing robots
         raise UserError(f"{world.label}: robots {mine.tolist()} placed on top of each other "
                         f"could not be moved apart in free space")
 
