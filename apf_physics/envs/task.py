@@ -17,7 +17,7 @@ import numpy as np
 from apf_physics.actions import ACTIONS
 from apf_physics.engine import TIMEOUT, Stepper
 from apf_physics.envs.reward import RewardWeights, reward_terms
-from apf_physics.formation import FormationTeam
+from apf_physics.formation import FormationCrowd, FormationTeam
 from apf_physics.observation import Observer, ObserverConfig
 from apf_physics.world import FormationSpec, World
 
@@ -149,3 +149,104 @@ class NavigationTask:
     def distance(self) -> np.ndarray:
         """(N,) each leader's distance to the nearest target of its world, after the last start or step."""
         return self.stepper.last_distance
+
+
+class CrowdTask:
+    """Several formations of one world at once (its ``formations:``), each to its own target.
+
+    What the PettingZoo environment steps: one :class:`~apf_physics.engine.Stepper` slot per
+    formation, all in one crowd (their robots meet), the followers' rule and the right of way
+    of :class:`~apf_physics.formation.FormationCrowd`, one observer row per agent.
+
+    Args:
+        world: A world with ``formations``.
+        observer: How observations are built; an agent sees the robots of the other
+            formations (``"leaders"``) or all the other robots (``"all"``) as discs.
+        weights: Reward weights.
+        agents: ``"leaders"``: one agent per formation, its followers follow by their rule and
+            every move gets the right of way; ``"all"``: every robot is an agent, moved as told.
+        max_steps: Truncate after this many steps (None: never).
+    """
+
+    def __init__(self, world: World, observer: ObserverConfig, weights: RewardWeights, agents: str = "leaders",
+                 max_steps: int | None = None):
+        if agents not in ("leaders", "all"):
+            raise ValueError(f"agents must be 'leaders' or 'all', got {agents!r}")
+        if not world.formations:
+            raise ValueError(f"{world.label}: the world has no 'formations'")
+        self.world = world
+        self.crowd = FormationCrowd(world)
+        self.weights = weights
+        self.mode = agents
+        count, m = self.crowd.count, self.crowd.robots
+        self.stepper = Stepper(self.crowd.worlds, count, m, max_steps=max_steps, crowds=[0] * count)
+        if agents == "leaders":
+            self.members = [(f, 0) for f in range(count)]
+        else:
+            self.members = [(f, r) for f in range(count) for r in range(self.crowd.sizes[f])]
+        self.names = [f"leader_{f}" if agents == "leaders" else f"robot_{f}_{r}" for f, r in self.members]
+        self._formation = np.array([f for f, _ in self.members], np.intp)
+        self._robot = np.array([f * m + r for f, r in self.members], np.intp)
+        self.observer = Observer(observer, len(self.members), self.crowd.worlds, track_visits=bool(weights.revisit))
+        self._centre = observer.size // 2
+
+    def start(self) -> None:
+        """Every formation at its start (followers behind their leaders)."""
+        initial = self.crowd.starts()
+        slots = np.arange(self.crowd.count)
+        self.stepper.start(slots, initial, world_ids=slots, present=self.crowd.present)
+        self.crowd.reset(initial)
+        self.step_count = 0
+        positions = self._agent_positions()
+        self.observer.reset(np.arange(len(self.members)), positions,
+                            [self.crowd.worlds[f] for f in self._formation])
+        self._obs, self._u = self._observe()
+
+    def _agent_positions(self) -> np.ndarray:
+        return self.stepper.positions.reshape(-1, 2)[self._robot]
+
+    def _observe(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every agent's observation, and U at it (in its formation's field, with the others' discs)."""
+        robots = self.stepper.positions.reshape(-1, 2)
+        present = self.stepper.physics.present
+        obs = np.empty((len(self.members), *self.observer.config.shape), np.float32)
+        u = np.empty(len(self.members))
+        for a, (f, r) in enumerate(self.members):
+            others = present.copy()
+            others[f * self.crowd.robots:(f + 1) * self.crowd.robots] = self.mode == "all"
+            others[self._robot[a]] = False
+            discs = robots[others]
+            row = np.array([a])
+            obs[a] = self.observer.observe(robots[self._robot[a]][None], row, self.step_count, discs)[0]
+            u[a] = self.observer.potential_at(robots[self._robot[a]][None], row, self.step_count, discs)[0]
+        return obs, u
+
+    def step(self, actions: np.ndarray) -> TaskStep:
+        """Every agent's move (agents of ended formations: ignored)."""
+        moves = ACTIONS[np.asarray(actions, dtype=np.intp).reshape(len(self.members))]
+        positions = self.stepper.positions
+        running = self.stepper.running
+        before = self._agent_positions()
+        if self.mode == "leaders":
+            commands = self.crowd.commands(positions, moves, running, self.step_count)
+        else:
+            commands = np.zeros(positions.shape)
+            commands.reshape(-1, 2)[self._robot] = moves
+        report = self.stepper.step(commands)
+        self.step_count += 1
+        self.crowd.watch(report.positions, report.moved, self.step_count)
+        for a in range(len(self.members)):
+            if report.moved[self._formation[a]]:
+                self.observer.visit(self._agent_positions()[a:a + 1], np.array([a]))
+        u_before = self._u
+        self._obs, self._u = self._observe()
+        moved = report.moved[self._formation]
+        touched = report.contacts.any[self._robot] if self.mode == "all" else report.collided[self._formation]
+        reached = report.reached[self._formation]
+        walked = np.hypot(*(self._agent_positions() - before).T) if self.weights.length else None
+        terms = reward_terms(self.weights, touched & moved, reached & moved, u_before, self._u, None, walked) * moved
+        ended = report.ended[self._formation]
+        truncated = ended & (self.stepper.outcome[self._formation] == TIMEOUT)
+        robot_contact = report.contacts.robot[self._robot]
+        return TaskStep(self._obs, terms.sum(axis=0), ended & ~truncated, truncated, terms, reached, touched, moved,
+                        robot_contact)

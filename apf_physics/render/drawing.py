@@ -56,6 +56,16 @@ EXTRA_FOLLOWER_COLOURS: tuple[RGB, ...] = (
     (130, 130, 130),  # grey
 )
 
+#: Colour families of the formations after the first (which keeps the thesis's yellow, blue,
+#: black): per family, the leader's colour and its followers' (darker, then lighter shades).
+FAMILIES: tuple[tuple[RGB, ...], ...] = (
+    ((0, 160, 70), (0, 100, 40), (120, 210, 140), (0, 60, 25)),          # greens
+    ((215, 0, 200), (130, 0, 120), (240, 120, 230), (80, 0, 75)),        # magentas
+    ((255, 120, 0), (170, 70, 0), (255, 185, 120), (110, 45, 0)),        # oranges
+    ((0, 185, 205), (0, 110, 125), (120, 225, 235), (0, 70, 80)),        # cyans
+    ((140, 80, 30), (90, 50, 15), (200, 150, 100), (55, 30, 10)),        # browns
+)
+
 ROLES = ("single", "leader", "follower1", "follower2", "follower")
 _ROLE_PATTERN = re.compile(r"^(single|leader|follower\d*)$")
 
@@ -75,20 +85,29 @@ def formation_roles(robots: int) -> tuple[str, ...]:
     return ("leader",) + tuple(f"follower{i}" for i in range(1, robots))
 
 
-def robot_colours(roles: Sequence[str]) -> list[tuple[RGB, RGB]]:
-    """``(disc colour, trail colour)`` of each robot, by role.
+def robot_colours(roles: Sequence[str], families: Sequence[int] = ()) -> list[tuple[RGB, RGB]]:
+    """``(disc colour, trail colour)`` of each robot, by role (and formation).
 
     ``"single"`` is a blue disc with a yellow trail. In a formation each robot's trail has its
     disc's colour: leader yellow, follower1 blue, follower2 black, follower3+ from
     :data:`EXTRA_FOLLOWER_COLOURS`; plain ``"follower"`` robots take the next unused colour of
-    that palette in order.
+    that palette in order. With ``families`` (one formation number per robot), formations
+    after the first take a colour family of :data:`FAMILIES` each: the leader its main colour,
+    its followers shades of it.
 
     Raises:
         ValueError: for an unknown role.
     """
     out: list[tuple[RGB, RGB]] = []
     plain = 0
-    for role in roles:
+    for k, role in enumerate(roles):
+        family = int(families[k]) if k < len(families) else 0
+        if family > 0 and _ROLE_PATTERN.match(role) and role != "single":
+            shades = FAMILIES[(family - 1) % len(FAMILIES)]
+            rank = 0 if role == "leader" else int(role[len("follower"):] or 1) if role != "follower" else 1
+            colour = shades[min(rank, len(shades) - 1)]
+            out.append((colour, colour))
+            continue
         if not _ROLE_PATTERN.match(role):
             raise ValueError(f"unknown robot role {role!r} (expected one of {', '.join(ROLES)}, or followerN)")
         if role == "single":
@@ -131,6 +150,8 @@ class Snapshot:
         overlay: Lines of text drawn in the top-left corner, e.g. ``"step 12/40"``,
             ``"planner gradient"``, ``"outcome success"``.
         t: The control step shown: where the world's moving obstacles are drawn.
+        families: One formation number per robot (several formations: each in a colour
+            family of its own), or empty.
     """
 
     positions: np.ndarray
@@ -138,6 +159,7 @@ class Snapshot:
     trails: tuple[np.ndarray, ...] = ()
     overlay: tuple[str, ...] = ()
     t: float = 0.0
+    families: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         positions = np.asarray(self.positions, dtype=float).reshape(-1, 2)
@@ -149,7 +171,7 @@ class Snapshot:
             raise ValueError(f"{len(positions)} robot positions but {len(self.roles)} roles")
         if self.trails and len(self.trails) != len(positions):
             raise ValueError(f"{len(positions)} robot positions but {len(self.trails)} trails")
-        robot_colours(self.roles)  # validates the roles
+        robot_colours(self.roles, self.families)  # validates the roles
 
 
 @dataclass(frozen=True, eq=False)
@@ -497,7 +519,7 @@ def draw_frame(field_image: FieldImage, snapshot: Snapshot) -> np.ndarray:
     """
     frame = field_image.background.copy()
     field_image.draw_moving(frame, snapshot.t)
-    colours = robot_colours(snapshot.roles)
+    colours = robot_colours(snapshot.roles, snapshot.families)
     for trail, (_, trail_colour) in zip(snapshot.trails, colours):
         field_image.draw_path(frame, trail, trail_colour)
     _draw_robots(frame, field_image, snapshot, colours)
@@ -523,11 +545,12 @@ class TrailLayer:
     Args:
         field_image: The world's static picture.
         roles: One role per robot (they fix the trail colours).
+        families: One formation number per robot (see :func:`robot_colours`), or empty.
     """
 
-    def __init__(self, field_image: FieldImage, roles: Sequence[str]):
+    def __init__(self, field_image: FieldImage, roles: Sequence[str], families: Sequence[int] = ()):
         self.field_image = field_image
-        self.colours = robot_colours(roles)
+        self.colours = robot_colours(roles, families)
         self.canvas = field_image.background.copy()
         self._last: np.ndarray | None = None
         self._previous: list[np.ndarray | None] = [None] * len(self.colours)
