@@ -25,6 +25,7 @@ import numpy as np
 from apf_physics.actions import ACTIONS, SAFETY
 from apf_physics.errors import UserError
 from apf_physics.field import repulsive, repulsive_term
+from apf_physics.geometry import near_any
 from apf_physics.world import FormationSpec, World
 
 
@@ -386,6 +387,8 @@ class FormationCrowd:
         self.first_until = np.full(self.count, -1)
         self.deadlocks = np.zeros(self.count, np.intp)
 
+    reach = 12.0     # other robots farther than this from all of a formation's robots do not count for it
+
     def others(self, positions: np.ndarray, f: int) -> np.ndarray:
         """(K, 2) the robots of every formation but ``f``."""
         mask = self.present.copy()
@@ -393,8 +396,14 @@ class FormationCrowd:
         return positions[mask]
 
     def view(self, positions: np.ndarray, f: int) -> World:
-        """Formation ``f``'s world with the other formations' robots in it, as they stand."""
-        return self.worlds[f].among(self.others(positions, f))
+        """Formation ``f``'s world with the other formations' robots near it in it, as they stand.
+
+        Near: within :attr:`reach` (beyond any field's repulsion range plus an observation
+        window and a step) of one of its robots, found through a spatial hash, so that a
+        leader's field costs as much among 16 formations as among 2.
+        """
+        others = self.others(positions, f)
+        return self.worlds[f].among(others[near_any(others, positions[f, :self.sizes[f]], self.reach)])
 
     def commands(self, positions: np.ndarray, leader_moves: np.ndarray, active: np.ndarray, step: int) -> np.ndarray:
         """(F, m, 2) every robot's move: leaders as proposed, followers by their rule, all given right of way."""

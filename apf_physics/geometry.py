@@ -250,3 +250,30 @@ def convex_width(vertices: np.ndarray) -> float:
     rel = vertices[None, :, :] - a[:, None, :]
     dist = np.abs(edges[:, None, 0] * rel[:, :, 1] - edges[:, None, 1] * rel[:, :, 0]) / length[:, None]
     return float(dist.max(axis=1).min())
+
+
+def near_any(points: np.ndarray, centres: np.ndarray, reach: float) -> np.ndarray:
+    """(N,) bool: points within ``reach`` of one of ``centres`` (M, 2), through a spatial hash.
+
+    Points and centres are binned into square cells of side ``reach``; only the points in a
+    centre's cell or the eight around it are measured, so the work grows with how many are
+    near, not with N × M.
+    """
+    points = np.asarray(points, float).reshape(-1, 2)
+    centres = np.asarray(centres, float).reshape(-1, 2)
+    if not len(points) or not len(centres):
+        return np.zeros(len(points), bool)
+    cell_p = np.floor(points / reach).astype(np.int64)
+    cell_c = np.floor(centres / reach).astype(np.int64)
+    width = int(max(cell_p[:, 0].max(), cell_c[:, 0].max()) - min(cell_p[:, 0].min(), cell_c[:, 0].min())) + 3
+    offset = min(cell_p[:, 0].min(), cell_c[:, 0].min()) - 1
+    key_p = (cell_p[:, 1] * width) + (cell_p[:, 0] - offset)
+    around = np.array([(dx, dy) for dy in (-1, 0, 1) for dx in (-1, 0, 1)])
+    neighbours = (cell_c[:, None, :] + around[None]).reshape(-1, 2)
+    keys_c = np.unique(neighbours[:, 1] * width + (neighbours[:, 0] - offset))
+    candidates = np.flatnonzero(np.isin(key_p, keys_c))
+    out = np.zeros(len(points), bool)
+    if len(candidates):
+        d = np.hypot(points[candidates, None, 0] - centres[None, :, 0], points[candidates, None, 1] - centres[None, :, 1])
+        out[candidates] = d.min(axis=1) <= reach
+    return out

@@ -121,3 +121,15 @@ def test_parallel_env_is_deterministic_and_leaders_never_touch():
         runs.append(trace)
     assert runs[0] == runs[1]
     assert frame.shape == (512, 512, 3)
+
+
+def test_spatial_hash_finds_exactly_the_near_points():
+    from apf_physics.geometry import near_any
+
+    rng = np.random.default_rng(0)
+    for _ in range(100):
+        points = rng.uniform(-5, 50, (int(rng.integers(0, 60)), 2))
+        centres = rng.uniform(-5, 50, (int(rng.integers(1, 8)), 2))
+        reach = rng.uniform(0.5, 15)
+        exact = np.hypot(points[:, None, 0] - centres[None, :, 0], points[:, None, 1] - centres[None, :, 1])
+        np.testing.assert_array_equal(near_any(points, centres, reach), (exact <= reach).any(axis=1))

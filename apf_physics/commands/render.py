@@ -5,6 +5,14 @@ from __future__ import annotations
 import argparse
 from collections import Counter
 
+from apf_physics.errors import UserError
+from apf_physics.planners import make_planner
+from apf_physics.render.episodes import write_episode_video
+from apf_physics.render.output import check_writable
+from apf_physics.render.video import VIDEO_EXTENSIONS, choose_codec
+from apf_physics.rollout import rollout, rollout_formations
+from apf_physics.worldfile import load_world
+
 
 def add_parser(subparsers) -> None:
     """Register the ``render`` subcommand."""
@@ -49,14 +57,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the planner, render and write the video; returns the exit status."""
-    from apf_physics import load_world
-    from apf_physics.errors import UserError
-    from apf_physics.planners import make_planner
-    from apf_physics.render.episodes import write_episode_video
-    from apf_physics.render.output import check_writable
-    from apf_physics.render.video import VIDEO_EXTENSIONS, choose_codec
-    from apf_physics.rollout import rollout
-
     out = check_writable(args.out, VIDEO_EXTENSIONS, create_parent=True)
     codec = choose_codec(out, args.codec or ("h264" if args.h264 else None))
     png = check_writable(args.png, (".png",), create_parent=True) if args.png else None
@@ -75,7 +75,10 @@ def run(args: argparse.Namespace) -> int:
         starts = world.starts[args.start: args.start + 1]
 
     planner = make_planner(args.planner, model=args.model)
-    episodes = rollout(world, planner, starts, max_steps=args.max_steps, formation=bool(args.formation))
+    if args.formation and world.formations:   # every formation at once, each to its own target
+        episodes = rollout_formations(world, planner, max_steps=args.max_steps)
+    else:
+        episodes = rollout(world, planner, starts, max_steps=args.max_steps, formation=bool(args.formation))
 
     written = write_episode_video(world, episodes, out, png=png, fps=args.fps, size=args.size, hold=args.hold,
                                   overlay=(f"world {world.name}", f"planner {args.planner}"),

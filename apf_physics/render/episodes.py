@@ -25,13 +25,13 @@ def write_episode_video(world, episodes: Sequence, out: str | Path, png: str | P
     image = FieldImage.from_world(world, size)
     hold_frames = max(0, int(round(hold * fps)))
     clips = list(episode_clips(episodes, overlay, formation, start_index))
-    total = sum(len(trajectory) + hold_frames for trajectory, *_ in clips)
+    total = sum(len(clip[0]) + hold_frames for clip in clips)
     last: list[np.ndarray] = []
 
     def frames() -> Iterator[np.ndarray]:
         frame = None
-        for trajectory, roles, lines, final in clips:
-            for frame in render_trajectory(world, trajectory, roles, overlay=lines, final_overlay=final,
+        for trajectory, roles, lines, final, families in clips:
+            for frame in render_trajectory(world, trajectory, roles, overlay=lines, final_overlay=final, families=families,
                                            hold=hold_frames, image=image):
                 yield frame
         last.append(frame)
@@ -43,12 +43,31 @@ def write_episode_video(world, episodes: Sequence, out: str | Path, png: str | P
 
 
 def episode_clips(episodes: Sequence, overlay: tuple[str, ...], formation: bool,
-           start_index: int | None) -> Iterator[tuple[np.ndarray, tuple[str, ...], tuple[str, ...], tuple[str, ...]]]:
-    """``(trajectory (T, R, 2), roles, overlay, final overlay)`` per clip of the video.
+                  start_index: int | None) -> Iterator[tuple[np.ndarray, tuple[str, ...], tuple[str, ...],
+                                                             tuple[str, ...], tuple[int, ...]]]:
+    """``(trajectory (T, R, 2), roles, overlay, final overlay, families)`` per clip of the video.
 
     Single robots from several starts share one clip (all move at once); each formation
-    episode is a clip of its own, one after another.
+    episode is a clip of its own, one after another; the formations of a world with several
+    share one clip, each in its colour family.
     """
+    crowds: dict[str, list] = {}
+    for episode in episodes:
+        record = getattr(episode, "formation", None)
+        if record is not None and record.crowd is not None:
+            crowds.setdefault(record.crowd, []).append(episode)
+    if crowds:
+        for name, members in crowds.items():
+            positions = [robot_positions(e) for e in members]
+            steps = max(len(p) for p in positions)
+            trajectory = np.concatenate([np.concatenate([p, np.repeat(p[-1:], steps - len(p), axis=0)])
+                                         for p in positions], axis=1)
+            roles = tuple(role for p in positions for role in formation_roles(p.shape[1]))
+            families = tuple(e.formation.index for e, p in zip(members, positions) for _ in range(p.shape[1]))
+            arrived = sum(e.success for e in members)
+            yield (trajectory, roles, (*overlay, f"{len(members)} formations"),
+                   (f"{arrived}/{len(members)} formations arrived",), families)
+        return
     paths = [robot_positions(episode) for episode in episodes]
     if not formation and all(p.ndim == 2 for p in paths):
         counts = Counter(episode.outcome for episode in episodes)
@@ -60,14 +79,14 @@ def episode_clips(episodes: Sequence, overlay: tuple[str, ...], formation: bool,
         else:
             lines = (*overlay, f"{len(episodes)} starts")
             final = (", ".join(f"{k} {v}" for k, v in sorted(counts.items())),)
-        yield stack_paths(paths), ("single",) * len(paths), lines, final
+        yield stack_paths(paths), ("single",) * len(paths), lines, final, ()
         return
     for i, (episode, path) in enumerate(zip(episodes, paths)):
         trajectory = path if path.ndim == 3 else path[:, None, :]
         where = f"start {start_index} " if start_index is not None else ""
         lines = (*overlay, f"formation, {where}({episode.start[0]:g}, {episode.start[1]:g})")
         yield (trajectory, formation_roles(trajectory.shape[1]), lines,
-               (f"outcome {episode.outcome} after {episode.steps} steps",))
+               (f"outcome {episode.outcome} after {episode.steps} steps",), ())
 
 
 def robot_positions(episode) -> np.ndarray:

@@ -354,6 +354,7 @@ def trajectory_snapshots(
     final_overlay: Sequence[str] = (),
     trails: bool = True,
     hold: int = 0,
+    families: Sequence[int] = (),
 ) -> Iterator[Snapshot]:
     """One :class:`Snapshot` per time step of a trajectory.
 
@@ -365,6 +366,7 @@ def trajectory_snapshots(
         final_overlay: Extra text lines on the last frame only (e.g. the outcome).
         trails: Draw each robot's path so far.
         hold: Repeat the last frame this many extra times (a pause at the end of a video).
+        families: One formation number per robot (several formations), or empty.
     """
     trajectory = np.asarray(trajectory, dtype=float)
     if trajectory.ndim == 2:
@@ -378,7 +380,8 @@ def trajectory_snapshots(
         lines = (f"step {t}/{steps - 1}", *overlay)
         if t == steps - 1:
             lines = (*lines, *final_overlay)
-        snapshot = Snapshot(trajectory[t], roles, tuple(per_robot[:, : t + 1]) if trails else (), lines, t)
+        snapshot = Snapshot(trajectory[t], roles, tuple(per_robot[:, : t + 1]) if trails else (), lines, t,
+                            tuple(families))
         yield snapshot
         if t == steps - 1:
             for _ in range(hold):
@@ -396,6 +399,7 @@ def render_trajectory(
     hold: int = 0,
     long_side: int = 512,
     image: FieldImage | None = None,
+    families: Sequence[int] = (),
 ) -> Iterator[np.ndarray]:
     """Frames of robots moving through ``world``, one per time step (see :func:`trajectory_snapshots`).
 
@@ -410,6 +414,7 @@ def render_trajectory(
         hold: Repeat the last frame this many extra times.
         long_side: Image size in pixels along the world's longer side.
         image: A prebuilt :class:`FieldImage` to draw on (overrides ``long_side``).
+        families: One formation number per robot (several formations), or empty.
 
     Yields:
         ``(H, W, 3)`` uint8 RGB frames.
@@ -418,12 +423,12 @@ def render_trajectory(
     layer: TrailLayer | None = None
     # Trails grow by one segment a step on a persistent layer: constant cost per frame.
     for snapshot in trajectory_snapshots(trajectory, roles, overlay=overlay, final_overlay=final_overlay,
-                                         trails=False, hold=hold):
+                                         trails=False, hold=hold, families=families):
         if not trails:
             yield draw_frame(image, snapshot)
             continue
         if layer is None:
-            layer = TrailLayer(image, snapshot.roles)
+            layer = TrailLayer(image, snapshot.roles, snapshot.families)
         layer.extend(snapshot.positions)
         yield layer.frame(snapshot)
 
