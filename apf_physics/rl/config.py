@@ -200,8 +200,8 @@ class TrainConfig:
     """Store the experience pool in ``last.pt`` (large). Needed for a resumed run to continue exactly
     as an uninterrupted one; without it a resumed run refills the pool first."""
     threads: int = 1
-    """torch intra-op threads. More than 1 helps only on an idle machine: on 2 busy cores, 2 threads
-    made the network's forward pass ~10× slower (threads waiting on each other)."""
+    """torch intra-op threads. More than 1 helps only on an idle machine: on busy cores the threads
+    wait on each other."""
     seed: int = 0
     """Seed of the environments, the network's initial weights, ε-greedy and minibatch sampling."""
 
