@@ -248,6 +248,7 @@ class Physics:
         if id(world) not in self._atlas_ids:
             self._atlas_ids[id(world)] = self._atlas.add(world.clearance_raster(CLEARANCE_RESOLUTION, CLEARANCE_CAP))
         self.worlds[slot] = world
+        self._any_moving = getattr(self, "_any_moving", False) or bool(world.moving)
         self._slot_tile[slot] = self._tiles[key]
         self._slot_radius[slot] = world.robot_radius
         m = self.robots_per_slot
@@ -413,10 +414,19 @@ class Physics:
         self._release(robots)
         self._positions[robots] = np.asarray(positions, dtype=float).reshape(-1, 2)
         m = self.robots_per_slot
-        for crowd in np.unique(self.crowd[robots // m]).tolist():
-            slots = np.flatnonzero(self.crowd == crowd)
-            mine = (slots[:, None] * m + np.arange(m)).ravel()
-            self._separate(int(slots[0]), mine[self.present[mine]])
+        # One raster lookup for all: a robot clear of the static obstacles by more than its
+        # radius (and the raster's error) in a world without moving ones needs no more checks.
+        clearance = self._atlas.sample(self._positions[robots], self._sample_atlas[3 * robots])
+        slots = robots // m
+        doubtful = (clearance - 0.71 / CLEARANCE_RESOLUTION < self._slot_radius[slots] + 1e-6)
+        doubtful |= np.array([bool(self.worlds[s].moving) for s in slots.tolist()], bool) if self._any_moving else False
+        crowds = set(self.crowd[slots[doubtful]].tolist())
+        if m > 1 or self._crowd_robots:
+            crowds |= set(self.crowd[slots].tolist())   # robots of one crowd may overlap one another
+        for crowd in sorted(crowds):
+            members = np.flatnonzero(self.crowd == crowd)
+            mine = (members[:, None] * m + np.arange(m)).ravel()
+            self._separate(int(members[0]), mine[self.present[mine]])
 
     def _separate(self, slot: int, mine: np.ndarray) -> None:
         """Move robots ``mine`` (of one crowd, in ``slot``'s world) out of each other and off
