@@ -217,10 +217,12 @@ class Stepper:
             self._slot_tolerance[slots] = self._tolerance[self.world_of[slots]]
         m = self.robots_per_slot
         robots = (slots[:, None] * m + np.arange(m)[None]).ravel()
+        self.steps[slots] = 0
+        if self._moving:   # placed among the moving obstacles where they are at step 0
+            self.physics.set_time(self.steps)
         self.physics.place(robots, positions.reshape(-1, 2))
         self.positions = self.positions.copy()   # never change an array a report handed out
         self.positions[slots] = positions
-        self.steps[slots] = 0
         self.outcome[slots] = RUNNING
         self.last_distance = self.distance()
         if self._watch is not None:

@@ -193,3 +193,41 @@ def test_generated_moving_worlds_are_valid_and_solvable():
         assert min(speeds) >= 0.15 and max(speeds) <= 0.6
         assert all(reachable(world, s) for s in world.starts)
         assert np.all(world.clearance(world.starts, 0.0) >= world.robot_radius)
+
+
+def test_navigate_env_observes_the_field_at_its_own_step(tmp_path):
+    from apf_physics.envs import NavigateEnv, NavigateVectorEnv
+
+    world = with_moving(world_from_dict(simple_world_dict(field="thesis-general", obstacles=[])),
+                        CircleObstacle(np.array([10.0, 14.0]), 1.0, Motion(np.array([[0.0, -4.0]]), 0.5)))
+    start = np.array([10.0, 9.0])
+    env = NavigateEnv(world=world, starts=start[None], previous=True)
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (2, 11, 11)
+    observer = Observer(env.observer, 1, [world])
+    observer.reset(np.arange(1), start[None], [world])
+    for step in range(1, 6):
+        obs, *_ = env.step(8)                         # stay: only the disc moves (down, towards the robot)
+        expected = observer.observe(start[None], t=float(step))[0]
+        np.testing.assert_allclose(obs, expected, rtol=1e-6)
+        assert np.any(obs[0] != obs[1])
+    vector = NavigateVectorEnv(world=world, num_envs=2, starts=start[None], previous=True)
+    vector.reset(seed=0)
+    for _ in range(3):
+        obs, *_ = vector.step(np.array([8, 8]))
+    np.testing.assert_allclose(obs[0], observer.observe(start[None], t=3.0)[0], rtol=1e-6)
+
+
+def test_a_new_episode_is_placed_among_the_obstacles_where_they_are_at_step_0():
+    # the disc has moved onto (10, 9) by step 6; a new episode starting there (free at step 0) is fine
+    world = with_moving(world_from_dict(simple_world_dict(obstacles=[])),
+                        CircleObstacle(np.array([10.0, 12.0]), 1.0, Motion(np.array([[0.0, -3.0]]), 0.5)))
+    stepper = Stepper([world], 2, max_steps=50)
+    stepper.start(np.arange(2), np.array([[[3.0, 3.0]], [[16.0, 3.0]]]))
+    for _ in range(6):
+        stepper.step(np.zeros((2, 1, 2)))
+    assert world.clearance(np.array([[10.0, 9.0]]), 6.0)[0] < 0 < world.clearance(np.array([[10.0, 9.0]]), 0.0)[0]
+    stepper.start(np.array([1]), np.array([[[10.0, 9.0]]]))
+    assert stepper.steps.tolist() == [6, 0]
+    report = stepper.step(np.zeros((2, 1, 2)))
+    assert stepper.outcome[0] == 0 and report.positions[1, 0].tolist() == [10.0, 9.0]

@@ -540,7 +540,8 @@ def test_render_clips_single_robots_together_and_formations_in_turn():
 
     singles = [episode(np.linspace([1, 1], [5, 5], 4)), episode(np.linspace([1, 9], [5, 9], 7), "trapped")]
     assert not is_formation(singles)
-    (trajectory, roles, lines, final), = episode_clips(singles, ("world w",), False, None)
+    (trajectory, roles, lines, final, families), = episode_clips(singles, ("world w",), False, None)
+    assert families == ()
     assert trajectory.shape == (7, 2, 2) and roles == ("single", "single")
     assert "reached 1, trapped 1" in final[0]
     line = np.linspace([1, 1], [5, 5], 5)

@@ -240,19 +240,25 @@ def test_the_memory_budget_can_be_raised_for_big_machines(monkeypatch):
 
 
 RASTER_PEAK = """
-import resource, sys
+import sys
 from apf_physics.observation import observation_raster
 from apf_physics.physics import CLEARANCE_CAP, CLEARANCE_RESOLUTION
 from apf_physics.search import SearchGrid
 from apf_physics.worldfile import raster_memory, world_from_dict
 world = world_from_dict({"size": [150, 150], "field": "thesis-general", "targets": [[75, 75], [140, 20]],
                          "obstacles": [{"circle": {"center": [30, 30], "radius": 2}}], "starts": [[2, 2]]})
-before = int(open("/proc/self/statm").read().split()[1]) * resource.getpagesize()
+def status(key):   # kB figures of /proc/self/status
+    return next(int(line.split()[1]) * 1024 for line in open("/proc/self/status") if line.startswith(key + ":"))
+try:   # reset the peak, so that what imports used does not count
+    open("/proc/self/clear_refs", "w").write("5")
+except OSError:
+    pass
+before = status("VmRSS")
 world.clearance_raster(CLEARANCE_RESOLUTION, CLEARANCE_CAP)   # the physics'
 observation_raster(world, 7, 4)                                # the DQN planner's (and u_wall's potential raster)
 world.start_cells()                                            # --random-starts
 SearchGrid.of(world).cost_to_go                                # the A* planner's
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+peak = status("VmHWM")
 print(peak - before, raster_memory(world.size, len(world.targets)))
 """
 

@@ -13,6 +13,15 @@ import argparse
 import time
 from pathlib import Path
 
+from apf_physics import load_world
+from apf_physics.bundled import bundled_dir
+from apf_physics.errors import UserError
+from apf_physics.evaluate import evaluate, format_table, write_json
+from apf_physics.planners import make_planner
+from apf_physics.render.output import check_writable, write_text
+from apf_physics.render.page import PAGE, Section, write_media, write_page
+from apf_physics.render.video import progress_bar
+
 GENERAL_WORLDS = tuple(f"thesis/test{i}.yaml" for i in range(1, 5))
 
 
@@ -30,14 +39,6 @@ def add_parser(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from apf_physics import load_world
-    from apf_physics.bundled import bundled_dir
-    from apf_physics.errors import UserError
-    from apf_physics.evaluate import evaluate, format_table, write_json
-    from apf_physics.planners import make_planner
-    from apf_physics.render.output import check_writable, write_text
-    from apf_physics.render.page import PAGE, Section, write_media, write_page
-    from apf_physics.render.video import progress_bar
 
     began = time.perf_counter()
     worlds_dir = Path(args.worlds) if args.worlds is not None else bundled_dir()

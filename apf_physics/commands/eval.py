@@ -8,7 +8,10 @@ from pathlib import Path
 import numpy as np
 
 from apf_physics.errors import UserError
+from apf_physics.evaluate import evaluate, format_table, write_json
+from apf_physics.planners import make_planner
 from apf_physics.render.output import check_writable
+from apf_physics.render.page import PAGE, write_results
 from apf_physics.worldfile import MAX_STARTS, load_worlds
 
 
@@ -44,13 +47,10 @@ def random_starts(world, count: int, seed: int) -> np.ndarray:
 
 
 def run(args: argparse.Namespace) -> int:
-    from apf_physics.evaluate import evaluate, format_table, write_json
-    from apf_physics.planners import make_planner
 
     if args.json:
         check_writable(args.json, create_parent=True)
     if args.html:
-        from apf_physics.render.page import PAGE
 
         check_writable(Path(args.html) / PAGE, create_parent=True)
     if args.random_starts is not None and not 1 <= args.random_starts <= MAX_STARTS:
@@ -79,7 +79,6 @@ def run(args: argparse.Namespace) -> int:
         write_json(evaluations, args.json)
         print(f"wrote {args.json}")
     if args.html:
-        from apf_physics.render.page import write_results
 
         page = write_results(args.html, evaluations, worlds, title=f"apf-physics eval: {', '.join(names)}",
                              progress=not getattr(args, "no_progress", False))

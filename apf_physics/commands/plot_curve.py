@@ -5,6 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from apf_physics.errors import UserError
+from apf_physics.render.output import check_writable
+from apf_physics.render.video import write_png
+from apf_physics.rl.plot import plot_training_curve
+
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("plot-curve", help="draw a training run's curve (train.csv) to a PNG",
@@ -17,10 +22,6 @@ def add_parser(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from apf_physics.errors import UserError
-    from apf_physics.render.output import check_writable
-    from apf_physics.render.video import write_png
-    from apf_physics.rl.plot import plot_training_curve
 
     csv = Path(args.csv)
     if not csv.is_file():

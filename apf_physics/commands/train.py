@@ -9,9 +9,16 @@ from pathlib import Path
 
 import yaml
 
+from apf_physics.curriculum import load_curriculum
+from apf_physics.errors import UserError
+from apf_physics.rl.config import CURRICULUM_DEFAULT, PRESETS, WORLD_DEFAULT, preset, replace
+from apf_physics.rl.phases import phases_for_curriculum, phases_for_world
+from apf_physics.rl.rundir import RunDir
+from apf_physics.rl.trainer import CSV_COLUMNS, load_checkpoint_config, train
+from apf_physics.worldfile import load_world
+
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    from apf_physics.rl.config import CURRICULUM_DEFAULT, PRESETS, WORLD_DEFAULT
 
     p = subparsers.add_parser(
         "train", help="train a DQN planner on a world or a curriculum; write best.pt, last.pt, train.csv",
@@ -46,7 +53,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def parse_overrides(pairs: list[str]) -> dict:
     """``["key=value", ...]`` to a dict, each value read as YAML (``1e-3``, ``true``, ``[4, 4]``, ``null``)."""
-    from apf_physics.errors import UserError
 
     overrides = {}
     for pair in pairs:
@@ -73,13 +79,6 @@ def resume_command(args: argparse.Namespace) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from apf_physics.curriculum import load_curriculum
-    from apf_physics.errors import UserError
-    from apf_physics.rl.config import CURRICULUM_DEFAULT, WORLD_DEFAULT, preset, replace
-    from apf_physics.rl.phases import phases_for_curriculum, phases_for_world
-    from apf_physics.rl.rundir import RunDir
-    from apf_physics.rl.trainer import CSV_COLUMNS, load_checkpoint_config, train
-    from apf_physics.worldfile import load_world
 
     overrides = parse_overrides(args.set)
     if args.seed is not None:

@@ -6,6 +6,9 @@ import argparse
 import re
 from pathlib import Path
 
+from apf_physics import load_world
+from apf_physics.bundled import bundled_dir, list_bundled, resolve_world
+
 
 def add_parser(subparsers) -> None:
     """Register the ``worlds`` subcommand."""
@@ -34,8 +37,6 @@ def describe(path: Path, width: int = 110) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Print one line per bundled world; returns the exit status."""
-    from apf_physics import load_world
-    from apf_physics.bundled import bundled_dir, list_bundled, resolve_world
 
     rows = []
     for name in list_bundled():

@@ -67,7 +67,7 @@ class FormationEnv(gym.Env):
 
     def __init__(self, world: WorldSpec | None = None, obs_size: int = 11, reward: Any = "thesis-fixed",
                  starts: Any = "world", resolution: int = 4, formation: FormationSpec | dict | None = None,
-                 render_mode: str | None = None, memory: bool = False, obs_scale: str = "raw",
+                 render_mode: str | None = None, memory: bool = False, previous: bool = False, obs_scale: str = "raw",
                  observer: ObserverConfig | dict | None = None):
         self.worlds = resolve_worlds(world)
         if formation is None:
@@ -75,7 +75,7 @@ class FormationEnv(gym.Env):
         else:
             spec = formation if isinstance(formation, FormationSpec) else FormationSpec(**formation)
         self.formation = spec
-        self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer)
+        self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer, previous)
         self.weights = reward_weights(reward)
         self.chooser = StartChooser(starts, self.worlds)
         self.render_mode = render_mode

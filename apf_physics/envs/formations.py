@@ -67,11 +67,11 @@ class FormationsParallelEnv(ParallelEnv):
     metadata = {"name": "apf_physics_formations_v0", "render_modes": ["rgb_array"], "render_fps": 10}
 
     def __init__(self, world: Any = None, agents: str = "leaders", obs_size: int = 11, reward: Any = "thesis-fixed",
-                 resolution: int = 4, memory: bool = False, obs_scale: str = "raw",
+                 resolution: int = 4, memory: bool = False, previous: bool = False, obs_scale: str = "raw",
                  observer: ObserverConfig | dict | None = None, max_episode_steps: int = 100,
                  render_mode: str | None = None):
         (self.world,) = resolve_worlds(world)
-        self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer)
+        self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer, previous)
         self._task = CrowdTask(self.world, self.observer, reward_weights(reward), agents, max_episode_steps)
         self.possible_agents = list(self._task.names)
         self.agents: list[str] = []

@@ -53,6 +53,11 @@ class NavigateEnv(gym.Env):
     (:class:`~apf_physics.observation.VisitMemory`). A reactive policy sees where it has been
     and can learn to leave a potential well.
 
+    With ``previous=True`` the channel after the potential is the same window of the field
+    one control step earlier (robot where it is now, obstacles where they were): in a world
+    with moving obstacles the difference of the two channels shows where each is going.
+    Channels come in the order potential, previous, memory.
+
     ## Rewards
 
     ``R = W1 + W2 + W3 + W4 (+ W5 + W6)`` (SPEC eq. 15–16), returned by name in
@@ -93,6 +98,9 @@ class NavigateEnv(gym.Env):
     - ``starts``: see Starting State.
     - ``resolution``: raster nodes per unit for the observation (default 4).
     - ``memory``: add the visit-memory channel (see Observation Space; default False).
+    - ``previous``: add the window of the field one step earlier, as the channel after the
+      potential (default False): in a world with moving obstacles the difference of the two
+      shows where each obstacle is going.
     - ``obs_scale``: ``"raw"`` (default) or ``"log"`` (see Observation Space).
     - ``observer``: an :class:`~apf_physics.observation.ObserverConfig` (or its dict) instead
       of ``obs_size``, ``resolution``, ``memory`` and ``obs_scale``, e.g. a model's.
@@ -107,9 +115,10 @@ class NavigateEnv(gym.Env):
 
     def __init__(self, world: WorldSpec | None = None, obs_size: int = 11, reward: Any = "thesis-fixed",
                  starts: Any = "world", resolution: int = 4, render_mode: str | None = None,
-                 memory: bool = False, obs_scale: str = "raw", observer: ObserverConfig | dict | None = None):
+                 memory: bool = False, previous: bool = False, obs_scale: str = "raw",
+                 observer: ObserverConfig | dict | None = None):
         self.worlds = resolve_worlds(world)
-        self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer)
+        self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer, previous)
         self.weights = reward_weights(reward)
         self.chooser = StartChooser(starts, self.worlds)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:

@@ -26,11 +26,15 @@ def resolve_worlds(world: WorldSpec | None) -> list[World]:
 
 
 def observer_config(obs_size: int, resolution: int, memory: bool, obs_scale: str,
-                    observer: ObserverConfig | dict | None) -> ObserverConfig:
-    """The environment's :class:`ObserverConfig`: ``observer`` if given, else built from the keyword options."""
+                    observer: ObserverConfig | dict | None, previous: bool = False) -> ObserverConfig:
+    """The environment's :class:`ObserverConfig`: ``observer`` if given, else built from the keyword options.
+
+    ``previous`` adds the window of the field one step earlier (where moving obstacles were), so a
+    policy can tell where they are going; ``memory`` the visit memory.
+    """
     if observer is not None:
         return observer if isinstance(observer, ObserverConfig) else ObserverConfig.from_dict(observer)
-    channels = ("potential", "memory") if memory else ("potential",)
+    channels = ("potential",) + (("previous",) if previous else ()) + (("memory",) if memory else ())
     return ObserverConfig(size=int(obs_size), resolution=int(resolution), channels=channels, scale=obs_scale)
 
 

@@ -94,11 +94,12 @@ class NavigationTask:
     def _observe(self, slots: np.ndarray | None) -> None:
         """Refresh the observations (and the potential at the leaders) of ``slots`` (None: all)."""
         leaders = self.stepper.positions[:, 0] if slots is None else self.stepper.positions[slots, 0]
-        obs = self.observer.observe(leaders, slots)
+        steps = self.stepper.steps if slots is None else self.stepper.steps[slots]   # moving obstacles' time
+        obs = self.observer.observe(leaders, slots, steps)
         if self.observer.config.scale == "raw":
             u = obs[:, 0, self._centre, self._centre]
         else:  # the scaled window reads 0 at the robot: take U from an unscaled sample
-            u = self.observer.potential_at(leaders, slots)
+            u = self.observer.potential_at(leaders, slots, steps)
         if slots is None:
             self._obs, self._u = obs, u.astype(float)
         else:  # copy on write: an array handed out by step() is never changed afterwards

@@ -46,6 +46,7 @@ class NavigateVectorEnv(VectorEnv):
         resolution: Raster nodes per unit for the observation.
         render_mode: ``"rgb_array"`` renders copy 0.
         memory: Add the visit-memory channel (see ``NavigateEnv``).
+        previous: Add the window of the field one step earlier (see ``NavigateEnv``).
         obs_scale: ``"raw"`` or ``"log"`` (see ``NavigateEnv``).
         observer: An observer configuration instead of the four options above.
 
@@ -57,11 +58,11 @@ class NavigateVectorEnv(VectorEnv):
 
     def __init__(self, world: WorldSpec | None = None, num_envs: int = 8, obs_size: int = 11,
                  reward: Any = "thesis-fixed", starts: Any = "world", max_episode_steps: int = 100,
-                 resolution: int = 4, render_mode: str | None = None, memory: bool = False,
+                 resolution: int = 4, render_mode: str | None = None, memory: bool = False, previous: bool = False,
                  obs_scale: str = "raw", observer: ObserverConfig | dict | None = None):
         self.worlds = resolve_worlds(world)
         self.num_envs = int(num_envs)
-        self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer)
+        self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer, previous)
         self.weights = reward_weights(reward)
         self.chooser = StartChooser(starts, self.worlds)
         self.max_episode_steps = int(max_episode_steps)

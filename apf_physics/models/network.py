@@ -17,7 +17,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-OBS_TRANSFORMS = ("raw", "relative-log", "relative-log-memory")
+OBS_TRANSFORMS = ("raw", "relative-log", "relative-log-memory", "relative-log-previous")
 """Names accepted by :class:`QNetwork`'s ``obs_transform``."""
 
 
@@ -78,7 +78,7 @@ def max_pool_2x2_stride1(x: torch.Tensor) -> torch.Tensor:
     return torch.maximum(cols[..., :-1, :], cols[..., 1:, :])
 
 
-def relative_log(obs: torch.Tensor) -> torch.Tensor:
+def relative_log(obs: torch.Tensor, reference: torch.Tensor | None = None) -> torch.Tensor:
     """Signed log of each window's potential relative to its centre cell.
 
     ``sign(d) · log(1 + |d|)`` with ``d = U − U(centre)``, per channel. The robot's own
@@ -88,12 +88,15 @@ def relative_log(obs: torch.Tensor) -> torch.Tensor:
 
     Args:
         obs: (N, C, k, k) raw potential windows.
+        reference: (N, 1, k, k) the window whose centre every channel is taken relative to
+            (default: each channel's own centre).
 
     Returns:
         (N, C, k, k) transformed windows.
     """
     c = obs.shape[-1] // 2
-    d = obs - obs[..., c : c + 1, c : c + 1]
+    ref = obs if reference is None else reference
+    d = obs - ref[..., c : c + 1, c : c + 1]
     return torch.sign(d) * torch.log1p(d.abs())
 
 
@@ -112,7 +115,10 @@ class QNetwork(nn.Module):
         obs_transform: ``"raw"`` (the observation as it comes), ``"relative-log"``
             (:func:`relative_log` on every channel) or ``"relative-log-memory"``
             (:func:`relative_log` on channel 0, the potential; the other channels, e.g. the
-            visit memory of ``NavigateEnv(memory=True)``, pass through unchanged).
+            visit memory of ``NavigateEnv(memory=True)``, pass through unchanged) or
+            ``"relative-log-previous"`` (channels 0 and 1, the potential now and one step
+            earlier of ``NavigateEnv(previous=True)``, both relative to the centre of channel 0,
+            so their difference is the obstacles' motion; the others pass through).
 
     Raises:
         ValueError: A window too small for the layers, or an unknown transform.
@@ -172,6 +178,8 @@ class QNetwork(nn.Module):
             x = relative_log(obs)
         elif self.obs_transform == "relative-log-memory":
             x = torch.cat([relative_log(obs[:, :1]), obs[:, 1:]], dim=1)
+        elif self.obs_transform == "relative-log-previous":
+            x = torch.cat([relative_log(obs[:, :2], obs[:, :1]), obs[:, 2:]], dim=1)
         else:
             x = obs
         for i, conv in enumerate(self.convs):

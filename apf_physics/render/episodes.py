@@ -54,7 +54,7 @@ def episode_clips(episodes: Sequence, overlay: tuple[str, ...], formation: bool,
     crowds: dict[str, list] = {}
     for episode in episodes:
         record = getattr(episode, "formation", None)
-        if record is not None and record.crowd is not None:
+        if getattr(record, "crowd", None) is not None:
             crowds.setdefault(record.crowd, []).append(episode)
     if crowds:
         for name, members in crowds.items():

@@ -41,7 +41,7 @@ from typing import Any, Optional, Union
 
 from apf_physics.envs.reward import REWARD_PRESETS, RewardWeights
 from apf_physics.errors import UserError
-from apf_physics.generate import FAMILIES
+from apf_physics.generate import FAMILIES, MOVING_FAMILIES
 from apf_physics.models.network import OBS_TRANSFORMS, QNetwork
 from apf_physics.observation import SCALES, ObserverConfig
 
@@ -75,6 +75,9 @@ class TrainConfig:
     ``"relative-log-memory"`` or ``"raw"``)."""
     memory_cap: int = 4
     """Visits at which a memory cell reads 1."""
+    previous: bool = False
+    """Add the window of the field one step earlier (where moving obstacles were) as the channel
+    after the potential (needs ``obs_transform`` ``"relative-log-previous"`` or ``"raw"``)."""
     obs_scale: str = "raw"
     """How the observer scales the potential: ``"raw"`` or ``"log"`` (:class:`~apf_physics.observation.ObserverConfig`)."""
 
@@ -87,7 +90,8 @@ class TrainConfig:
     """Leaky ReLU slope λ."""
     obs_transform: str = "raw"
     """Applied inside the network: ``"raw"``, ``"relative-log"`` (signed log of U − U at the robot's cell)
-    or ``"relative-log-memory"`` (the same on the potential channel only)."""
+    ``"relative-log-memory"`` (the same on the potential channel only) or ``"relative-log-previous"``
+    (the same on the potential and previous channels, both relative to the robot's cell now)."""
 
     # --- environment ---
     reward: Union[str, dict] = "thesis-fixed"
@@ -213,15 +217,18 @@ class TrainConfig:
             (self.obs_transform in OBS_TRANSFORMS, f"obs_transform must be one of {', '.join(OBS_TRANSFORMS)}"),
             (self.obs_scale in SCALES, f"obs_scale must be one of {', '.join(SCALES)}"),
             (self.obs_size >= 3 and self.obs_size % 2 == 1, "obs_size must be odd and at least 3"),
-            (not self.memory or self.obs_transform in ("raw", "relative-log-memory"),
+            (not self.memory or self.obs_transform in ("raw", "relative-log-memory", "relative-log-previous"),
              "memory needs obs_transform 'relative-log-memory' (or 'raw'): 'relative-log' would transform "
              "the memory channel too"),
+            ((self.obs_transform == "relative-log-previous") == self.previous or self.obs_transform == "raw",
+             "previous needs obs_transform 'relative-log-previous' (or 'raw'), and that transform needs previous"),
             (reward_ok, f"reward must be one of {', '.join(REWARD_PRESETS)} or a dict of RewardWeights fields"),
             (self.loss in ("mse", "huber"), "loss must be 'mse' or 'huber'"),
             (self.target_update in ("none", "hard", "soft"), "target_update must be 'none', 'hard' or 'soft'"),
             (self.train_starts in TRAIN_STARTS, f"train_starts must be one of {', '.join(TRAIN_STARTS)}"),
             (0.0 <= self.world_start_fraction <= 1.0, "world_start_fraction must be in [0, 1]"),
-            (all(f in FAMILIES for f in self.families), f"families must be among {', '.join(FAMILIES)}"),
+            (all(f in TRAIN_FAMILIES for f in self.families),
+             f"families must be among {', '.join(TRAIN_FAMILIES)}"),
             (bool(self.select) and all(n in EVAL_FIGURES for n in select_names),
              f"select must name figures among {', '.join(EVAL_FIGURES)} (a leading '-': lower is better)"),
             (self.validation_seed != HELDOUT_SEED, f"validation_seed must not be the held-out seed {HELDOUT_SEED}"),
@@ -246,7 +253,7 @@ class TrainConfig:
     @property
     def observer(self) -> ObserverConfig:
         """How observations are built (saved in every model file)."""
-        channels = ("potential", "memory") if self.memory else ("potential",)
+        channels = ("potential",) + (("previous",) if self.previous else ()) + (("memory",) if self.memory else ())
         return ObserverConfig(size=self.obs_size, resolution=self.obs_resolution, channels=channels,
                               memory_cap=self.memory_cap, scale=self.obs_scale)
 
@@ -277,6 +284,9 @@ def _reward_dict_ok(data: dict) -> bool:
         return False
     return True
 
+
+TRAIN_FAMILIES = FAMILIES + MOVING_FAMILIES
+"""Generator families a training pool may draw from (single-robot worlds)."""
 
 PRESETS: dict[str, dict[str, Any]] = {
     "thesis-fixed": dict(),  # the defaults are Table 3
@@ -311,6 +321,8 @@ PRESETS["general"] = {
 PRESETS["general-memory"] = {**PRESETS["general"], "obs_transform": "relative-log-memory", "memory": True,
                              "world_start_fraction": 0.5}
 PRESETS["general-revisit"] = {**PRESETS["general-memory"], "reward": "general"}
+PRESETS["moving"] = {**PRESETS["general-revisit"], "obs_transform": "relative-log-previous", "previous": True,
+                     "families": FAMILIES + MOVING_FAMILIES * len(FAMILIES)}
 """Changes to :class:`TrainConfig`'s defaults (which are Table 3's) for each preset."""
 WORLD_DEFAULT = "fast"
 """What ``apf-physics train --world`` trains without ``--preset``."""

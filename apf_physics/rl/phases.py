@@ -136,10 +136,12 @@ def draw_pool(config: TrainConfig, draw: int, size: float = 50) -> list[World]:
 
 
 def validation_set(config: TrainConfig) -> EvalSet:
-    """The generated validation worlds (all families in turn, from ``validation_seed``), labelled."""
+    """The generated validation worlds (the pool's families in turn, or all static ones without a
+    pool, from ``validation_seed``), labelled."""
     rng = np.random.default_rng(config.validation_seed)
-    worlds = [generate_world(FAMILIES[k % len(FAMILIES)], rng, n_starts=config.validation_starts,
-                             name=f"val_{FAMILIES[k % len(FAMILIES)]}_{k}") for k in range(config.validation_worlds)]
+    fams = config.families or FAMILIES
+    worlds = [generate_world(fams[k % len(fams)], rng, n_starts=config.validation_starts,
+                             name=f"val_{fams[k % len(fams)]}_{k}") for k in range(config.validation_worlds)]
     return EvalSet.of(worlds)
 
 

@@ -31,6 +31,7 @@ from typing import Any, Callable, Optional, Sequence
 import numpy as np
 import torch
 import torch.nn.functional as F
+from tqdm import tqdm
 
 from apf_physics.envs import NavigateVectorEnv
 from apf_physics.errors import UserError
@@ -632,8 +633,6 @@ class ProgressBar:
     """
 
     def __init__(self, config: TrainConfig, phases: Sequence[Phase], c: Counters):
-        from tqdm import tqdm
-
         self.budgets = [p.episodes for p in phases]
         if config.total_steps is not None:
             self.measure, total, unit = "steps", config.total_steps, "step"
