@@ -261,20 +261,27 @@ class Observer:
         # discs all at once; polygons one by one
         d = np.hypot(px - centre[shape, 0, None], py - centre[shape, 1, None]) - radius[shape, None]
         polygon = np.isnan(radius[shape])
-        for index in np.unique(shape[polygon]).tolist():
+        for index in (np.unique(shape[polygon]).tolist() if polygon.any() else ()):
             pairs = shape == index
             dist, _ = shapes[index].signed_distance(np.stack([px[pairs], py[pairs]], -1).reshape(-1, 2))
             d[pairs] = dist.reshape(-1, dx.shape[1])
-        term = np.where(valid, apf.repulsive_term(d, field.krep, field.p0, field.u_max), 0.0)
+        d = d[valid]
+        term = apf.repulsive_term(d, field.krep, field.p0, field.u_max)
         flat = (h - dy) * k + (dx + h) if lattice else np.zeros_like(dx)                # window point [h - dy, h + dx]
-        near, which = np.unique(robot, return_inverse=True)                              # the robots concerned
+        # the robots concerned (np.nonzero lists them in order): their rank among them
+        first_of = np.empty(len(robot), bool)
+        first_of[0], first_of[1:] = True, robot[1:] != robot[:-1]
+        near, which = robot[first_of], np.cumsum(first_of) - 1
         cell = (which[:, None] * values.shape[1] + flat)[valid]
         size = len(near) * values.shape[1]
-        added = np.bincount(cell, weights=term[valid], minlength=size).reshape(len(near), -1)
-        blocked = np.bincount(cell[d[valid] <= 0], minlength=size).reshape(len(near), -1) > 0
+        added = np.bincount(cell, weights=term, minlength=size).reshape(len(near), -1)
         rows = mine[near]
         # u_wall stays the highest reading: points inside read it, none above it
-        values[rows] = np.where(blocked, world.u_wall, np.minimum(values[rows] + added, world.u_wall))
+        sums = np.minimum(values[rows] + added, world.u_wall)
+        inside = d <= 0
+        if inside.any():
+            sums.reshape(-1)[cell[inside]] = world.u_wall
+        values[rows] = sums
 
     def _moving_discs(self, world: World) -> tuple[np.ndarray, np.ndarray]:
         """Centres ``(M, 2)`` and radii ``(M,)`` of the moving discs where they are written (NaN for polygons)."""
