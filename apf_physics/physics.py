@@ -224,6 +224,17 @@ class Physics:
         self._proxy_held = False                     # some robot holds a proxy
         self._buffer = pymunk.batch.Buffer()
         self._arbiters = pymunk.batch.Buffer()
+        # pairs of shapes touching now, counted by pymunk's begin/separate callbacks (each called
+        # once per contact, not per substep): a substep after which none touch has no arbiters to read
+        touching = self._touching = [0]
+
+        def begin(arbiter, space, data):
+            touching[0] += 1
+
+        def separate(arbiter, space, data):
+            touching[0] -= 1
+
+        self.space.on_collision(begin=begin, separate=separate)
         self._rows_dirty = True
         nothing = np.zeros(self.num_robots, bool)
         nothing.flags.writeable = False
@@ -635,8 +646,11 @@ class Physics:
         self._proxy_moved[:] = False
         touched = []
         arbiter_fields = pymunk.batch.ArbiterFields.BODY_A_ID | pymunk.batch.ArbiterFields.BODY_B_ID
+        touching = self._touching
         for _ in range(self.substeps):
             self.space.step(self.dt)
+            if not touching[0]:
+                continue
             self._arbiters.clear()
             pymunk.batch.get_space_arbiters(self.space, arbiter_fields, self._arbiters)
             ids = np.frombuffer(self._arbiters.int_buf(), dtype=np.uintp)
