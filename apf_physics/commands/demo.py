@@ -1,10 +1,11 @@
 """``apf-physics demo``: the shipped models at work, no training needed.
 
 Runs the fixed 20×20 world's three-robot formation with the shipped fixed-world DQN as
-leader, and the thesis's general test worlds with the shipped general DQN, beside gradient
-descent; prints the summary table and writes a results page (``index.html``: the table,
-field figures and browser-playable videos) into a folder. The worlds are the bundled ones,
-so the demo runs from any folder.
+leader, the thesis's general test worlds with the shipped general DQN, a world with moving
+obstacles and a world of four formations crossing each other, beside gradient descent (and
+escape and A* where they apply); prints the summary table and writes a results page
+(``index.html``: the table, field figures and browser-playable videos) into a folder. The
+worlds are the bundled ones, so the demo runs from any folder.
 """
 
 from __future__ import annotations
@@ -23,6 +24,8 @@ from apf_physics.render.page import PAGE, Section, write_media, write_page
 from apf_physics.render.video import progress_bar
 
 GENERAL_WORLDS = tuple(f"thesis/test{i}.yaml" for i in range(1, 5))
+MOVING_WORLD = "moving_obstacles.yaml"
+FORMATIONS_WORLD = "four_formations.yaml"
 
 
 def add_parser(subparsers) -> None:
@@ -32,7 +35,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--out", default="apf-demo",
                    help="folder for the results page, figures and videos (default: apf-demo)")
     p.add_argument("--worlds", default=None, metavar="DIR",
-                   help="a worlds folder with fixed20.yaml and thesis/test1-4.yaml (default: the bundled worlds)")
+                   help=f"a worlds folder with fixed20.yaml, thesis/test1-4.yaml, {MOVING_WORLD} and "
+                        f"{FORMATIONS_WORLD} (default: the bundled worlds)")
     p.add_argument("--no-video", action="store_true", help="skip the videos (the page keeps the table and figures)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -44,14 +48,17 @@ def run(args: argparse.Namespace) -> int:
     worlds_dir = Path(args.worlds) if args.worlds is not None else bundled_dir()
     fixed_path = worlds_dir / "fixed20.yaml"
     general_paths = [worlds_dir / name for name in GENERAL_WORLDS]
-    for path in [fixed_path, *general_paths]:
+    moving_path, formations_path = worlds_dir / MOVING_WORLD, worlds_dir / FORMATIONS_WORLD
+    for path in [fixed_path, *general_paths, moving_path, formations_path]:
         if not path.is_file():
-            raise UserError(f"{path}: demo world missing (--worlds needs fixed20.yaml and thesis/test1-4.yaml)")
+            raise UserError(f"{path}: demo world missing (--worlds needs fixed20.yaml, thesis/test1-4.yaml, "
+                            f"{MOVING_WORLD} and {FORMATIONS_WORLD})")
     out = Path(args.out)
     check_writable(out / PAGE, create_parent=True)
 
     fixed = load_world(fixed_path)
     general = [load_world(p) for p in general_paths]
+    moving, crowd = load_world(moving_path), load_world(formations_path)
     runs = [
         ("gradient", lambda: evaluate(make_planner("gradient"), [fixed])),
         ("dqn", lambda: evaluate(make_planner("dqn"), [fixed])),
@@ -61,8 +68,13 @@ def run(args: argparse.Namespace) -> int:
         # what a hand-made escape and the grid-search oracle do on the same worlds
         ("escape, general", lambda: evaluate(make_planner("escape"), general)),
         ("astar, general", lambda: evaluate(make_planner("astar"), general)),
+        # moving obstacles: the field at each step; A* replans every step around them
+        ("gradient, moving", lambda: evaluate(make_planner("gradient"), [moving])),
+        ("dqn, moving", lambda: evaluate(make_planner("dqn"), [moving])),
+        ("astar, moving", lambda: evaluate(make_planner("astar"), [moving])),
+        ("dqn, four formations", lambda: evaluate(make_planner("dqn"), [crowd], formation=True)),
     ]
-    media = 2 * (1 + len(general)) + (0 if args.no_video else 1)
+    media = 2 * (1 + len(general)) + (0 if args.no_video else 1) + 2 + 1
     with progress_bar(len(runs) + media, "demo", "step", not args.no_progress) as bar:
         evaluations = []
         for name, run_planner in runs:
@@ -106,10 +118,30 @@ def run(args: argparse.Namespace) -> int:
             if clip is not None:
                 section.videos.append(clip)
             sections.append(section)
+        gradient_moving, dqn_moving, astar_moving, formations = evaluations[7:11]
+        section = Section(f"{moving.name}: a cup before the target, five obstacles moving across the way")
+        section.figures.append(media_for(moving, gradient_moving, f"{moving.name}_gradient", "gradient descent",
+                                         False)[0])
+        figure, clip = media_for(moving, dqn_moving, f"{moving.name}_dqn", "dqn (shipped)", not args.no_video)
+        section.figures.append(figure)
+        if clip is not None:
+            section.videos.append(clip)
+        section.figures.append(media_for(moving, astar_moving, f"{moving.name}_astar", "A*, replanning every step",
+                                         False)[0])
+        sections.append(section)
+        section = Section(f"{crowd.name}: four formations, each to its own target across the others' way")
+        figure, clip = media_for(crowd, formations, f"{crowd.name}_dqn", "leaders dqn (shipped), 2 followers each",
+                                 not args.no_video)
+        section.figures.append(figure)
+        if clip is not None:
+            section.videos.append(clip)
+        sections.append(section)
         page = write_page(out, "apf-physics demo: the shipped models", evaluations, sections,
                           notes=["Gradient descent beside the shipped DQN planners, on the fixed 20×20 world "
-                                 "(single robot and three-robot formation) and the thesis's four general test "
-                                 "worlds; yellow paths, blue starts, blue rings where a robot stopped short."],
+                                 "(single robot and three-robot formation), the thesis's four general test "
+                                 "worlds, a world with moving obstacles (drawn where they are in each frame, "
+                                 "their routes as faint lines) and four formations crossing each other; yellow "
+                                 "paths, blue starts, blue rings where a robot stopped short."],
                           files=["summary.txt", "summary.json"])
     print(table)
     videos = sum(len(s.videos) for s in sections)
