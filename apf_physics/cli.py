@@ -19,6 +19,7 @@ COMMANDS = {
     "demo": "run the shipped models: fixed-world formation and general worlds, with videos and a results page",
     "eval": "run planners from every start of every world; print a table, write JSON",
     "train": "train a DQN planner on a world or a curriculum; write best.pt, last.pt, train.csv",
+    "sweep": "compare training recipes on Ray Tune: grids, seeds, early stopping; the best model copied out",
     "generate": "generate random worlds where gradient descent tends to be trapped",
     "render": "render a planner's run in a world to a video (and optionally a PNG of the last frame)",
     "plot_field": "plot a world's potential field: heatmap, level lines, descent paths",

@@ -28,6 +28,7 @@ LAYERS = [
     ("planners", "envs"),
     ("rollout",),
     ("evaluate", "worldsets"),
+    ("campaign",),
     ("rl",),
     ("commands", "cli"),
 ]

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from apf_physics.campaign import evaluate_on_ray
 from apf_physics.errors import UserError
 from apf_physics.evaluate import evaluate, format_table, write_json
 from apf_physics.planners import make_planner
@@ -32,6 +33,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--html", metavar="DIR",
                    help="write a results page DIR/index.html: the table, a field figure and a video per planner "
                         "and world (viewable offline; DIR is created)")
+    p.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
+                   help="run the worlds x planners as Ray tasks (needs the [ray] extra); same table and JSON. "
+                        "Alone: RAY_ADDRESS if set, else a Ray started here on this machine's cores; "
+                        "'auto': the Ray started here with `ray start --head`; HOST:PORT or ray://HOST:10001: "
+                        "that cluster. Put it after the worlds, or write --ray=ADDRESS")
+    p.add_argument("--ray-batch", type=int, metavar="N",
+                   help="with --ray: worlds per Ray task (default: about 4 tasks per CPU of the cluster, "
+                        "each of at least 50 episodes)")
     p.set_defaults(func=run)
 
 
@@ -53,6 +62,13 @@ def run(args: argparse.Namespace) -> int:
     if args.html:
 
         check_writable(Path(args.html) / PAGE, create_parent=True)
+    if args.ray is not None and args.ray and Path(args.ray).exists():
+        raise UserError(f"--ray: {args.ray!r} is a file, not a Ray address; put --ray after the worlds, "
+                        "or write --ray=ADDRESS")
+    if args.ray_batch is not None and args.ray is None:
+        raise UserError("--ray-batch: only with --ray")
+    if args.ray_batch is not None and args.ray_batch < 1:
+        raise UserError(f"--ray-batch: must be at least 1, got {args.ray_batch}")
     if args.random_starts is not None and not 1 <= args.random_starts <= MAX_STARTS:
         raise UserError(f"--random-starts: must be from 1 to {MAX_STARTS:,} (as a world file's starts), "
                         f"got {args.random_starts}")
@@ -70,10 +86,15 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"{', '.join(empty)}: no starts to run from (add 'starts: [[x, y], ...]' to the "
                             f"world file, or use --random-starts N)")
     names = [n.strip() for n in args.planner.split(",") if n.strip()]
-    evaluations = []
-    for name in names:
-        planner = make_planner(name, model=args.model)
-        evaluations.append(evaluate(planner, worlds, starts, max_steps=args.max_steps, formation=args.formation))
+    if args.ray is not None:
+        evaluations = evaluate_on_ray(names, worlds, starts, model=args.model, max_steps=args.max_steps,
+                                      formation=args.formation, address=args.ray or None,
+                                      worlds_per_task=args.ray_batch)
+    else:
+        evaluations = []
+        for name in names:
+            planner = make_planner(name, model=args.model)
+            evaluations.append(evaluate(planner, worlds, starts, max_steps=args.max_steps, formation=args.formation))
     print(format_table(evaluations))
     if args.json:
         write_json(evaluations, args.json)
