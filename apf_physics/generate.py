@@ -21,41 +21,46 @@ Families (:data:`FAMILIES`):
   middle of the map, each from its start to a target across it, among 2–4 obstacles kept
   off the crossing (the world file's ``formations:``).
 
-Structure families (:data:`STRUCTURE_FAMILIES`, issue 12): bigger structures than the
-ones above, for testing whether a planner generalises. They use a robot of radius 0.3
+Structure families (:data:`STRUCTURE_FAMILIES`, issue 12): larger structures than the ones
+above, for testing whether a planner generalises. They use a robot of radius 0.3
 (:data:`STRUCTURE_ROBOT_RADIUS`); every start is out of the target's sight (the straight
-segment to it comes within the robot's radius of an obstacle, so the start is behind a
-structure as seen from the target) and its A* path is shorter than :data:`PATH_SHARE` of
-the default step limit (:func:`step_limit`, 4 x (width + height): 240 units on a 50 x 50
-map, 480 on a 100 x 100 one).
+segment to it comes within the robot's radius of an obstacle: the start is behind a
+structure as seen from the target, where gradient descent is trapped about nine times in
+ten) and its A* path is shorter than :data:`PATH_SHARE` of the default step limit
+(:func:`step_limit`, 4 x (width + height): shorter than 240 on a 50 x 50 map, 480 on a
+100 x 100 one).
 
-- ``rooms``: a building of 2 x 2 up to 4 x 4 rooms (6 x 6 on a 100 x 100 map) with jittered
-  walls, 1.6–3.2 wide doors at random places in the walls (a random spanning tree of doors
-  plus extra doors that make loops, and now and then a wall left out), either filling the map
-  (its walls the map's edge) or a smaller, possibly rotated, building with 1–3 outside doors.
-  The target is in a room (now and then outside the building), the starts in other rooms or
-  outside.
-- ``maze``: a grid maze (cells 3–6 units, 3.5–8 on a 100 x 100 map) drawn by a depth-first
-  walk (long corridors) or by Kruskal's algorithm (many short dead ends), with 5–30 % of the
-  remaining inner walls removed to make loops; filling the map or a smaller, possibly
-  rotated, block with 1–3 entrances. Target and starts in cells (or starts outside).
-- ``nested_cups``: two or three nested cups around the target, their openings alternating
+- ``rooms``: a building of 2 up to 4 x 4 rooms (6 x 6 on a 100 x 100 map), 7–16 units
+  across, with jittered walls and 1.6–3.2 wide doors at random places in them (a random
+  spanning tree of doors, extra doors that make loops, now and then a wall left out);
+  either filling the map (the map's edge its outside wall) or a smaller building, turned
+  at times, with 1–3 outside doors. The target in a room (now and then outside, by a
+  wall), the starts in the other rooms or outside.
+- ``maze``: a grid maze drawn by a depth-first walk (long corridors) or by Kruskal's
+  algorithm (many short dead ends), 5–30 % of its remaining inner walls removed to make
+  loops; cells of 3–6 units (3.5–8 on a 100 x 100 map; larger where there would be more
+  than 10 a side, 12 on a 100 x 100 map); filling the map or a smaller block, turned at
+  times, with 1–3 gates. The target and most starts in cells.
+- ``nested_cups``: two or three nested cups around the target, openings alternating
   (opposite sides, now and then a quarter turn): U-shaped or with a partial opening,
-  rectangular or round, 1.8–4 units between them, at any orientation. Starts outside the
-  nest or between its cups.
+  rectangular or round, 1.8–4 units apart (up to 5.7 on a 100 x 100 map), at any
+  orientation. Starts outside the nest or between its cups.
 - ``narrow_gap``: one straight wall from edge to edge across the map between the target and
   the starts, 0.3–1 thick, at any angle, with a single gap 1.3–1.8 wide somewhere along it.
-- ``dense_clutter``: 18–32 polygons (random convex polygons, boxes, bars and L-shapes,
-  overlapping at times) around the target and between it and the starts.
+- ``dense_clutter``: 18–32 polygons (27–49 on a 100 x 100 map): random convex polygons,
+  boxes, bars and L-shapes, overlapping at times, around the target and between it and the
+  starts.
 - ``mixed``: several blocks on one map, each a small building of rooms, a nest of cups or a
   patch of clutter (2–3 blocks on a 50 x 50 map, 3–5 on a 100 x 100 one); the target in a
-  building or a nest, the starts anywhere else, often in the other blocks. This is the
-  issue's "100 x 100 worlds mixing cups, rooms and clutter": ``--family mixed --size 100``.
+  building or a nest, the starts mostly in or by the other blocks. The issue's "100 x 100
+  worlds mixing cups, rooms and clutter" are ``--family mixed --size 100``.
 
-Every structure family works at any ``--size`` from about 30 up: on bigger maps a building
-has more rooms and a maze more cells (not stretched walls: doors, gaps and corridors keep
-their widths, which are set by the robot's size), the nest, the clutter patch and the
-distance to the starts grow with the map.
+They work at any ``--size`` from 20 up (``mixed`` from 40). On bigger maps a building has
+more rooms and a maze more cells rather than stretched walls: doors, gaps and corridors
+keep their widths, which the robot's size sets; the nest, the clutter and the distance to
+the starts grow with the map. A world takes well under a second on a 50 x 50 map and
+0.3–4 s on a 100 x 100 one (most of it in the reachability grid: one clearance per grid
+node and obstacle).
 
 Every world goes through :func:`~apf_physics.worldfile.world_from_dict` (so it honours the
 world-file contract), and every start is reachable: a path with the robot's clearance
@@ -467,7 +472,7 @@ def _rotated_extent(w: float, h: float, angle: float) -> np.ndarray:
 
 def _fit_frame(rng: np.random.Generator, lo: np.ndarray, hi: np.ndarray, angle: float, size: float,
                pad: float) -> _Frame | None:
-    """A frame at ``angle`` that puts the local box [lo, hi] inside the map, ``pad`` from its edge, at a random place."""
+    """A frame at ``angle`` putting the local box [lo, hi] at a random place in the map, ``pad`` from its edge."""
     corners = _box_corners(lo[0], hi[0], lo[1], hi[1])
     turned = corners @ _Frame(np.zeros(2), angle).rot.T
     low, high = turned.min(axis=0), turned.max(axis=0)
@@ -828,8 +833,8 @@ def _rooms_world(rng: np.random.Generator, size: float) -> Drawn | None:
 
 def _maze_world(rng: np.random.Generator, size: float) -> Drawn | None:
     scale = size / 50.0
-    cell = rng.uniform(3.0 + 0.5 * (scale - 1), 6.0 + 2.0 * (scale - 1))   # 3-6 on 50 x 50, 3.5-8 on 100 x 100 (or more:
-    # at most ``most`` cells per side)
+    # cells of 3-6 units on 50 x 50, 3.5-8 on 100 x 100 (larger where there would be more than ``most`` a side)
+    cell = rng.uniform(3.0 + 0.5 * (scale - 1), 6.0 + 2.0 * (scale - 1))
     most = int(round(10 + 2 * (scale - 1)))                               # cells per side
     outer = rng.random() >= 0.35
     if not outer:                         # the maze fills the map: its edge is the outside wall
@@ -995,7 +1000,8 @@ def _structure_world(family: str, rng: np.random.Generator, size: float, field: 
         if drawn is None:
             continue
         polygons, target, propose = drawn
-        obstacles = _round([{"polygon": np.asarray(p, float).tolist()} for p in polygons])
+        # 3 decimals as everywhere (+ 0.0: no -0.0, which would not read back the same)
+        obstacles = [{"polygon": (np.round(np.asarray(p, float), 3) + 0.0).tolist()} for p in polygons]
         if any(min(min(v) for v in o["polygon"]) < 0 or max(max(v) for v in o["polygon"]) > size for o in obstacles):
             continue
         data = {

@@ -387,7 +387,7 @@ def _parse_formations(check: _Checker, value: Any) -> tuple[FormationTask, ...]:
         key = f"formations[{i}]"
         body = check.attempt(check.mapping, entry, key, _FORMATION_KEYS | {"start", "target"},
                              required=("start", "target"))
-        if body is None:
+        if body is None or "start" not in body or "target" not in body:   # (a missing one is reported)
             continue
         start = check.attempt(check.point, body["start"], f"{key}.start")
         target = check.attempt(check.point, body["target"], f"{key}.target")
