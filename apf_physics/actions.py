@@ -1,4 +1,4 @@
-"""The nine moves of SPEC §2 (thesis Table 1), in the thesis's order."""
+"""The nine moves of SPEC §2 (thesis Table 1), in the thesis's order, and a finer set with half-length moves."""
 
 from __future__ import annotations
 
@@ -10,6 +10,12 @@ ACTION_NAMES = ("up", "down", "left", "right", "left-up", "left-down", "right-up
 ACTIONS = np.array(
     [(0, 1), (0, -1), (-1, 0), (1, 0), (-1, 1), (-1, -1), (1, 1), (1, -1), (0, 0)], dtype=float
 )  # displacement per control step, world units
+
+FINE_ACTIONS = np.vstack([ACTIONS[:8], 0.5 * ACTIONS[:8], ACTIONS[8:]])
+"""The nine moves and the eight half-length ones (stay last): a robot can thread a passage
+narrower than a unit lattice allows."""
+MOVE_SETS = {"unit": ACTIONS, "fine": FINE_ACTIONS}
+"""Move sets of planners, by name."""
 
 SAFETY = 0.05
 """Clearance kept beyond touching by planners that check their moves [world units]."""

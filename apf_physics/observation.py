@@ -395,3 +395,42 @@ class VisitMemory:
         values = np.minimum(counts, self.cap).astype(np.float32) / np.float32(self.cap)
         values[outside] = 1.0
         return values
+
+
+@dataclass(frozen=True)
+class MapView:
+    """What a robot sees of the whole (static) map: the observation of map-planning networks.
+
+    A grid over the map at ``resolution`` nodes per unit (node ``[r, c]`` at
+    ``grid.to_world((c, r))``), each node with :data:`~apf_physics.models.mapnet.MAP_FEATURES`
+    features: the robot's clearance there beyond its radius (``(clearance − radius) / 2``,
+    clipped to ``[−0.5, 1]``) and whether a target is within reach (the goal tolerance).
+
+    Attributes:
+        grid: The nodes.
+        features: (2, rows, cols) float32 node features.
+        free: (rows, cols) bool: the robot fits there with ``margin`` to spare.
+        goal: (rows, cols) bool: free nodes within ``0.9 ×`` the goal tolerance of a target.
+    """
+
+    grid: Grid
+    features: np.ndarray
+    free: np.ndarray
+    goal: np.ndarray
+
+    @classmethod
+    def of(cls, world: World, resolution: int = 2, margin: float = 0.05) -> "MapView":
+        """The (cached) map view of ``world``'s static obstacles."""
+        def build() -> MapView:
+            grid = Grid.covering((0.0, 0.0), world.size, resolution)
+            points = grid.node_points()
+            clearance = world.static_clearance(points).reshape(grid.shape)
+            free = clearance >= world.robot_radius + margin
+            near = np.full(len(points), np.inf)
+            for target in world.targets:
+                near = np.minimum(near, np.hypot(points[:, 0] - target[0], points[:, 1] - target[1]))
+            goal = (near.reshape(grid.shape) <= 0.9 * world.goal_tolerance) & free
+            features = np.stack([np.clip((clearance - world.robot_radius) / 2.0, -0.5, 1.0),
+                                 goal.astype(float)]).astype(np.float32)
+            return cls(grid, features, free, goal)
+        return world.cached(("map_view", int(resolution), float(margin)), build)

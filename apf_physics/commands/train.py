@@ -12,6 +12,7 @@ import yaml
 from apf_physics.curriculum import load_curriculum
 from apf_physics.errors import UserError
 from apf_physics.rl.config import CURRICULUM_DEFAULT, PRESETS, WORLD_DEFAULT, preset, replace
+from apf_physics.rl.imitation import train_imitation
 from apf_physics.rl.phases import phases_for_curriculum, phases_for_world
 from apf_physics.rl.rundir import RunDir
 from apf_physics.rl.trainer import CSV_COLUMNS, load_checkpoint_config, train
@@ -100,7 +101,8 @@ def run(args: argparse.Namespace) -> int:
             config = preset(args.preset or (WORLD_DEFAULT if args.world else CURRICULUM_DEFAULT), **overrides)
         phases = phases_for_world(world, config) if world is not None else phases_for_curriculum(stages, config)
         try:
-            result = train(config, phases, out_dir=out, resume=args.resume, progress=not args.no_progress)
+            fit = train_imitation if config.method == "imitation" else train
+            result = fit(config, phases, out_dir=out, resume=args.resume, progress=not args.no_progress)
         except KeyboardInterrupt:
             if out.last.is_file():
                 print(f"interrupted: the training state is in {out.last}; continue with\n  {resume_command(args)}",

@@ -16,7 +16,8 @@ from pathlib import Path
 from apf_physics.errors import ModelError
 from apf_physics.models.files import FORMAT_VERSION, SavedModel, load_model, model_meta, save_model
 from apf_physics.models.network import QNetwork
-from apf_physics.models.policy import DQNPolicy
+from apf_physics.models.mapnet import MapNetwork
+from apf_physics.models.policy import DQNPolicy, MapPolicy, load_policy
 from apf_physics.world import World
 
 MODELS = Path(__file__).resolve().parent
@@ -37,5 +38,5 @@ def shipped_model_for(world: World) -> Path:
                      f"train one with `apf-physics train` and pass --model")
 
 
-__all__ = ["DQNPolicy", "FORMAT_VERSION", "MODELS", "QNetwork", "SHIPPED", "SavedModel", "load_model", "model_meta",
+__all__ = ["DQNPolicy", "MapNetwork", "MapPolicy", "load_policy", "FORMAT_VERSION", "MODELS", "QNetwork", "SHIPPED", "SavedModel", "load_model", "model_meta",
            "save_model", "shipped_model_for"]

@@ -36,8 +36,9 @@ import stat
 import numpy as np
 import torch
 
-from apf_physics.actions import ACTIONS
+from apf_physics.actions import ACTIONS, MOVE_SETS
 from apf_physics.errors import ModelError
+from apf_physics.models.mapnet import MapNetwork
 from apf_physics.models.network import OBS_TRANSFORMS, QNetwork
 from apf_physics.observation import CHANNELS, SCALES, ObserverConfig
 from apf_physics.worldfile import RASTER_MARGIN
@@ -233,19 +234,26 @@ class SavedModel:
 
     Attributes:
         path: The file it came from.
-        network: The network, in eval mode, on CPU.
-        obs_shape: (C, k, k) observation shape it expects.
+        network: The network, in eval mode, on CPU: a window :class:`QNetwork`, or a
+            :class:`~apf_physics.models.mapnet.MapNetwork` (``arch.type`` ``"map"``).
+        obs_shape: (C, k, k) observation shape it expects (``()`` for a map network, which
+            sees a :class:`~apf_physics.observation.MapView` of any size).
         field: Field parameters of the world it was trained on.
-        observer: How its observations were built (:func:`observer_of`).
+        observer: How its observations were built (:func:`observer_of`; None for a map network).
         meta: All metadata of the file (``kind``, ``arch``, ``config``, ``training``, ...).
     """
 
     path: Path
-    network: QNetwork
-    obs_shape: tuple[int, int, int]
+    network: QNetwork | MapNetwork
+    obs_shape: tuple[int, ...]
     field: dict[str, float]
-    observer: ObserverConfig
+    observer: ObserverConfig | None
     meta: dict
+
+    @property
+    def is_map(self) -> bool:
+        """Whether the network plans on a map view rather than reading a potential window."""
+        return isinstance(self.network, MapNetwork)
 
 
 def observer_of(meta: Mapping[str, Any]) -> ObserverConfig:
@@ -260,8 +268,8 @@ def observer_of(meta: Mapping[str, Any]) -> ObserverConfig:
     return ObserverConfig(size=size, resolution=4, channels=("potential", "memory")[:channels])
 
 
-def model_meta(network: QNetwork, field: Any, config: Mapping[str, Any], training: Mapping[str, Any],
-               observer: ObserverConfig) -> dict:
+def model_meta(network: QNetwork | MapNetwork, field: Any, config: Mapping[str, Any], training: Mapping[str, Any],
+               observer: ObserverConfig | None) -> dict:
     """Metadata describing a network (the part shared by model and checkpoint files).
 
     Args:
@@ -269,11 +277,13 @@ def model_meta(network: QNetwork, field: Any, config: Mapping[str, Any], trainin
         field: Field parameters of the world trained on (dataclass or mapping).
         config: Training configuration (plain values).
         training: Training metadata (steps, episodes, evaluation, world name, ...).
-        observer: How the network's observations are built.
+        observer: How the network's observations are built (None for a map network).
 
     Returns:
         JSON-serialisable metadata.
     """
+    if isinstance(network, MapNetwork):
+        return {"arch": network.arch, "field": field_dict(field), "config": dict(config), "training": dict(training)}
     return {
         "arch": network.arch,
         "obs_shape": network.arch["obs_shape"],
@@ -285,7 +295,7 @@ def model_meta(network: QNetwork, field: Any, config: Mapping[str, Any], trainin
     }
 
 
-def save_model(path: str | os.PathLike, network: QNetwork, meta: Mapping[str, Any]) -> Path:
+def save_model(path: str | os.PathLike, network: QNetwork | MapNetwork, meta: Mapping[str, Any]) -> Path:
     """Write a model file (network weights and ``meta`` from :func:`model_meta`).
 
     Args:
@@ -342,11 +352,26 @@ class _Schema:
             raise self.fail(key, f"expected one of {', '.join(choices)}, got {self._show(value)}")
         return value
 
+    def map_arch(self, arch: Mapping[str, Any]) -> dict[str, Any]:
+        """A map network's architecture (``arch.type`` ``"map"``), checked."""
+        known = ("type", "resolution", "channels", "hidden", "negative_slope", "moves")
+        unknown = sorted(set(map(str, arch)) - set(known))
+        if unknown:
+            raise self.fail(f"arch.{unknown[0][:40]}", "unknown key")
+        return {"resolution": self.whole(self.get(arch, "resolution", "arch."), "arch.resolution", 1, MAX_OBS_RESOLUTION),
+                "channels": self.whole(self.get(arch, "channels", "arch."), "arch.channels", 1, MAX_FILTERS),
+                "hidden": self.wholes(self.get(arch, "hidden", "arch."), "arch.hidden", (0, MAX_LAYERS), 1, MAX_HIDDEN),
+                "negative_slope": self.number(self.get(arch, "negative_slope", "arch."), "arch.negative_slope"),
+                "moves": self.choice(self.get(arch, "moves", "arch."), "arch.moves", tuple(MOVE_SETS))}
+
     def arch(self, meta: Mapping[str, Any]) -> dict[str, Any]:
         """The network's architecture, checked, with its size bounded before it is built."""
         arch = self.get(meta, "arch", "")
         if not isinstance(arch, dict):
             raise self.fail("arch", f"expected a mapping, got {self._show(arch)}")
+        if "type" in arch:
+            self.choice(arch["type"], "arch.type", ("map",))
+            return {"type": "map", **self.map_arch(arch)}
         known = ("obs_shape", "filters", "hidden", "n_actions", "negative_slope", "pooled_convs", "obs_transform")
         unknown = sorted(set(map(str, arch)) - set(known))
         if unknown:
@@ -435,6 +460,8 @@ def load_model(
     schema = _Schema(path)
     schema.choice(schema.get(meta, "kind", ""), "kind", ("model", "checkpoint"))
     arch = schema.arch(meta)
+    if arch.get("type") == "map":
+        return _load_map_model(path, schema, meta, tensors, arch, expect_obs_shape, expect_field)
     obs_shape = tuple(arch["obs_shape"])
     if "obs_shape" in meta and meta["obs_shape"] != list(obs_shape):
         raise schema.fail("obs_shape", f"{schema._show(meta['obs_shape'])} contradicts arch.obs_shape {list(obs_shape)}")
@@ -455,19 +482,48 @@ def load_model(
     except (RuntimeError, ValueError, TypeError, KeyError) as exc:
         raise ModelError(f"{path}: the weights do not fit the network the metadata describes ({_one_line(exc)})") from None
     network.eval()
-    bad = sum(int((~torch.isfinite(p)).sum()) for p in network.state_dict().values() if p.is_floating_point())
-    if bad:
-        total = sum(p.numel() for p in network.state_dict().values())
-        raise ModelError(f"{path}: not a usable model: {bad:,} of its {total:,} weights are not finite (NaN or infinite)")
+    _finite_weights(path, network)
     if expect_obs_shape is not None and tuple(int(v) for v in expect_obs_shape) != obs_shape:
         raise ModelError(
             f"{path}: the model expects observations of shape {obs_shape} (C, k, k), "
             f"but they are {tuple(expect_obs_shape)} here"
         )
+    _check_field(path, field, expect_field)
+    return SavedModel(path=path, network=network, obs_shape=obs_shape, field=field, observer=observer, meta=meta)
+
+
+def _check_field(path: Path, field: dict[str, float], expect_field: Any) -> None:
     if expect_field is not None:
         expected = field_dict(expect_field)
         wrong = [k for k in FIELD_KEYS if not np.isclose(field[k], expected[k], rtol=1e-9, atol=1e-12)]
         if wrong:
             diffs = ", ".join(f"{k}={field[k]:g} (world: {expected[k]:g})" for k in wrong)
             raise ModelError(f"{path}: the model was trained in another field: {diffs}")
-    return SavedModel(path=path, network=network, obs_shape=obs_shape, field=field, observer=observer, meta=meta)
+
+
+def _finite_weights(path: Path, network: torch.nn.Module) -> None:
+    bad = sum(int((~torch.isfinite(p)).sum()) for p in network.state_dict().values() if p.is_floating_point())
+    if bad:
+        total = sum(p.numel() for p in network.state_dict().values())
+        raise ModelError(f"{path}: not a usable model: {bad:,} of its {total:,} weights are not finite (NaN or infinite)")
+
+
+def _load_map_model(path: Path, schema: _Schema, meta: dict, tensors: dict, arch: dict,
+                    expect_obs_shape: Sequence[int] | None, expect_field: Any) -> SavedModel:
+    """The rest of :func:`load_model` for a map network."""
+    if expect_obs_shape is not None:
+        raise ModelError(f"{path}: a map-planning model (it sees the whole map, not a window of "
+                         f"{tuple(expect_obs_shape)}): use it with the dqn planner, not in an environment")
+    field = schema.field(meta)
+    state = tensors.get("q_network")
+    if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
+        raise ModelError(f"{path}: not a usable model: the payload has no 'q_network' weights")
+    network = MapNetwork(**{k: v for k, v in arch.items() if k != "type"})
+    try:
+        network.load_state_dict(state)
+    except (RuntimeError, ValueError, TypeError, KeyError) as exc:
+        raise ModelError(f"{path}: the weights do not fit the network the metadata describes ({_one_line(exc)})") from None
+    network.eval()
+    _finite_weights(path, network)
+    _check_field(path, field, expect_field)
+    return SavedModel(path=path, network=network, obs_shape=(), field=field, observer=None, meta=meta)

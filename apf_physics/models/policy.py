@@ -1,4 +1,4 @@
-"""A trained Q-network as a greedy policy over batches of observations."""
+"""Trained networks as policies: a Q-network over batches of observations, a map network over a world."""
 
 from __future__ import annotations
 
@@ -8,9 +8,12 @@ from typing import Any, Sequence
 import numpy as np
 import torch
 
+from apf_physics.actions import MOVE_SETS
 from apf_physics.models.files import SavedModel, load_model, observer_of
+from apf_physics.models.mapnet import MapNetwork, move_features, sample_values
 from apf_physics.models.network import QNetwork
-from apf_physics.observation import ObserverConfig
+from apf_physics.observation import MapView, ObserverConfig
+from apf_physics.world import World
 
 
 SMALL_BATCH = 256
@@ -95,3 +98,100 @@ class DQNPolicy:
         finally:
             if small:
                 torch.set_num_threads(threads)
+
+
+class MapPolicy:
+    """Action values of a :class:`~apf_physics.models.mapnet.MapNetwork` for robots in a world.
+
+    The network's values over the world's :class:`~apf_physics.observation.MapView` depend
+    only on the world's static obstacles and targets, so they are computed once per world
+    (cached with the world) and every step only samples them at the robots' moves.
+
+    Args:
+        network: The map network; it is put in eval mode.
+        model: The file it came from, if any.
+    """
+
+    _count = 0
+
+    def __init__(self, network: MapNetwork, model: SavedModel | None = None):
+        self.network = network.eval()
+        self.model = model
+        self.moves = MOVE_SETS[network.arch["moves"]]
+        """(M, 2) the moves the action values are for."""
+        self.lengths = np.hypot(*self.moves.T)
+        MapPolicy._count += 1
+        self._key = ("map_values", MapPolicy._count)   # cache key in a world: this policy's values
+
+    @property
+    def field(self) -> dict[str, float] | None:
+        """Field parameters of the world the network was trained on (None if unknown)."""
+        return None if self.model is None else self.model.field
+
+    def values(self, world: World) -> tuple[MapView, torch.Tensor]:
+        """The world's map view and the network's V over it (cached with the world)."""
+        def build():
+            view = MapView.of(world, self.network.resolution)
+            with _threads_for(1), torch.inference_mode():
+                v = self.network.values(torch.from_numpy(view.features), torch.from_numpy(view.free),
+                                        torch.from_numpy(view.goal))
+            return view, v
+        return world.cached(self._key, build)
+
+    def q_values(self, world: World, positions: np.ndarray, room: np.ndarray, du: np.ndarray) -> np.ndarray:
+        """(N, M) action values of robots at ``positions`` for :attr:`moves`.
+
+        Args:
+            world: The world.
+            positions: (N, 2) robot centres.
+            room: (N, M) clearance along each move beyond the robot's radius and the safety margin.
+            du: (N, M) signed-log change of U over each move (:func:`potential_change`).
+        """
+        view, v = self.values(world)
+        positions = np.asarray(positions, float).reshape(-1, 2)
+        with _threads_for(1), torch.inference_mode():
+            return map_scores(self.network, view, v, positions, self.moves, room, du).numpy()
+
+
+def potential_change(world: World, positions: np.ndarray, moves: np.ndarray, t: float = 0.0) -> np.ndarray:
+    """(N, M) ``sign(d)·log(1 + |d|) / 4`` of ``d = U(p + a, t) − U(p, t)`` for each robot and move."""
+    positions = np.asarray(positions, float).reshape(-1, 2)
+    ends = (positions[:, None, :] + moves[None]).reshape(-1, 2)
+    d = world.potential(ends, t).reshape(len(positions), -1) - world.potential(positions, t)[:, None]
+    return np.sign(d) * np.log1p(np.abs(d)) / 4.0
+
+
+def map_scores(network: MapNetwork, view: MapView, v: torch.Tensor, positions: np.ndarray, moves: np.ndarray,
+               room: np.ndarray, du: np.ndarray) -> torch.Tensor:
+    """(N, M) the network's action values (differentiable in ``v`` and the head's weights)."""
+    n, m = len(positions), len(moves)
+    points = torch.from_numpy(np.concatenate([positions, (positions[:, None, :] + moves[None]).reshape(-1, 2)]))
+    sampled, found = sample_values(v, torch.from_numpy(view.free), view.grid.origin, view.grid.resolution,
+                                   points.to(v.dtype))
+    here, there, ok = sampled[:n], sampled[n:].reshape(n, m), found[n:].reshape(n, m)
+    lengths = torch.from_numpy(np.hypot(*moves.T)).to(v.dtype)
+    features = move_features(here, there, ok, lengths, torch.from_numpy(np.asarray(room)).to(v.dtype),
+                             torch.from_numpy(np.asarray(du)).to(v.dtype))
+    return network.scores(features)
+
+
+class _threads_for:
+    """Run a block on ``count`` torch threads (small work: more threads only wait on each other)."""
+
+    def __init__(self, count: int):
+        self.count = count
+
+    def __enter__(self):
+        self.saved = torch.get_num_threads()
+        if self.saved != self.count:
+            torch.set_num_threads(self.count)
+
+    def __exit__(self, *exc):
+        if self.saved != self.count:
+            torch.set_num_threads(self.saved)
+
+
+def load_policy(path: str | os.PathLike, expect_field: Any = None) -> "DQNPolicy | MapPolicy":
+    """The policy of a model file, whichever kind of network it holds."""
+    model = load_model(path, expect_field=expect_field)
+    return MapPolicy(model.network, model) if model.is_map else DQNPolicy(model.network, model.observer, model)

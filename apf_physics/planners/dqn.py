@@ -1,4 +1,10 @@
-"""The DQN planner: greedy actions of a trained Q-network on the robot's observation."""
+"""The DQN planner: greedy actions of a trained Q-network on the robot's observation.
+
+Two kinds of network (:func:`~apf_physics.models.load_policy` tells them apart): the
+thesis's, on a window of the potential (and the visit memory), with the nine unit moves; and
+the map network (:mod:`apf_physics.models.mapnet`), which plans on a view of the whole map
+and scores the nine moves and eight half-length ones.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from apf_physics.actions import ACTIONS, SAFETY, move_clearance
-from apf_physics.models import DQNPolicy, shipped_model_for
+from apf_physics.models import DQNPolicy, MapPolicy, load_policy, shipped_model_for
+from apf_physics.models.policy import potential_change
 from apf_physics.observation import Observer
 from apf_physics.planners.base import Planner
 from apf_physics.world import World
@@ -37,7 +44,8 @@ class DQNPlanner(Planner):
     MEMORY_TRAP_WINDOW = 40
     """Trap window of a planner with a visit memory (control steps)."""
 
-    def __init__(self, model: str | Path | None = None, shield: bool = True, policy: DQNPolicy | None = None):
+    def __init__(self, model: str | Path | None = None, shield: bool = True,
+                 policy: DQNPolicy | MapPolicy | None = None):
         self.model_path = Path(model) if model is not None else None
         self.shield = bool(shield)
         self.name = "dqn" if self.shield else "dqn-unshielded"
@@ -49,15 +57,21 @@ class DQNPlanner(Planner):
         if self._loaded != "given":
             path = self.model_path or shipped_model_for(world)
             if self._policy is None or self._loaded != (path, id(world)):
-                self._policy = DQNPolicy.load(path, expect_field=world.field.as_dict())
+                self._policy = load_policy(path, expect_field=world.field.as_dict())
                 self._loaded = (path, id(world))
         positions = np.asarray(positions, dtype=float).reshape(-1, 2)
+        if isinstance(self._policy, MapPolicy):
+            self.observer = None
+            self.trap_window = self.MEMORY_TRAP_WINDOW
+            return
         self.observer = Observer(self._policy.observer, len(positions), [world])
         self.observer.reset(np.arange(len(positions)), positions, [world] * len(positions))
         self.trap_window = self.MEMORY_TRAP_WINDOW if self._policy.observer.memory else None
         self._started = False
 
     def act(self, positions: np.ndarray, active: np.ndarray, t: int = 0) -> np.ndarray:
+        if self.observer is None:
+            return self._act_on_map(positions, active, t)
         if self._started:  # the first call sees the starts, which reset() counted already
             self.observer.visit(positions)
         self._started = True
@@ -66,6 +80,16 @@ class DQNPlanner(Planner):
             return ACTIONS[self._policy.act(obs)] * active[:, None]
         room = move_clearance(self.world, positions, t=t) - (self.world.robot_radius + SAFETY)
         return ACTIONS[shielded_argmax(self._policy.q_values(obs), room)] * active[:, None]
+
+
+    def _act_on_map(self, positions: np.ndarray, active: np.ndarray, t: int) -> np.ndarray:
+        """A map network's move: its best-valued one (with the shield: among the safe ones)."""
+        policy = self._policy
+        moves = policy.moves
+        room = move_clearance(self.world, positions, moves, t=t) - (self.world.robot_radius + SAFETY)
+        q = policy.q_values(self.world, positions, room, potential_change(self.world, positions, moves, t))
+        chosen = shielded_argmax(q, room) if self.shield else q.argmax(axis=1)
+        return moves[chosen] * active[:, None]
 
 
 def shielded_argmax(q: np.ndarray, room: np.ndarray) -> np.ndarray:

@@ -39,9 +39,10 @@ import typing
 from dataclasses import dataclass
 from typing import Any, Optional, Union
 
+from apf_physics.actions import MOVE_SETS
 from apf_physics.envs.reward import REWARD_PRESETS, RewardWeights
 from apf_physics.errors import UserError
-from apf_physics.generate import FAMILIES, MOVING_FAMILIES
+from apf_physics.generate import FAMILIES, MOVING_FAMILIES, STRUCTURE_FAMILIES
 from apf_physics.models.network import OBS_TRANSFORMS, QNetwork
 from apf_physics.observation import SCALES, ObserverConfig
 
@@ -151,6 +152,26 @@ class TrainConfig:
     restart_exploration: bool = True
     """Count s from the start of each phase (the thesis: ε decays anew over every stage), not of the run."""
 
+    # --- method ---
+    method: str = "dqn"
+    """``"dqn"``: deep Q-learning of the window network (:mod:`apf_physics.rl.trainer`);
+    ``"imitation"``: the map network (:class:`~apf_physics.models.mapnet.MapNetwork`) learns
+    A*'s moves on generated worlds (:mod:`apf_physics.rl.imitation`)."""
+    map_resolution: int = 2
+    """Imitation: nodes per unit of the map network's view."""
+    map_channels: int = 8
+    """Imitation: hidden channels of the map network's cost map."""
+    map_moves: str = "fine"
+    """Imitation: the network's move set (:data:`~apf_physics.actions.MOVE_SETS`)."""
+    grad_iterations: int = 24
+    """Imitation: value-iteration sweeps back-propagated through, after the fixed point."""
+    demo_positions: int = 256
+    """Imitation: robot positions labelled by the teacher per world and update."""
+    label_temperature: float = 0.1
+    """Imitation: the teacher's move probabilities are ``softmax(−cost to go after the move / T)``."""
+    map_sizes: tuple[float, ...] = (50.0,)
+    """Map sizes of generated worlds (pool and validation), cycled."""
+
     # --- phases (a world is one phase; a curriculum one phase per stage, then the pool) ---
     stage_episodes: Optional[int] = None
     """Searches per curriculum stage (the thesis: 150). None with ``stage_steps`` None: the stages
@@ -227,6 +248,13 @@ class TrainConfig:
             (self.target_update in ("none", "hard", "soft"), "target_update must be 'none', 'hard' or 'soft'"),
             (self.train_starts in TRAIN_STARTS, f"train_starts must be one of {', '.join(TRAIN_STARTS)}"),
             (0.0 <= self.world_start_fraction <= 1.0, "world_start_fraction must be in [0, 1]"),
+            (self.method in ("dqn", "imitation"), "method must be 'dqn' or 'imitation'"),
+            (self.map_moves in MOVE_SETS, f"map_moves must be one of {', '.join(MOVE_SETS)}"),
+            (1 <= self.map_resolution <= 8 and self.map_channels >= 1 and self.grad_iterations >= 0
+             and self.demo_positions >= 1 and self.label_temperature > 0,
+             "map_resolution must be 1 to 8; map_channels, demo_positions positive; grad_iterations not negative; "
+             "label_temperature positive"),
+            (bool(self.map_sizes) and all(20 <= s <= 500 for s in self.map_sizes), "map_sizes must be in [20, 500]"),
             (all(f in TRAIN_FAMILIES for f in self.families),
              f"families must be among {', '.join(TRAIN_FAMILIES)}"),
             (bool(self.select) and all(n in EVAL_FIGURES for n in select_names),
@@ -285,7 +313,7 @@ def _reward_dict_ok(data: dict) -> bool:
     return True
 
 
-TRAIN_FAMILIES = FAMILIES + MOVING_FAMILIES
+TRAIN_FAMILIES = FAMILIES + MOVING_FAMILIES + STRUCTURE_FAMILIES
 """Generator families a training pool may draw from (single-robot worlds)."""
 
 PRESETS: dict[str, dict[str, Any]] = {
@@ -323,6 +351,13 @@ PRESETS["general-memory"] = {**PRESETS["general"], "obs_transform": "relative-lo
 PRESETS["general-revisit"] = {**PRESETS["general-memory"], "reward": "general"}
 PRESETS["moving"] = {**PRESETS["general-revisit"], "obs_transform": "relative-log-previous", "previous": True,
                      "families": FAMILIES + MOVING_FAMILIES * len(FAMILIES)}
+PRESETS["map"] = {
+    "method": "imitation", "reward": "thesis-general", "families": FAMILIES + STRUCTURE_FAMILIES,
+    "map_sizes": (50.0, 50.0, 100.0), "pool_size": 48, "refresh_every": 600, "learning_rate": 3e-3,
+    "total_episodes": None, "total_steps": 3_000, "time_limit": 2_400.0, "eval_every": 500, "eval_shield": True,
+    "select": ("-collisions", "success", "spl"), "validation_worlds": 24, "validation_starts": 2, "validation_seed": 1,
+    "log_every": 50, "checkpoint_every": 250, "hidden": (32, 32), "negative_slope": 0.01,
+}
 """Changes to :class:`TrainConfig`'s defaults (which are Table 3's) for each preset."""
 WORLD_DEFAULT = "fast"
 """What ``apf-physics train --world`` trains without ``--preset``."""

@@ -123,24 +123,25 @@ def phases_for_curriculum(stages: Sequence[Stage], config: TrainConfig) -> list[
     return phases
 
 
-def draw_pool(config: TrainConfig, draw: int, size: float = 50) -> list[World]:
+def draw_pool(config: TrainConfig, draw: int) -> list[World]:
     """The ``draw``-th generated training pool (deterministic in the seed and ``draw``).
 
-    Its generator is seeded with ``[POOL_STREAM, seed, draw]``, a sequence, so it never
-    coincides with a set generated from an integer seed (the held-out or validation set).
+    Families and map sizes (:attr:`~TrainConfig.map_sizes`) are cycled. Its generator is
+    seeded with ``[POOL_STREAM, seed, draw]``, a sequence, so it never coincides with a set
+    generated from an integer seed (the held-out or validation set).
     """
     rng = np.random.default_rng([POOL_STREAM, config.seed, draw])
-    fams = config.families
-    return [generate_world(fams[k % len(fams)], rng, size=size, n_starts=config.pool_starts,
+    fams, sizes = config.families, config.map_sizes
+    return [generate_world(fams[k % len(fams)], rng, size=sizes[k % len(sizes)], n_starts=config.pool_starts,
                            name=f"pool{draw}_{fams[k % len(fams)]}_{k}") for k in range(config.pool_size)]
 
 
 def validation_set(config: TrainConfig) -> EvalSet:
-    """The generated validation worlds (the pool's families in turn, or all static ones without a
-    pool, from ``validation_seed``), labelled."""
+    """The generated validation worlds (the pool's families and map sizes in turn, or all static
+    families without a pool, from ``validation_seed``), labelled."""
     rng = np.random.default_rng(config.validation_seed)
-    fams = config.families or FAMILIES
-    worlds = [generate_world(fams[k % len(fams)], rng, n_starts=config.validation_starts,
+    fams, sizes = config.families or FAMILIES, config.map_sizes
+    worlds = [generate_world(fams[k % len(fams)], rng, size=sizes[k % len(sizes)], n_starts=config.validation_starts,
                              name=f"val_{fams[k % len(fams)]}_{k}") for k in range(config.validation_worlds)]
     return EvalSet.of(worlds)
 

@@ -1,0 +1,186 @@
+"""A Q-network that plans: a learned cost map, value iteration over it, and a per-move head.
+
+The thesis's second direction of future work is an observation that is an image map of the
+world. This network takes one (:class:`~apf_physics.observation.MapView`): every node of a
+grid over the map (``resolution`` per unit) carries the robot's clearance there and whether a
+target is within reach. It has three parts, all learned:
+
+1. **Cost map.** Two convolutions turn the node features into a cost per unit of length
+   ``κ(x) > 0`` (where the robot would rather not go: near walls, in narrow places).
+2. **Value iteration** (a value-iteration network, Tamar et al., NIPS 2016, in its shortest-
+   path form): ``V(x) ← max(V(x), max_n V(x + n) − |n|·(κ(x) + κ(x + n))/2)`` over the 8
+   neighbours, with ``V = 0`` at the target nodes, repeated until nothing changes. ``−V`` is the
+   learned cost to go. The iterations run without gradients to the fixed point, then a few
+   more with them (the gradient of a fixed point, truncated: enough for a cost map that is a
+   local function of the features).
+3. **Head.** Each candidate move ``a`` of the robot at ``p`` is scored by a small MLP shared by
+   all moves, from what the robot knows: the change of ``V`` (sampled bilinearly over the
+   free nodes) from ``p`` to ``p + a``, the move's length, the clearance left along the move
+   (the same local check as the shield, moving obstacles included), and the change of the
+   potential ``U``. The scores are the action values.
+
+Nothing here searches the world's graph with A* or knows the optimal path: A* is the teacher
+in training (:mod:`apf_physics.rl.imitation`), never consulted when the network acts. One
+network serves every map size: the grid grows with the map and the iterations run until the
+values settle.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+MAP_FEATURES = 2
+"""Node features of a :class:`~apf_physics.observation.MapView`: clearance margin, target."""
+MOVE_FEATURES = 5
+"""Per-move features of the head: ΔV, length, room, ΔU, stay."""
+UNREACHED = -1e6
+"""V of nodes with no way to a target (blocked, or cut off)."""
+DV_CLIP = 4.0
+"""|ΔV| fed to the head is clipped to this (a move is at most √2 long)."""
+
+
+def _neighbours(resolution: int) -> list[tuple[int, int, float]]:
+    return [(dr, dc, math.hypot(dr, dc) / resolution) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if dr or dc]
+
+
+class MapNetwork(nn.Module):
+    """Learned cost map + value iteration + per-move head (see the module's docstring).
+
+    Args:
+        resolution: Grid nodes per world unit of the map view.
+        channels: Hidden channels of the cost map's first convolution.
+        hidden: Widths of the head's hidden layers.
+        negative_slope: Leaky ReLU slope.
+        moves: Name of the move set (:data:`~apf_physics.actions.MOVE_SETS`).
+    """
+
+    def __init__(self, resolution: int = 2, channels: int = 8, hidden: Sequence[int] = (32, 32),
+                 negative_slope: float = 0.01, moves: str = "fine"):
+        super().__init__()
+        self.arch = {"type": "map", "resolution": int(resolution), "channels": int(channels),
+                     "hidden": [int(h) for h in hidden], "negative_slope": float(negative_slope), "moves": str(moves)}
+        """Everything needed to build this network again (saved with its weights)."""
+        self.resolution = int(resolution)
+        self.negative_slope = float(negative_slope)
+        self.cost_in = nn.Conv2d(MAP_FEATURES, channels, kernel_size=3, padding=1)
+        self.cost_out = nn.Conv2d(channels, 1, kernel_size=1)
+        sizes = [MOVE_FEATURES, *self.arch["hidden"]]
+        self.hidden = nn.ModuleList(nn.Linear(a, b) for a, b in zip(sizes[:-1], sizes[1:]))
+        self.head = nn.Linear(sizes[-1], 1)
+        with torch.no_grad():   # start from "every free place costs about its length"
+            self.cost_out.bias.fill_(math.log(math.e - 1.0))
+            self.cost_out.weight.mul_(0.1)
+
+    # -- the cost map and the values ---------------------------------------------------------
+    def cost(self, features: torch.Tensor) -> torch.Tensor:
+        """(R, C) cost per unit length at each node, from (F, R, C) node features; at least 0.1."""
+        x = F.leaky_relu(self.cost_in(features[None]), self.negative_slope)
+        return F.softplus(self.cost_out(x))[0, 0] + 0.1
+
+    def values(self, features: torch.Tensor, free: torch.Tensor, goal: torch.Tensor,
+               grad_iterations: int = 0, max_iterations: int | None = None) -> torch.Tensor:
+        """(R, C) V over the grid: minus the learned cost to go to the nearest target node.
+
+        Args:
+            features: (F, R, C) node features.
+            free: (R, C) bool, nodes where the robot fits.
+            goal: (R, C) bool, free nodes within reach of a target.
+            grad_iterations: Iterations run with gradients after the fixed point is reached.
+            max_iterations: Cap on the iterations without gradients (default: enough for
+                any path that visits every node of a row and a column four times).
+        """
+        kappa = self.cost(features)
+        edges = [(dr, dc, w * 0.5 * (kappa + _shift(kappa, dr, dc, float("inf"))))
+                 for dr, dc, w in _neighbours(self.resolution)]
+        cap = max_iterations if max_iterations is not None else 4 * sum(free.shape)
+        with torch.no_grad():
+            plain = [(dr, dc, e.detach()) for dr, dc, e in edges]
+            v = torch.where(goal, 0.0, UNREACHED).to(kappa.dtype)
+            for k in range(cap):
+                new = _sweep(v, plain, free, goal)
+                if k % 8 == 7 and torch.equal(new, v):
+                    break
+                v = new
+        for _ in range(grad_iterations):
+            v = _sweep(v, edges, free, goal)
+        return v
+
+    # -- the head -------------------------------------------------------------------------------
+    def scores(self, move_features: torch.Tensor) -> torch.Tensor:
+        """(N, M) action values from (N, M, MOVE_FEATURES) per-move features."""
+        x = move_features
+        for layer in self.hidden:
+            x = F.leaky_relu(layer(x), self.negative_slope)
+        return self.head(x)[..., 0]
+
+
+def _shift(x: torch.Tensor, dr: int, dc: int, fill: float) -> torch.Tensor:
+    """``y[r, c] = x[r + dr, c + dc]`` (``fill`` beyond the edge)."""
+    padded = F.pad(x[None, None], (1, 1, 1, 1), value=fill)[0, 0]
+    rows, cols = x.shape
+    return padded[1 + dr:1 + dr + rows, 1 + dc:1 + dc + cols]
+
+
+def _sweep(v: torch.Tensor, edges: list, free: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+    """One Bellman sweep: each free node takes its best neighbour's value minus the edge's cost."""
+    padded = F.pad(v[None, None], (1, 1, 1, 1), value=UNREACHED)[0, 0]
+    rows, cols = v.shape
+    best = v
+    for dr, dc, cost in edges:
+        best = torch.maximum(best, padded[1 + dr:1 + dr + rows, 1 + dc:1 + dc + cols] - cost)
+    best = torch.where(free, best.clamp_min(UNREACHED), torch.full_like(best, UNREACHED))
+    return torch.where(goal, torch.zeros_like(best), best)
+
+
+def sample_values(v: torch.Tensor, free: torch.Tensor, origin: Sequence[float], resolution: int,
+                  points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """V at ``points`` (K, 2), bilinear over the reached free nodes around each point.
+
+    Returns:
+        (K,) values and (K,) bool: whether any of the four nodes around the point was usable
+        (else the value is :data:`UNREACHED`).
+    """
+    rows, cols = v.shape
+    ij = (points - torch.as_tensor(origin, dtype=points.dtype)) * resolution
+    c0, r0 = torch.floor(ij[:, 0]), torch.floor(ij[:, 1])
+    fx, fy = ij[:, 0] - c0, ij[:, 1] - r0
+    c0, r0 = c0.long(), r0.long()
+    total = torch.zeros(len(points), dtype=v.dtype)
+    weight = torch.zeros(len(points), dtype=v.dtype)
+    usable = free & (v > UNREACHED / 2)
+    for dr, dc, w in ((0, 0, (1 - fx) * (1 - fy)), (0, 1, fx * (1 - fy)), (1, 0, (1 - fx) * fy), (1, 1, fx * fy)):
+        r, c = r0 + dr, c0 + dc
+        inside = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
+        rc, cc = r.clamp(0, rows - 1), c.clamp(0, cols - 1)
+        ok = inside & usable[rc, cc]
+        w = torch.where(ok, w, torch.zeros_like(w))
+        total = total + w * torch.where(ok, v[rc, cc], torch.zeros_like(w))
+        weight = weight + w
+    found = weight > 1e-9
+    return torch.where(found, total / weight.clamp_min(1e-9), torch.full_like(total, UNREACHED)), found
+
+
+def move_features(v_here: torch.Tensor, v_there: torch.Tensor, found: torch.Tensor, lengths: torch.Tensor,
+                  room: torch.Tensor, du: torch.Tensor) -> torch.Tensor:
+    """(N, M, MOVE_FEATURES) head inputs.
+
+    Args:
+        v_here: (N,) V at the robots.
+        v_there: (N, M) V at the end of each move.
+        found: (N, M) whether ``v_there`` could be sampled.
+        lengths: (M,) move lengths.
+        room: (N, M) clearance left along each move beyond the robot's radius and the safety margin.
+        du: (N, M) change of the potential over each move, signed-log scaled.
+    """
+    here_ok = v_here > UNREACHED / 2
+    dv = torch.where(found & here_ok[:, None], v_there - v_here[:, None], torch.full_like(v_there, -DV_CLIP))
+    dv = dv.clamp(-DV_CLIP, DV_CLIP)
+    n, m = v_there.shape
+    stay = (lengths == 0).to(v_there.dtype)
+    return torch.stack([dv, lengths[None].expand(n, m), room.clamp(-1.0, 1.0), du, stay[None].expand(n, m)], dim=-1)
