@@ -1,0 +1,113 @@
+"""The map network: value iteration over the map view, its model files, and imitation training."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from apf_physics import world_from_dict
+from apf_physics.errors import ModelError
+from apf_physics.evaluate import evaluate
+from apf_physics.models import MapNetwork, MapPolicy, load_policy, model_meta, save_model
+from apf_physics.models.mapnet import UNREACHED
+from apf_physics.observation import MapView
+from apf_physics.planners.dqn import DQNPlanner
+from apf_physics.rl.config import preset
+from apf_physics.rl.imitation import Teacher, map_network, quick_room, train_imitation, update
+from apf_physics.rl.phases import phases_for_curriculum
+
+from conftest import simple_world_dict
+
+WALLED = simple_world_dict(
+    # a wall across the map with one door at its right end, and a sealed box
+    obstacles=[{"polygon": [[0, 9.5], [17, 9.5], [17, 10.5], [0, 10.5]]},
+               *({"polygon": box} for box in ([[2, 2], [6, 2], [6, 2.5], [2, 2.5]], [[2, 5.5], [6, 5.5], [6, 6], [2, 6]],
+                                               [[2, 2.5], [2.5, 2.5], [2.5, 5.5], [2, 5.5]],
+                                               [[5.5, 2.5], [6, 2.5], [6, 5.5], [5.5, 5.5]]))],
+    targets=[[4, 15]], starts=[[4, 8], [10, 3]], goal_tolerance=0.75)
+
+
+def test_values_are_minus_a_cost_to_go_around_walls_and_none_where_sealed_off():
+    world = world_from_dict(WALLED)
+    view = MapView.of(world, 2)
+    net = MapNetwork(resolution=2)
+    with torch.no_grad():
+        v = net.values(torch.from_numpy(view.features), torch.from_numpy(view.free), torch.from_numpy(view.goal)).numpy()
+    def at(x, y):
+        c, r = view.grid.to_index(np.array([[x, y]]))[0]
+        return v[int(round(r)), int(round(c))]
+    assert at(4, 15) == 0.0
+    # below the wall the way round (through the door at x 17..20) is far longer than the straight line
+    assert at(4, 8) < -(13 + 2 + 13) * 0.9
+    assert at(4, 8) < at(18.5, 8) < at(18.5, 12) < 0
+    assert at(4, 4) == UNREACHED          # inside the sealed box
+    assert at(10, 10) == UNREACHED        # inside the wall
+    assert np.all(v[~view.free] == UNREACHED)
+
+
+def test_map_model_files_round_trip_and_refuse_what_does_not_fit(tmp_path):
+    world = world_from_dict(WALLED)
+    net = MapNetwork(resolution=2, channels=4, hidden=(8,))
+    path = save_model(tmp_path / "map.pt", net, model_meta(net, world.field, {"preset": "map"}, {}, None))
+    policy = load_policy(path, expect_field=world.field.as_dict())
+    assert isinstance(policy, MapPolicy) and policy.moves.shape == (17, 2)
+    positions = np.array([[4.0, 8.0], [10.0, 3.0]])
+    room, du = np.zeros((2, 17)), np.zeros((2, 17))
+    np.testing.assert_allclose(policy.q_values(world, positions, room, du), MapPolicy(net).q_values(world, positions, room, du),
+                               rtol=1e-6)
+    with pytest.raises(ModelError, match="map-planning model"):
+        from apf_physics.models import load_model
+        load_model(path, expect_obs_shape=(1, 11, 11))
+    # an unknown architecture type is one line naming the key
+    raw = path.read_bytes()
+    meta_start = raw.index(b"\n", len(b"APF-PHYSICS-DQN\n")) + 1
+    header = json.loads(raw[len(b"APF-PHYSICS-DQN\n"):meta_start])
+    meta = json.loads(raw[meta_start:meta_start + header["meta_bytes"]])
+    meta["arch"]["moves"] = "sideways"
+    from apf_physics.models.files import read_file, write_file
+    _, tensors = read_file(path)
+    bad = write_file(tmp_path / "bad.pt", meta, tensors)
+    with pytest.raises(ModelError) as err:
+        load_policy(bad)
+    assert "arch.moves" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_quick_room_is_a_lower_bound_of_the_exact_clearance():
+    from apf_physics.actions import FINE_ACTIONS, SAFETY, move_clearance
+    world = world_from_dict(WALLED)
+    rng = np.random.default_rng(0)
+    points = rng.uniform(0, 20, size=(300, 2))
+    exact = move_clearance(world, points, FINE_ACTIONS) - (world.robot_radius + SAFETY)
+    quick = quick_room(world, points, FINE_ACTIONS)
+    assert np.all(quick <= exact + 1e-9)
+    assert np.median(exact - quick) < 0.2
+
+
+def test_imitation_lowers_the_loss_and_the_planner_follows_the_values():
+    world = world_from_dict(WALLED)
+    config = preset("map", demo_positions=128, grad_iterations=8)
+    torch.manual_seed(0)
+    net = map_network(config)
+    optimizer = torch.optim.Adam(net.parameters(), lr=config.learning_rate)
+    teacher = Teacher.of(world, config.map_resolution)
+    rng = np.random.default_rng(0)
+    losses = [update(net, optimizer, teacher, config, rng) for _ in range(40)]
+    assert np.mean(losses[-5:]) < 0.6 * np.mean(losses[:5])
+    episodes = evaluate(DQNPlanner(policy=MapPolicy(net)), [world]).episodes
+    assert [e.outcome for e in episodes] == ["reached", "reached"]
+
+
+def test_a_tiny_imitation_run_writes_a_usable_model_and_resumes(tmp_path):
+    from apf_physics.curriculum import load_curriculum
+    from conftest import WORLDS
+    config = preset("map", total_steps=6, eval_every=6, validation_worlds=2, validation_starts=1, pool_size=2,
+                    map_sizes=(30.0,), families=("point", "narrow_gap"), demo_positions=64, grad_iterations=4)
+    phases = phases_for_curriculum(load_curriculum(WORLDS / "curricula" / "thesis.yaml"), config)
+    result = train_imitation(config, phases, out_dir=tmp_path / "run")
+    assert result.counters.global_step == 6 and (tmp_path / "run" / "best.pt").is_file()
+    assert isinstance(load_policy(tmp_path / "run" / "best.pt"), MapPolicy)
+    again = train_imitation(config, phases, out_dir=tmp_path / "run", resume=True)
+    assert again.already_finished
