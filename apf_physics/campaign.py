@@ -1,16 +1,18 @@
 """Evaluation campaigns on Ray: worlds × planners fanned out as Ray tasks, gathered as a local run's.
 
 ``apf-physics eval WORLD... --planner P,Q --ray [ADDRESS]`` runs :func:`evaluate_on_ray`
-instead of one :func:`~apf_physics.evaluate.evaluate` per planner. Every planner's worlds
-are dealt into batches (:func:`batches`), each one Ray task that builds its planner and runs
-:func:`~apf_physics.evaluate.evaluate` on its worlds one by one; the episodes are put back
-together in the worlds' order, so the result is the local run's, episode for episode
-(every world's rollout starts from :meth:`~apf_physics.planners.base.Planner.reset` and its
-starts are fixed before the fan-out: nothing depends on which worlds share a task).
+instead of one :func:`~apf_physics.evaluate.evaluate` per planner. The worlds are dealt into
+batches (:func:`batches`), each one Ray task that runs every planner on its worlds, world by
+world, as :func:`~apf_physics.evaluate.evaluate` does; the episodes are put back together per
+planner in the worlds' order, so the result is the local run's, episode for episode (every
+world's rollout starts from :meth:`~apf_physics.planners.base.Planner.reset`, and random
+starts are drawn before the fan-out: nothing depends on which worlds share a task).
 
-The worlds are dealt into about :data:`TASKS_PER_CPU` tasks per CPU of the cluster, but at least
-:data:`MIN_EPISODES_PER_TASK` episodes, so that a task lasts seconds rather than milliseconds
-(start-up, shipping the worlds, and the worker building each world's field raster again are
+A task runs all the planners so that a world's field raster and clearance tables, built on
+the worker from the world file's data, serve every planner as they do in a local run. There
+are about :data:`TASKS_PER_CPU` tasks per CPU of the cluster, but none under
+:data:`MIN_EPISODES_PER_TASK` episodes (over its planners), so that a task lasts a second or
+more rather than milliseconds (scheduling, shipping the worlds and building their tables are
 paid per task).
 
 Ray is found as Ray finds it (:func:`connect`): with no address, ``RAY_ADDRESS`` if it is set,
@@ -41,10 +43,10 @@ from apf_physics.rollout import Episode
 from apf_physics.world import World
 
 TASKS_PER_CPU = 4
-"""Tasks per CPU of the cluster the worlds are cut into (over all planners): enough for the
-CPUs to stay busy while the last tasks finish."""
+"""Tasks per CPU of the cluster the worlds are dealt into: enough for the CPUs to stay busy
+while the last tasks finish."""
 MIN_EPISODES_PER_TASK = 50
-"""Fewest episodes in a task (about a second of a planner's work), unless there are fewer in all."""
+"""Fewest episodes in a task, over its planners (about a second of work), unless there are fewer in all."""
 INSTALL_HINT = "pip install 'apf-physics[ray]'"
 
 
@@ -53,21 +55,21 @@ class TaskTiming:
     """What one Ray task of :func:`evaluate_on_ray` did, for benchmarks and capacity planning.
 
     Attributes:
-        planner: The planner's command-line name.
-        worlds: Worlds in the task.
-        episodes: Episodes it ran.
-        seconds: Wall time of its evaluation on the worker (without queueing and shipping).
+        worlds: Indices of its worlds.
+        episodes: Episodes it ran (over all planners).
+        seconds: Wall time of its evaluations on the worker (without queueing and shipping).
         cpu_seconds: CPU time of the worker process over the same span (what the task costs on
             a core of its own, whatever else the machine was doing).
+        planner_cpu: CPU seconds per planner.
         node: The Ray node it ran on.
         pid: The worker process.
     """
 
-    planner: str
-    worlds: int
+    worlds: tuple[int, ...]
     episodes: int
     seconds: float
     cpu_seconds: float
+    planner_cpu: dict
     node: str
     pid: int
 
@@ -150,21 +152,18 @@ def episodes_per_world(worlds: Sequence[World], starts: Optional[dict[str, np.nd
     return out
 
 
-def tasks_per_planner(episodes: int, planners: int, cpus: int, worlds_per_task: Optional[int] = None,
-                      worlds: int = 0) -> int:
-    """How many tasks each planner's worlds are cut into (see the module's notes).
+def task_count(episodes: int, cpus: int, worlds_per_task: Optional[int] = None, worlds: int = 0) -> int:
+    """How many tasks the worlds are dealt into (see the module's notes).
 
     Args:
-        episodes: Episodes of one planner over all worlds.
-        planners: Planners run.
+        episodes: Episodes of all planners over all worlds.
         cpus: CPUs of the cluster.
         worlds_per_task: A batch size asked for (worlds per task) instead of the rule.
         worlds: Worlds in all (with ``worlds_per_task``).
     """
     if worlds_per_task is not None:
         return max(1, math.ceil(worlds / max(1, worlds_per_task)))
-    spread = math.ceil(TASKS_PER_CPU * max(1, cpus) / max(1, planners))
-    return max(1, min(spread, episodes // MIN_EPISODES_PER_TASK))
+    return max(1, min(TASKS_PER_CPU * max(1, cpus), episodes // MIN_EPISODES_PER_TASK))
 
 
 def _model_copy(data: bytes, name: str) -> Path:
@@ -180,42 +179,46 @@ def _model_copy(data: bytes, name: str) -> Path:
     return path
 
 
-def evaluate_batch(planner: str, worlds: Sequence[World], starts: Optional[dict[str, np.ndarray]],
+def evaluate_batch(planners: Sequence[str], worlds: Sequence[World], starts: Optional[dict[str, np.ndarray]],
                    max_steps: Optional[int], formation: bool, model: Optional[str] = None,
-                   model_bytes: Optional[bytes] = None) -> tuple[str, list[list[Episode]]]:
-    """One task: :func:`~apf_physics.evaluate.evaluate` of a planner on some worlds (run on a Ray worker).
+                   model_bytes: Optional[bytes] = None) -> dict[str, tuple[str, list[list[Episode]], float]]:
+    """One task: every planner on some worlds, as :func:`~apf_physics.evaluate.evaluate` runs it (on a Ray worker).
 
     Args:
-        planner: The planner's command-line name.
+        planners: The planners' command-line names.
         worlds: The task's worlds.
         starts: Their starts by world name (None: the worlds' own).
         max_steps: Step limit per episode.
         formation: Run the worlds' formations.
-        model: The model file as the user named it, for a learned planner.
+        model: The model file of the learned planners, as the user named it.
         model_bytes: Its contents, shipped to the worker (a cluster's nodes need not share files);
             None: ``model`` is opened where the task runs.
 
     Returns:
-        The evaluation's planner label, and each world's episodes.
+        Per planner: the evaluation's label, each world's episodes, and the CPU seconds taken.
     """
     local = None
     if model_bytes is not None:
         local = _model_copy(model_bytes, Path(model).name)
+    out = {}
     try:
-        made = make_planner(planner, model=model if local is None else str(local))
-        label, episodes = "", []
-        for world in worlds:   # one planner through the worlds in turn, as evaluate() runs it
-            ev = evaluate(made, [world], starts, max_steps=max_steps, formation=formation)
-            label = ev.planner
-            episodes.append(ev.episodes)
-        return label, episodes
+        for name in planners:
+            cpu = time.process_time()
+            made = make_planner(name, model=model if local is None else str(local))
+            label, episodes = made.name + ("+formation" if formation else ""), []
+            for world in worlds:   # one planner through the worlds in turn, as evaluate() runs it
+                ev = evaluate(made, [world], starts, max_steps=max_steps, formation=formation)
+                label = ev.planner
+                episodes.append(ev.episodes)
+            out[name] = (label, episodes, time.process_time() - cpu)
     except UserError as exc:   # name the user's file, not the worker's copy
         if local is None:
             raise
         raise type(exc)(str(exc).replace(str(local), str(model))) from None
+    return out
 
 
-def _timed_batch(*args) -> tuple[tuple[str, list[list[Episode]]], float, float, str, int]:
+def _timed_batch(*args) -> tuple[dict, float, float, str, int]:
     """:func:`evaluate_batch` with its wall and CPU time, node and process (run on a Ray worker)."""
     import ray
     start, cpu = time.perf_counter(), time.process_time()
@@ -238,17 +241,17 @@ def evaluate_on_ray(planners: Sequence[str], worlds: Sequence[World], starts: Op
         max_steps: Step limit per episode.
         formation: Run each world's formation.
         address: Where Ray is (:func:`connect`).
-        worlds_per_task: Worlds per task (default: :func:`tasks_per_planner`'s rule).
+        worlds_per_task: Worlds per task (default: :func:`task_count`'s rule).
         num_cpus: CPUs of a local Ray started for the run (default: all).
-        timings: A list to append a :class:`TaskTiming` per task to, in submission order.
+        timings: A list to append a :class:`TaskTiming` per task to.
 
     Returns:
         One :class:`~apf_physics.evaluate.Evaluation` per planner, in order, as
         ``[evaluate(make_planner(p, model), worlds, starts, ...) for p in planners]`` gives.
 
     Raises:
-        UserError: An unknown planner, an unusable model file, Ray missing or unreachable, or
-            a task's own error (a world's, a model's), as the local run would raise it.
+        UserError: An unknown planner, Ray missing or unreachable, or a task's own error (a
+            world's, a model file's), as the local run would raise it.
     """
     names = list(planners)
     for name in names:
@@ -264,20 +267,14 @@ def evaluate_on_ray(planners: Sequence[str], worlds: Sequence[World], starts: Op
     sizes = episodes_per_world(worlds, starts, formation)
     with connect(address, num_cpus=num_cpus) as ray:
         cpus = int(ray.cluster_resources().get("CPU", 1))
-        parts = batches(len(worlds), tasks_per_planner(sum(sizes), len(names), cpus, worlds_per_task, len(worlds)))
+        parts = batches(len(worlds), task_count(sum(sizes) * len(names), cpus, worlds_per_task, len(worlds)))
         task = ray.remote(num_cpus=1)(_timed_batch)
         shipped = ray.put(model_bytes) if model_bytes is not None else None
-        shared = []   # each batch's worlds and starts go to the object store once, for every planner
+        futures = []
         for part in parts:
             chosen = [worlds[i] for i in part]
-            shared.append((ray.put(chosen), ray.put(None if starts is None else {w.name: starts[w.name] for w in chosen})))
-        futures, submitted = [], []
-        for name in names:
-            for part, (chosen, mine) in zip(parts, shared):
-                submitted.append((name, len(part), sum(sizes[i] for i in part)))
-                futures.append(task.remote(name, chosen, mine, max_steps, formation,
-                                           model if name in LEARNED else None,
-                                           shipped if name in LEARNED else None))
+            mine = None if starts is None else {w.name: starts[w.name] for w in chosen}
+            futures.append(task.remote(names, chosen, mine, max_steps, formation, model, shipped))
         try:
             results = ray.get(futures)
         except ray.exceptions.RayTaskError as exc:
@@ -286,15 +283,16 @@ def evaluate_on_ray(planners: Sequence[str], worlds: Sequence[World], starts: Op
                 raise type(cause)(str(cause)) from None
             raise
     if timings is not None:
-        timings.extend(TaskTiming(name, n, eps, *measured[1:])
-                       for (name, n, eps), measured in zip(submitted, results))
-    results = [r[0] for r in results]
+        timings.extend(TaskTiming(tuple(part), sum(sizes[i] for i in part) * len(names), seconds, cpu,
+                                  {n: r[n][2] for n in names}, node, pid)
+                       for part, (r, seconds, cpu, node, pid) in zip(parts, results))
     out = []
-    for k, name in enumerate(names):
+    for name in dict.fromkeys(names):
         per_world: list[list[Episode]] = [[] for _ in worlds]
         label = make_planner(name, model=model).name + ("+formation" if formation else "")
-        for part, (label, episodes) in zip(parts, results[k * len(parts):(k + 1) * len(parts)]):
+        for part, (r, *_) in zip(parts, results):
+            label, episodes, _ = r[name]
             for i, eps in zip(part, episodes):
                 per_world[i] = eps
         out.append(Evaluation(label, [e for eps in per_world for e in eps]))
-    return out
+    return [out[list(dict.fromkeys(names)).index(n)] for n in names]

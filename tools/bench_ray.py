@@ -37,7 +37,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from apf_physics.campaign import TaskTiming, batches, episodes_per_world, evaluate_on_ray, tasks_per_planner  # noqa: E402
+from apf_physics.campaign import TaskTiming, batches, episodes_per_world, evaluate_on_ray, task_count  # noqa: E402
 from apf_physics.evaluate import evaluate  # noqa: E402
 from apf_physics.planners import make_planner  # noqa: E402
 from apf_physics.worldfile import load_worlds  # noqa: E402
@@ -85,15 +85,20 @@ def schedule(durations: list[float], slots: int) -> float:
 
 
 def paper(names, worlds, per_world, timings: list[TaskTiming], dispatch: float, cpus: int) -> tuple[float, int, dict]:
-    """Predicted wall time of the warm evaluation on ``cpus`` dedicated CPUs, tasks per planner, and the overheads (see the module's notes)."""
+    """Predicted wall time of the warm evaluation on ``cpus`` dedicated CPUs, its tasks, and Ray's CPU overhead per planner.
+
+    A task costs the serial CPU time of its worlds under each planner times that planner's
+    measured overhead (its CPU time in the Ray tasks over its serial CPU time).
+    """
     sizes = episodes_per_world(worlds, None, False)
     serial_cpu = {n: sum(c for _, c in per_world[n]) for n in names}
     ray_cpu = defaultdict(float)
     for t in timings:
-        ray_cpu[t.planner] += t.cpu_seconds
+        for n, c in t.planner_cpu.items():
+            ray_cpu[n] += c
     factor = {n: ray_cpu[n] / serial_cpu[n] if serial_cpu[n] else 1.0 for n in names}
-    parts = batches(len(worlds), tasks_per_planner(sum(sizes), len(names), cpus))
-    durations = [factor[n] * sum(per_world[n][i][1] for i in part) for n in names for part in parts]
+    parts = batches(len(worlds), task_count(sum(sizes) * len(names), cpus))
+    durations = [sum(factor[n] * per_world[n][i][1] for n in names for i in part) for part in parts]
     return schedule(durations, cpus) + dispatch, len(parts), factor
 
 
@@ -152,8 +157,9 @@ def main() -> int:
     print(f"  speed-up warm: {serial_wall / ray_wall:.2f}x; with start-up and shutdown "
           f"({init + warmup + ray_wall + shutdown:.2f} s): {serial_wall / (init + warmup + ray_wall + shutdown):.2f}x")
     for task in timings:
-        print(f"    task {task.planner:<10} {task.worlds:3d} worlds {task.episodes:4d} episodes "
-              f"{task.seconds:6.2f} s wall {task.cpu_seconds:6.2f} s CPU  (pid {task.pid})")
+        print(f"    task of {len(task.worlds):3d} worlds, {task.episodes:4d} episodes: {task.seconds:6.2f} s wall, "
+              f"{task.cpu_seconds:6.2f} s CPU (" + ", ".join(f"{n} {c:.2f}" for n, c in task.planner_cpu.items())
+              + f")  pid {task.pid}")
 
     if not args.no_cli:
         with tempfile.TemporaryDirectory() as tmp:
@@ -176,7 +182,7 @@ def main() -> int:
           + ", ".join(f"{n} {f:.2f}" for n, f in factor.items()) + ")")
     print(f"  serial on a core of its own: {serial_cpu:.2f} s (its CPU time)")
     print(f"  {args.cpus} CPUs: {local:.2f} s warm ({serial_cpu / local:.2f}x)")
-    print(f"  {args.nodes} nodes x {args.node_cpus} CPUs: {tasks} tasks per planner, {predicted:.2f} s warm "
+    print(f"  {args.nodes} nodes x {args.node_cpus} CPUs: {tasks} tasks, {predicted:.2f} s warm "
           f"({serial_cpu / predicted:.2f}x); plus joining the cluster and the workers' first imports "
           f"(~{warmup:.1f} s, in parallel on the nodes)")
     return 0 if same else 1

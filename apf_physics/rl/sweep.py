@@ -37,6 +37,7 @@ trial's model) and ``best.json`` (its values, figures and full configuration), b
 from __future__ import annotations
 
 import csv
+import dataclasses
 import itertools
 import json
 import math
@@ -329,6 +330,37 @@ def load_sweep(path: str | Path) -> Sweep:
     return sweep
 
 
+def build_phases(sweep: Sweep, target: Any, config: TrainConfig) -> list:
+    """The trainer's phases of a trial: of the sweep's world, or through its curriculum."""
+    return phases_for_world(target, config) if sweep.world is not None else phases_for_curriculum(target, config)
+
+
+def check_phases(sweep: Sweep, target: Any, most: int = 12) -> None:
+    """Build the phases of the first ``most`` grid combinations, on a small scale, before any trial starts.
+
+    What the trainer would refuse for the world or curriculum (a curriculum preset on a world,
+    starts that need a single world ...) is found here, in one line naming the file, rather
+    than in every trial. The validation set is cut to one world (or the world to one start)
+    so that this takes moments.
+
+    Raises:
+        UserError: The phases cannot be built for a combination.
+    """
+    small = target
+    if sweep.world is not None and len(target.starts):
+        small = dataclasses.replace(target, starts=target.starts[:1], _cache={})
+    first = {k: args[0] for k, (_, args) in sweep.sample.items()}
+    for combo in itertools.islice(itertools.product(*sweep.grid.values()), most):
+        params = {**dict(zip(sweep.grid, combo)), **first}
+        config = dataclasses.replace(sweep.config(params, 1), validation_worlds=1, validation_starts=1,
+                                     eval_random_starts=0)
+        try:
+            build_phases(sweep, small, config)
+        except UserError as exc:
+            shown = ", ".join(f"{k}: {v!r}" for k, v in params.items())
+            raise UserError(f"{sweep.source}: {'grid ' + shown + ': ' if shown else ''}{exc}") from None
+
+
 def trial_name(trial: Any) -> str:
     """A trial's name and folder: its Tune id (``results.csv`` and ``ended.json`` name trials by it)."""
     return trial.trial_id
@@ -362,8 +394,7 @@ def run_trial(params: dict, sweep: Sweep, target: Any) -> None:
     for leg in range(done + 1, sweep.reports + 1):
         config = sweep.config(params, leg)
         if phases is None:
-            phases = (phases_for_world(target, config) if sweep.world is not None
-                      else phases_for_curriculum(target, config))
+            phases = build_phases(sweep, target, config)
         result = train(config, phases, out_dir=out, resume=(out / "last.pt").is_file())
         reason = result.stop_reason or ""
         finished = leg == sweep.reports or not reason.startswith(sweep.budget[0])
@@ -440,17 +471,16 @@ def ended_callback(path: Path) -> Any:
 
 
 def _error_line(error: BaseException) -> str:
-    """The user's message of a trial's error (a UserError inside Ray's wrappers), else its last line."""
-    seen = error
-    for _ in range(10):
-        if isinstance(seen, UserError):
-            return str(seen).splitlines()[0] if str(seen) else type(seen).__name__
-        nxt = getattr(seen, "cause", None) or seen.__cause__ or seen.__context__
-        if nxt is None or nxt is seen:
-            break
-        seen = nxt
-    lines = [s for s in str(error).strip().splitlines() if s.strip()]
-    return lines[-1].strip() if lines else type(error).__name__
+    """The message of a trial's error: the project's own (a UserError inside Ray's wrappers), else its last line."""
+    seen, chain = error, []
+    while seen is not None and seen not in chain and len(chain) < 10:
+        chain.append(seen)
+        seen = getattr(seen, "cause", None) or seen.__cause__ or seen.__context__
+    own = [e for e in chain if isinstance(e, UserError) and type(e).__module__.startswith("apf_physics")]
+    if own:
+        return str(own[-1]).splitlines()[0] if str(own[-1]) else type(own[-1]).__name__
+    lines = [s.strip() for s in str(chain[-1]).strip().splitlines() if s.strip()]
+    return lines[-1] if lines else type(chain[-1]).__name__
 
 
 def run_sweep(sweep: Sweep, out: str | Path, resume: bool = False, address: Optional[str] = None,
@@ -489,6 +519,7 @@ def run_sweep(sweep: Sweep, out: str | Path, resume: bool = False, address: Opti
             raise UserError(f"{out}: was started from another recipe (it differs in {', '.join(differ)}); "
                             f"resume it with the recipe it was started from")
     target = sweep.target()
+    check_phases(sweep, target)
     with connect(address):
         from ray.tune.schedulers import ASHAScheduler, FIFOScheduler
         from ray.tune.search.basic_variant import BasicVariantGenerator
