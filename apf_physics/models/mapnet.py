@@ -13,11 +13,12 @@ target is within reach. It has three parts, all learned:
    learned cost to go. The iterations run without gradients to the fixed point, then a few
    more with them (the gradient of a fixed point, truncated: enough for a cost map that is a
    local function of the features).
-3. **Head.** Each candidate move ``a`` of the robot at ``p`` is scored by a small MLP shared by
+3. **Head.** Each candidate move ``a`` of the robot at ``p`` is scored, with weights shared by
    all moves, from what the robot knows: the change of ``V`` (sampled bilinearly over the
-   free nodes) from ``p`` to ``p + a``, the move's length, the clearance left along the move
-   (the same local check as the shield, moving obstacles included), and the change of the
-   potential ``U``. The scores are the action values.
+   free nodes) from ``p`` to ``p + a`` (with a positive weight, so more value never scores
+   less), the move's length, the change of the potential ``U``, whether it stays, and a
+   small MLP of the clearance left along the move (the same local check as the shield,
+   moving obstacles included). The scores are the action values.
 
 Nothing here searches the world's graph with A* or knows the optimal path: A* is the teacher
 in training (:mod:`apf_physics.rl.imitation`), never consulted when the network acts. One
@@ -70,7 +71,11 @@ class MapNetwork(nn.Module):
         self.negative_slope = float(negative_slope)
         self.cost_in = nn.Conv2d(MAP_FEATURES, channels, kernel_size=3, padding=1)
         self.cost_out = nn.Conv2d(channels, 1, kernel_size=1)
-        sizes = [MOVE_FEATURES, *self.arch["hidden"]]
+        # the head: linear in ΔV (with a positive weight: a move that gains more value never
+        # scores less, all else equal), the length, ΔU and staying; a small MLP of the room
+        self.value_weight = nn.Parameter(torch.tensor(math.log(math.e - 1.0)))
+        self.linear = nn.Linear(MOVE_FEATURES - 2, 1)     # length, ΔU, stay
+        sizes = [1, *self.arch["hidden"]]
         self.hidden = nn.ModuleList(nn.Linear(a, b) for a, b in zip(sizes[:-1], sizes[1:]))
         self.head = nn.Linear(sizes[-1], 1)
         with torch.no_grad():   # start from "every free place costs about its length"
@@ -113,11 +118,13 @@ class MapNetwork(nn.Module):
 
     # -- the head -------------------------------------------------------------------------------
     def scores(self, move_features: torch.Tensor) -> torch.Tensor:
-        """(N, M) action values from (N, M, MOVE_FEATURES) per-move features."""
-        x = move_features
+        """(N, M) action values from (N, M, MOVE_FEATURES) per-move features (:func:`move_features`)."""
+        dv, room = move_features[..., 0], move_features[..., 2:3]
+        x = room
         for layer in self.hidden:
             x = F.leaky_relu(layer(x), self.negative_slope)
-        return self.head(x)[..., 0]
+        rest = move_features[..., [1, 3, 4]]
+        return F.softplus(self.value_weight) * dv + self.linear(rest)[..., 0] + self.head(x)[..., 0]
 
 
 def _shift(x: torch.Tensor, dr: int, dc: int, fill: float) -> torch.Tensor:

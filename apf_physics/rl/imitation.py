@@ -56,7 +56,7 @@ def map_network(config: TrainConfig) -> MapNetwork:
 
 @dataclasses.dataclass
 class Teacher:
-    """A world's demonstrations: its map view and A*'s cost to go over its search grid."""
+    """A world's demonstrations: its map view and the cost to go of A*'s search over the same grid."""
 
     world: World
     view: MapView
@@ -66,7 +66,9 @@ class Teacher:
 
     @classmethod
     def of(cls, world: World, resolution: int) -> "Teacher":
-        search = SearchGrid.of(world)
+        # A* on the network's own grid (its nodes, its clearance margin): the moves it is shown
+        # are ones its values can express
+        search = SearchGrid.of(world, resolution, SAFETY)
         cost = search.cost_to_go.reshape(search.grid.shape)
         finite = np.isfinite(cost)
         return cls(world, MapView.of(world, resolution), search,
@@ -80,6 +82,11 @@ class Teacher:
         value, found = sample_values(self.cost, self.reachable, self.search.grid.origin, self.search.grid.resolution,
                                      ends)
         value, found = value.numpy().reshape(n, m).astype(float), found.numpy().reshape(n, m)
+        # a move that ends at a target beats every other; staying is never a way there
+        ends = ends.numpy().reshape(n, m, 2).astype(float)
+        near = np.min(np.hypot(ends[..., None, 0] - self.world.targets[:, 0], ends[..., None, 1] - self.world.targets[:, 1]),
+                      axis=-1)
+        value = np.where(near <= self.world.goal_tolerance, 1.0, value) - 0.25 * (np.hypot(*moves.T) == 0)[None]
         usable = found & (room >= 0)
         logits = np.where(usable, value / temperature, -np.inf)
         ok = usable.any(axis=1)
