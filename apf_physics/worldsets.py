@@ -20,6 +20,7 @@ from apf_physics.errors import UserError
 from apf_physics.generate import generate_world
 from apf_physics.planners.gradient import GradientPlanner
 from apf_physics.render.output import check_writable, write_text
+from apf_physics.render.video import progress_bar
 from apf_physics.rollout import rollout
 from apf_physics.search import shortest_path_length
 from apf_physics.world import World
@@ -91,7 +92,8 @@ def previous_worlds(out: Path, force: bool) -> list[Path]:
 
 
 def generate_set(family: str | list[str], count: int, seed: int, out: str | Path, size: float = 50,
-                 field: str = "thesis-general", n_starts: int = 4, label: bool = True, force: bool = False) -> dict:
+                 field: str = "thesis-general", n_starts: int = 4, label: bool = True, force: bool = False,
+                 progress: bool = False) -> dict:
     """Write ``count`` worlds (``<family>_<k>.yaml``) and ``manifest.json`` into ``out``.
 
     ``out`` must be empty or new; with ``force`` the worlds of an earlier set there are
@@ -110,6 +112,7 @@ def generate_set(family: str | list[str], count: int, seed: int, out: str | Path
         label: Roll out gradient descent from every start and record the outcome (the
             manifest's ``gradient_trapped``); without it only the A* lengths are recorded.
         force: Replace an earlier set in ``out``.
+        progress: Show a progress bar on stderr (when it is a terminal).
 
     Returns:
         The manifest: ``{"seed", "family", "size", "field", "n_starts", "worlds": [{"file",
@@ -129,9 +132,10 @@ def generate_set(family: str | list[str], count: int, seed: int, out: str | Path
     rng = np.random.default_rng(seed)
     width = len(str(count - 1))
     records, texts = [], {}
+    bar = progress_bar(count, "generate", "world", progress)
     for k in range(count):
         fam = families[k % len(families)]
-        name = f"{fam}_{k:0{width}d}"
+        name = f"{fam}_{k:0{width}d}" if size == 50 else f"{fam}{size:g}_{k:0{width}d}"   # sets of two sizes can mix
         world = generate_world(fam, rng, size=size, field=field, n_starts=n_starts, name=name)
         texts[f"{name}.yaml"] = f"{GENERATED}{fam}, seed {seed}, world {k} of {count}.\n" + dump_world_yaml(world)
         if label:
@@ -140,6 +144,8 @@ def generate_set(family: str | list[str], count: int, seed: int, out: str | Path
             starts = [{"start": [float(v) for v in s], "astar_length": round(shortest_path_length(world, s), 3)}
                       for s in world.starts]
         records.append({"file": f"{name}.yaml", "family": fam, "starts": starts})
+        bar.update(1)
+    bar.close()
     all_starts = [s for r in records for s in r["starts"]]
     summary = {"worlds": len(records), "starts": len(all_starts)}
     if label:

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -64,6 +65,11 @@ def load_labelled(paths: list[str]):
             labels[world.name] = [(s["gradient_trapped"], s["astar_length"], lattice_reachable(world, s["start"]))
                                   for s in label_starts(world)]
     return worlds, labels
+
+
+def family_of(world_name: str) -> str:
+    """``rooms_03`` → ``rooms``, ``maze100_07`` → ``maze100`` (generated names)."""
+    return re.sub(r"_\d+$", "", world_name)
 
 
 def summarise(episodes, labels) -> dict:
@@ -107,6 +113,9 @@ def main(argv=None) -> int:
                         help="a DQN model to evaluate as planner dqn:NAME (default: the shipped model)")
     parser.add_argument("--max-steps", type=int, default=None, help="as apf-physics eval (default 4 x (w + h))")
     parser.add_argument("--per-world", action="store_true", help="also print successes per world")
+    parser.add_argument("--per-family", action="store_true",
+                        help="also print the figures per family (a world's name without its number; "
+                             "generated 100x100 worlds are their own family, e.g. rooms100)")
     parser.add_argument("--json", help="write the figures as JSON")
     args = parser.parse_args(argv)
 
@@ -138,6 +147,17 @@ def main(argv=None) -> int:
               f"{s['trap_successes']:>6}/{s['trap_starts']:<4}{s['trap_success_rate']:>7.1%} "
               f"{s['collisions']:>10} {s['length_ratio_vs_astar']:>10.3f} {s['spl']:>6.3f}"
               f" {s['lattice_successes']:>14}/{s['lattice_starts']:<4}")
+        if args.per_family:
+            families: dict[str, list] = {}
+            for e in ev.episodes:
+                families.setdefault(family_of(e.world), []).append(e)
+            s["per_family"] = {}
+            for fam, episodes in families.items():
+                f = summarise(episodes, labels)
+                s["per_family"][fam] = f
+                print(f"  {fam:<24} {f['successes']:>4}/{f['starts']:<4}{f['success_rate']:>5.1%} "
+                      f"{f['trap_successes']:>6}/{f['trap_starts']:<4}{f['trap_success_rate']:>7.1%} "
+                      f"{f['collisions']:>10} {f['length_ratio_vs_astar']:>10.3f} {f['spl']:>6.3f}")
         if args.per_world:
             per = {}
             for e in ev.episodes:

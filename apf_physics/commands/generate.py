@@ -30,6 +30,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--starts", type=int, default=4, help="starts per world (default 4)")
     p.add_argument("--no-label", action="store_true",
                    help="skip the gradient-descent rollouts (the manifest then has only A* lengths)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
 
@@ -48,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--size: {problem}")
     manifest = generate_set(families if len(families) > 1 else families[0], args.count, args.seed, args.out,
                             size=args.size, field=args.field, n_starts=args.starts, label=not args.no_label,
-                            force=args.force)
+                            force=args.force, progress=not args.no_progress)
     summary = manifest["summary"]
     line = f"wrote {summary['worlds']} worlds, {summary['starts']} starts to {args.out}"
     if "gradient_trapped" in summary:

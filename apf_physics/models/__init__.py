@@ -25,6 +25,15 @@ SHIPPED = {"thesis-fixed": MODELS / "fixed20.pt", "thesis-general": MODELS / "ge
 """Shipped models, by the field preset they were trained for."""
 
 
+def resolve_model(model: str | Path) -> Path:
+    """A model file: a path, or the name of a shipped model (``general``, ``moving``: the
+    ``.pt`` files beside this module) when no such path exists."""
+    path = Path(model)
+    if not path.exists() and path.parent == Path(".") and (MODELS / f"{path.stem}.pt").is_file():
+        return MODELS / f"{path.stem}.pt"
+    return path
+
+
 def shipped_model_for(world: World) -> Path:
     """The shipped model whose training field equals the world's field.
 
@@ -38,5 +47,5 @@ def shipped_model_for(world: World) -> Path:
                      f"train one with `apf-physics train` and pass --model")
 
 
-__all__ = ["DQNPolicy", "MapNetwork", "MapPolicy", "load_policy", "FORMAT_VERSION", "MODELS", "QNetwork", "SHIPPED", "SavedModel", "load_model", "model_meta",
+__all__ = ["resolve_model", "DQNPolicy", "MapNetwork", "MapPolicy", "load_policy", "FORMAT_VERSION", "MODELS", "QNetwork", "SHIPPED", "SavedModel", "load_model", "model_meta",
            "save_model", "shipped_model_for"]

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from apf_physics.actions import ACTIONS, SAFETY, move_clearance
-from apf_physics.models import DQNPolicy, MapPolicy, load_policy, shipped_model_for
+from apf_physics.models import DQNPolicy, MapPolicy, load_policy, resolve_model, shipped_model_for
 from apf_physics.models.policy import potential_change
 from apf_physics.observation import Observer
 from apf_physics.planners.base import Planner
@@ -24,7 +24,8 @@ class DQNPlanner(Planner):
     """Each control step, the move with the highest Q-value for the robot's window.
 
     Args:
-        model: A model file; by default the shipped model trained for the world's field.
+        model: A model file, or a shipped model's name (``general``, ``moving``, ...); by
+            default the shipped model trained for the world's field.
         shield: Choose only among the moves that keep the robot :data:`~apf_physics.actions.SAFETY`
             clear of every obstacle and the map's edge all along the move
             (:func:`~apf_physics.actions.move_clearance`); when no move is, the one with the
@@ -46,7 +47,7 @@ class DQNPlanner(Planner):
 
     def __init__(self, model: str | Path | None = None, shield: bool = True,
                  policy: DQNPolicy | MapPolicy | None = None):
-        self.model_path = Path(model) if model is not None else None
+        self.model_path = resolve_model(model) if model is not None else None
         self.shield = bool(shield)
         self.name = "dqn" if self.shield else "dqn-unshielded"
         self._policy = policy

@@ -350,11 +350,11 @@ PRESETS["general-memory"] = {**PRESETS["general"], "obs_transform": "relative-lo
                              "world_start_fraction": 0.5}
 PRESETS["general-revisit"] = {**PRESETS["general-memory"], "reward": "general"}
 PRESETS["moving"] = {**PRESETS["general-revisit"], "obs_transform": "relative-log-previous", "previous": True,
-                     "families": FAMILIES + MOVING_FAMILIES * len(FAMILIES)}
+                     "families": FAMILIES + MOVING_FAMILIES * len(FAMILIES), "time_limit": 2400.0}
 PRESETS["map"] = {
     "method": "imitation", "reward": "thesis-general", "families": FAMILIES + STRUCTURE_FAMILIES,
     "map_sizes": (50.0, 50.0, 100.0), "pool_size": 48, "refresh_every": 600, "learning_rate": 3e-3,
-    "total_episodes": None, "total_steps": 3_000, "time_limit": 2_400.0, "eval_every": 500, "eval_shield": True,
+    "total_episodes": None, "total_steps": 2_000, "time_limit": 1_800.0, "eval_every": 250, "eval_shield": True,
     "select": ("-collisions", "success", "spl"), "validation_worlds": 24, "validation_starts": 2, "validation_seed": 1,
     "log_every": 50, "checkpoint_every": 250, "hidden": (32, 32), "negative_slope": 0.01,
 }
