@@ -288,3 +288,35 @@ def test_a_crowd_pressed_onto_a_thin_wall_never_pushes_through(seed, thickness):
     for _ in range(40):
         physics.step(np.column_stack([rng.uniform(-0.3, 0.3, n), np.full(n, -1.4)]))
         assert np.all(physics.positions[:, 1] > 10 + thickness), "a robot pushed through the wall"
+
+
+def test_skipping_arbiter_reads_on_untouched_substeps_changes_nothing():
+    """The physics reads pymunk's arbiters only after substeps in which shapes touch (counted by
+    begin/separate callbacks); reading them after every substep gives the same contacts."""
+    from apf_physics import load_world
+    from apf_physics.actions import ACTIONS
+    from apf_physics.engine import Stepper
+
+    world = load_world("fixed20")
+
+    def run(always_read: bool):
+        rng = np.random.default_rng(0)
+        stepper = Stepper([world], 32, max_steps=40)
+        if always_read:
+            stepper.physics._touching = [1]
+        stepper.start(np.arange(32), world.random_free_positions(rng, 32)[:, None, :])
+        log = []
+        for _ in range(120):
+            report = stepper.step(ACTIONS[rng.integers(9, size=32)][:, None, :])
+            log.append((report.positions.copy(), stepper.outcome.copy(), report.contacts.any.copy()))
+            done = np.flatnonzero(stepper.outcome != 0)
+            if len(done):
+                stepper.start(done, world.random_free_positions(rng, len(done))[:, None, :])
+        return log
+
+    fast, slow = run(False), run(True)
+    assert sum(int(c.sum()) for _, _, c in slow) > 50          # contacts did happen
+    for (p, o, c), (q, u, d) in zip(fast, slow):
+        np.testing.assert_array_equal(p, q)
+        np.testing.assert_array_equal(o, u)
+        np.testing.assert_array_equal(c, d)
