@@ -147,7 +147,12 @@ def _sweep(v: torch.Tensor, edges: list, free: torch.Tensor, goal: torch.Tensor)
 
 def sample_values(v: torch.Tensor, free: torch.Tensor, origin: Sequence[float], resolution: int,
                   points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """V at ``points`` (K, 2), bilinear over the reached free nodes around each point.
+    """V at ``points`` (K, 2): the best of the reached free nodes around each point, less the
+    distance to it, ``max_n V(n) − |q − n|`` over the four corners of the point's cell.
+
+    Unlike a bilinear blend (which, next to blocked nodes, weights the free ones anew and can
+    make a short move look like a long gain), this continues V off the grid as a cost to go
+    does: from any point, heading for its best corner never loses more value than distance.
 
     Returns:
         (K,) values and (K,) bool: whether any of the four nodes around the point was usable
@@ -158,19 +163,17 @@ def sample_values(v: torch.Tensor, free: torch.Tensor, origin: Sequence[float], 
     c0, r0 = torch.floor(ij[:, 0]), torch.floor(ij[:, 1])
     fx, fy = ij[:, 0] - c0, ij[:, 1] - r0
     c0, r0 = c0.long(), r0.long()
-    total = torch.zeros(len(points), dtype=v.dtype)
-    weight = torch.zeros(len(points), dtype=v.dtype)
+    best = torch.full((len(points),), UNREACHED, dtype=v.dtype)
     usable = free & (v > UNREACHED / 2)
-    for dr, dc, w in ((0, 0, (1 - fx) * (1 - fy)), (0, 1, fx * (1 - fy)), (1, 0, (1 - fx) * fy), (1, 1, fx * fy)):
+    for dr, dc in ((0, 0), (0, 1), (1, 0), (1, 1)):
         r, c = r0 + dr, c0 + dc
         inside = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
         rc, cc = r.clamp(0, rows - 1), c.clamp(0, cols - 1)
         ok = inside & usable[rc, cc]
-        w = torch.where(ok, w, torch.zeros_like(w))
-        total = total + w * torch.where(ok, v[rc, cc], torch.zeros_like(w))
-        weight = weight + w
-    found = weight > 1e-9
-    return torch.where(found, total / weight.clamp_min(1e-9), torch.full_like(total, UNREACHED)), found
+        distance = torch.hypot(fx - dc, fy - dr).to(v.dtype) / resolution
+        best = torch.maximum(best, torch.where(ok, v[rc, cc] - distance, torch.full_like(best, UNREACHED)))
+    found = best > UNREACHED / 2
+    return best, found
 
 
 def move_features(v_here: torch.Tensor, v_there: torch.Tensor, found: torch.Tensor, lengths: torch.Tensor,
