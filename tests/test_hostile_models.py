@@ -54,7 +54,11 @@ def raw_file(tmp_path, meta_bytes: bytes, payload: bytes) -> str:
 
 
 def test_the_shipped_models_pass_every_check():
-    for path in SHIPPED.values():
+    from apf_physics.models import MODELS
+    shipped = sorted(MODELS.glob("*.pt"))
+    assert {p.name for p in shipped} >= {"fixed20.pt", "general.pt", "moving.pt", "map.pt"}
+    assert set(SHIPPED.values()) <= set(shipped)
+    for path in shipped:
         assert load_model(path).network is not None
 
 

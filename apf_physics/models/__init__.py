@@ -21,8 +21,10 @@ from apf_physics.models.policy import DQNPolicy, MapPolicy, load_policy
 from apf_physics.world import World
 
 MODELS = Path(__file__).resolve().parent
-SHIPPED = {"thesis-fixed": MODELS / "fixed20.pt", "thesis-general": MODELS / "general.pt"}
-"""Shipped models, by the field preset they were trained for."""
+SHIPPED = {"thesis-fixed": MODELS / "fixed20.pt", "thesis-general": MODELS / "map.pt"}
+"""The ``dqn`` planner's default model, by the world's field preset: the fixed world's Q-network
+for Table 3's field; the map network (which generalises to rooms, mazes and bigger maps) for
+Table 4's. The other shipped files (``general.pt``, ``moving.pt``) are chosen by name."""
 
 
 def resolve_model(model: str | Path) -> Path:
