@@ -91,7 +91,7 @@ def test_generate_refuses_a_folder_that_is_not_empty_and_force_leaves_no_stale_w
     assert "is not empty" in err and "--force" in err
     assert len(list(out.glob("*.yaml"))) == 5
     assert main(generate(out, "--count", "2", "--force")) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["manifest.json", "point_0.yaml", "point_1.yaml"]
+    assert sorted(p.name for p in out.iterdir()) == ["manifest.json", "point20_0.yaml", "point20_1.yaml"]
 
 
 def test_generate_force_never_removes_a_world_it_did_not_write(tmp_path, capsys):
