@@ -270,6 +270,8 @@ class Atlas:
         self.resolution = int(resolution)
         self.rasters: list[Raster] = []
         self._image: np.ndarray | None = None
+        self._offsets: np.ndarray | None = None   # the last offsets sampled with, and them scaled
+        self._scaled: tuple[np.ndarray, np.ndarray] = (np.zeros((1, 0), np.float32),) * 2
 
     def add(self, raster: Raster) -> int:
         """Add a raster (its grid must have this atlas's resolution) and return its index."""
@@ -302,7 +304,8 @@ class Atlas:
         Args:
             points: (N, 2) world points; point ``n`` is in raster ``ids[n]`` (or all in raster ``ids``).
             ids: (N,) raster indices, or one index for all.
-            offsets: (Q, 2) world offsets; when given, each point stands for the Q points
+            offsets: (Q, 2) world offsets (an array not changed afterwards: its scaled copy is kept);
+                when given, each point stands for the Q points
                 ``points[n] + offsets[q]`` (e.g. an observation window around a robot).
 
         Returns:
@@ -312,17 +315,23 @@ class Atlas:
 
         if self._image is None:
             self._build()
-        index = np.asarray(points, dtype=float).reshape(-1, 2) * self.resolution
-        index += self._shift[ids]
-        index = index.astype(np.float32)          # image coordinates: float32 is what remap takes
-        if offsets is None:
-            map_x, map_y = index[:, 0:1], index[:, 1:2]
-        else:  # x and y maps apart: broadcasting over a last axis of 2 is several times slower
-            scaled = (np.asarray(offsets, float) * self.resolution).astype(np.float32)
-            map_x = index[:, 0:1] + scaled[None, :, 0]
-            map_y = index[:, 1:2] + scaled[None, :, 1]
-        if not len(map_x):  # no points (e.g. a batch step where every slot is restarting): remap refuses empty maps
-            return np.zeros(len(map_x), np.float32) if offsets is None else np.zeros(map_x.shape, np.float32)
-        values = cv2.remap(self._image, np.ascontiguousarray(map_x), np.ascontiguousarray(map_y), cv2.INTER_LINEAR,
-                           borderMode=cv2.BORDER_REPLICATE)
-        return values[:, 0] if offsets is None else values
+        # image coordinates, in float32 (what remap takes)
+        index = (np.asarray(points, dtype=float).reshape(-1, 2) * self.resolution + self._shift[ids]).astype(np.float32)
+        if not len(index):  # no points (e.g. a batch step where every slot is restarting): remap refuses empty maps
+            return np.zeros(0 if offsets is None else (0, len(offsets)), np.float32)
+        if offsets is None:   # one two-channel map: (N, 1, 2)
+            return cv2.remap(self._image, index.reshape(-1, 1, 2), None, cv2.INTER_LINEAR,
+                             borderMode=cv2.BORDER_REPLICATE)[:, 0]
+        # x and y maps apart: broadcasting over a last axis of 2 is several times slower
+        scaled = self._scaled_offsets(offsets)
+        map_x = index[:, 0:1] + scaled[0]
+        map_y = index[:, 1:2] + scaled[1]
+        values = cv2.remap(self._image, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        return values
+
+    def _scaled_offsets(self, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``offsets`` in image units as float32 rows of x and of y (the last array's kept)."""
+        if self._offsets is not offsets:
+            scaled = (np.asarray(offsets, float).reshape(-1, 2) * self.resolution).astype(np.float32)
+            self._offsets, self._scaled = offsets, (scaled[None, :, 0].copy(), scaled[None, :, 1].copy())
+        return self._scaled

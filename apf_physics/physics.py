@@ -53,6 +53,7 @@ TILE_GAP = 4.0  # free space between neighbouring tiles, beyond their walls [uni
 CONTACT_MARGIN = 0.01  # a move that keeps this much more than touching distance needs no physics [units]
 CLEARANCE_RESOLUTION = 8  # nodes per unit of the clearance rasters that decide who needs physics
 CLEARANCE_CAP = 4.0  # clearance beyond this is not measured (it exceeds any move plus a radius)
+_FEW_PAIRS = 64  # up to this many touching pairs, contacts are read with dicts rather than arrays
 _FEW = 4  # up to this many proxies, per-body attribute access beats pymunk.batch's fixed cost
 _PROXY_GROUP = 1  # collision group of proxies of single-robot slots: they never touch each other
 _THIRDS = np.array([0.0, 0.5, 1.0])[None, :, None]  # where a move's clearance is sampled
@@ -191,6 +192,7 @@ class Physics:
         self._next_tile_x = 0.0
         self._static_ids = np.zeros(0, np.uintp)        # sorted body ids of obstacles, walls, moving obstacles
         self._static_label = np.zeros((0, 2), np.intp)  # (kind, index) of each, in that order
+        self._label_of_id: dict[int, tuple[int, int]] = {}   # the same as a dict (few contacts are read by it)
         # Moving obstacles: kinematic bodies, each built for one (world, obstacle), lent per step.
         self._mover_body: list[pymunk.Body] = []
         self._mover_key: list[tuple[int, int]] = []
@@ -204,6 +206,7 @@ class Physics:
         self.worlds: list[World] = [None] * self.num_slots  # type: ignore[list-item]
         self._slot_tile = np.zeros(self.num_slots, np.intp)
         self._slot_radius = np.zeros(self.num_slots)
+        self._slot_moving = np.zeros(self.num_slots, bool)
         # per robot, for needs_physics(): its world's clearance raster (three samples each) and
         # the least clearance that needs no physics
         self._sample_atlas = np.zeros(3 * self.num_robots, np.intp)
@@ -218,6 +221,7 @@ class Physics:
         self._proxy_radius = np.zeros(0)
         self._proxy_solo = np.zeros(0, bool)          # in the collision group of proxies that never meet
         self._proxy_ids = np.zeros(0, np.uintp)      # their body ids
+        self._proxy_of_id: dict[int, int] = {}        # the same as a dict
         self._proxy_target = np.zeros((0, 2))         # where a proxy is to be put before pymunk next steps
         self._proxy_moved = np.zeros(0, bool)         # ... for those that must be put there
         self._robot_proxy = np.full(self.num_robots, -1, np.intp)
@@ -247,10 +251,6 @@ class Physics:
             return -1 - int(self.crowd[slot])    # the crowd's own tile
         return slot + 1 if self.robots_per_slot > 1 or world.moving else 0
 
-    def _solo(self, slot: int) -> bool:
-        """Whether the slot's robots are in a tile they share with other slots' robots they must not meet."""
-        return self.robots_per_slot == 1 and not self._shared[slot] and not self.worlds[slot].moving
-
     def _assign(self, slot: int, world: World) -> None:
         # a tile is the world's geometry: worlds that differ only in targets (several formations) share it
         key = (id(world.obstacles), self._lane(slot, world))
@@ -260,12 +260,15 @@ class Physics:
             self._atlas_ids[id(world)] = self._atlas.add(world.clearance_raster(CLEARANCE_RESOLUTION, CLEARANCE_CAP))
         self.worlds[slot] = world
         self._any_moving = getattr(self, "_any_moving", False) or bool(world.moving)
+        self._moving_slots = None
+        self._slot_moving[slot] = bool(world.moving)
         self._slot_tile[slot] = self._tiles[key]
         self._slot_radius[slot] = world.robot_radius
         m = self.robots_per_slot
         self._sample_atlas[3 * m * slot:3 * m * (slot + 1)] = self._atlas_ids[id(world)]
         # the raster is within 0.71 / resolution of the clearance (see World.clearance_raster)
         self._free_above[m * slot:m * (slot + 1)] = world.robot_radius + CONTACT_MARGIN + 0.71 / CLEARANCE_RESOLUTION
+        self._free_twice = 2 * self._free_above
 
     def _build_tile(self, world: World) -> int:
         """Add ``world``'s obstacles and walls as static shapes at a fresh offset; returns the tile index."""
@@ -305,6 +308,7 @@ class Physics:
         labels = np.concatenate([self._static_label, np.array([(k, i) for _, k, i in bodies], np.intp).reshape(-1, 2)])
         order = np.argsort(ids)
         self._static_ids, self._static_label = ids[order], labels[order]
+        self._label_of_id.update((b.id, (k, i)) for b, k, i in bodies)
 
     def _new_mover(self, world: World, index: int) -> int:
         """A kinematic body shaped like moving obstacle ``index`` of ``world``, parked."""
@@ -349,6 +353,7 @@ class Physics:
         self._proxy_radius = np.append(self._proxy_radius, radius)
         self._proxy_solo = np.append(self._proxy_solo, solo)
         self._proxy_ids = np.append(self._proxy_ids, np.uintp(body.id))
+        self._proxy_of_id[body.id] = k
         self._proxy_target = np.vstack([self._proxy_target, self._parking(k)])
         self._proxy_moved = np.append(self._proxy_moved, False)
         self._rows_dirty = True
@@ -377,7 +382,7 @@ class Physics:
             return
         slots = robots // self.robots_per_slot
         radius = self._slot_radius[slots]
-        solo = np.array([self._solo(s) for s in slots.tolist()], bool)
+        solo = ~self._shared[slots] & ~self._slot_moving[slots] & (self.robots_per_slot == 1)
         for r, alone in {(float(a), bool(b)) for a, b in zip(radius, solo)}:
             mine = robots[(radius == r) & (solo == alone)]
             free = np.flatnonzero((self._proxy_robot < 0) & ~self._proxy_dirty & (self._proxy_radius == r)
@@ -430,7 +435,7 @@ class Physics:
         clearance = self._atlas.sample(self._positions[robots], self._sample_atlas[3 * robots])
         slots = robots // m
         doubtful = (clearance - 0.71 / CLEARANCE_RESOLUTION < self._slot_radius[slots] + 1e-6)
-        doubtful |= np.array([bool(self.worlds[s].moving) for s in slots.tolist()], bool) if self._any_moving else False
+        doubtful |= self._slot_moving[slots]
         crowds = set(self.crowd[slots[doubtful]].tolist())
         if m > 1 or self._crowd_robots:
             crowds |= set(self.crowd[slots].tolist())   # robots of one crowd may overlap one another
@@ -503,9 +508,8 @@ class Physics:
         # sampled at both ends of a piece of length L/2 is at least (c_a + c_b − L/2) / 2 on it,
         # so on the whole move at least (c_mid + min(c_start, c_end) − L/2) / 2.
         samples = self._positions[:, None, :] + _THIRDS * moves[:, None, :]
-        c = self._atlas.sample(samples.reshape(-1, 2), self._sample_atlas).reshape(-1, 3)
-        half = 0.5 * np.hypot(moves[:, 0], moves[:, 1])
-        needs = c[:, 1] + np.minimum(c[:, 0], c[:, 2]) - half < 2 * self._free_above
+        c = self._atlas.sample(samples, self._sample_atlas).reshape(-1, 3)
+        needs = c[:, 1] + np.minimum(c[:, 0], c[:, 2]) - 0.5 * np.hypot(moves[:, 0], moves[:, 1]) < self._free_twice
         m = self.robots_per_slot
         if m > 1:
             p = self._positions.reshape(-1, m, 2)
@@ -520,6 +524,8 @@ class Physics:
             close = close < 2 * self._slot_radius[group // m][:, None] + CONTACT_MARGIN
             np.fill_diagonal(close, False)
             needs[group] |= close.any(axis=1)
+        if not self._any_moving:
+            return needs
         self._movers_needed = []
         for slots, world, index, near in self._near_movers(moves):
             robots = (slots[:, None] * m + np.arange(m)).ravel()
@@ -534,9 +540,16 @@ class Physics:
     def _near_movers(self, moves: np.ndarray):
         """For each moving obstacle of each world in use: ``(slots, world, index, near (k, m))``,
         the robots of those slots whose swept disc this step comes near the obstacle's swept box."""
+        if not self._any_moving:
+            return
         m = self.robots_per_slot
-        for world in {id(w): w for w in self.worlds if w.moving}.values():
-            slots = np.flatnonzero([w is world for w in self.worlds])
+        if self._moving_slots is None:   # slots grouped by moving world, until a slot changes world
+            groups: dict[int, tuple[World, list[int]]] = {}
+            for s, w in enumerate(self.worlds):
+                if w.moving:
+                    groups.setdefault(id(w), (w, []))[1].append(s)
+            self._moving_slots = [(w, np.array(slots, np.intp)) for w, slots in groups.values()]
+        for world, slots in self._moving_slots:
             t = self._slot_time[slots]
             p = self._positions.reshape(-1, m, 2)[slots]
             q = p + moves.reshape(-1, m, 2)[slots]
@@ -620,6 +633,8 @@ class Physics:
     def _lend_movers(self, active: np.ndarray | None) -> None:
         """Put a kinematic copy of each moving obstacle that a robot needing physics comes near
         where its route has it at the slot's step, moving to where it will be at the next."""
+        if not self._mover_body and not self._movers_needed:
+            return
         self._mover_target[:, :2] = np.column_stack([4.0 * np.arange(len(self._mover_body)),
                                                      np.full(len(self._mover_body), -2000.0)])
         self._mover_target[:, 2:] = 0.0
@@ -644,7 +659,7 @@ class Physics:
         """Step pymunk with the proxies of ``robots`` at their commanded velocities (the others at rest).
 
         Returns:
-            (K, 2) body ids of the pairs that touched at some substep.
+            (K, 2) body ids of the pairs that touched at some substep (a pair once per substep).
         """
         if self._rows_dirty:
             self._index_rows()
@@ -694,27 +709,52 @@ class Physics:
             pymunk.batch.get_space_bodies(self.space, pymunk.batch.BodyFields.POSITION, buf)
             after = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 2)[self._row_of_proxy[proxies]]
         self._positions[robots] = after - offsets
-        return np.unique(np.vstack(touched), axis=0) if touched else np.zeros((0, 2), np.uintp)
+        return np.vstack(touched) if touched else np.zeros((0, 2), np.uintp)
 
     def _log(self, pairs: np.ndarray) -> ContactLog:
-        """The contact log of the touching body-id pairs."""
+        """The contact log of the touching body-id pairs (a pair may come several times)."""
+        table = self._contact_rows_few(pairs) if len(pairs) <= _FEW_PAIRS else self._contact_rows(pairs)
+        flags = np.zeros((len(KINDS), self.num_robots), bool)
+        flags[table[:, 1], table[:, 0]] = True
+        return ContactLog(flags[_OBSTACLE], flags[_WALL], flags[_ROBOT], flags[_MOVING], table)
+
+    def _contact_rows_few(self, pairs: np.ndarray) -> np.ndarray:
+        """:meth:`_contact_rows` for a few pairs: dict look-ups beat the arrays' fixed costs."""
+        rows = set()
+        proxy_of, label_of, robot_of = self._proxy_of_id, self._label_of_id, self._proxy_robot
+        for ids in pairs.tolist():
+            for a, b in ((ids[0], ids[1]), (ids[1], ids[0])):   # an arbiter's bodies come in either order
+                k = proxy_of.get(a)
+                if k is None or robot_of[k] < 0:
+                    continue
+                j = proxy_of.get(b)
+                if j is None:
+                    rows.add((int(robot_of[k]), *label_of[b]))
+                elif robot_of[j] >= 0:
+                    rows.add((int(robot_of[k]), _ROBOT, int(robot_of[j])))
+        return np.array(sorted(rows), np.intp).reshape(-1, 3)
+
+    def _contact_rows(self, pairs: np.ndarray) -> np.ndarray:
+        """(K, 3) sorted distinct rows ``(robot, kind, other)`` of the touching body-id pairs."""
         proxy_index = self._proxy_order[np.clip(np.searchsorted(self._proxy_ids[self._proxy_order], pairs), 0,
                                                 len(self._proxy_ids) - 1)]
         is_proxy = self._proxy_ids[proxy_index] == pairs
         robot_of = np.where(is_proxy, self._proxy_robot[proxy_index], -1)
         static = np.clip(np.searchsorted(self._static_ids, pairs), 0, max(len(self._static_ids) - 1, 0))
-        rows = []
+        robots, kinds, others = [], [], []
         for a, b in ((0, 1), (1, 0)):   # an arbiter's bodies come in either order
             robot = robot_of[:, a]
             with_static = (robot >= 0) & ~is_proxy[:, b]
             label = self._static_label[static[with_static, b]]
-            rows.append(np.column_stack([robot[with_static], label]))
             with_robot = (robot >= 0) & (robot_of[:, b] >= 0)
-            rows.append(np.column_stack([robot[with_robot], np.full(with_robot.sum(), _ROBOT), robot_of[with_robot, b]]))
-        table = np.unique(np.vstack(rows).astype(np.intp), axis=0)
-        flags = np.zeros((len(KINDS), self.num_robots), bool)
-        flags[table[:, 1], table[:, 0]] = True
-        return ContactLog(flags[_OBSTACLE], flags[_WALL], flags[_ROBOT], flags[_MOVING], table)
+            robots += [robot[with_static], robot[with_robot]]
+            kinds += [label[:, 0], np.full(int(with_robot.sum()), _ROBOT)]
+            others += [label[:, 1], robot_of[with_robot, b]]
+        robot, kind, other = (np.concatenate(c).astype(np.int64) for c in (robots, kinds, others))
+        # rows (robot, kind, other) as one sortable key: one 1-D unique instead of a row-wise one
+        span = int(other.max(initial=0)) + 1
+        key = np.unique((robot * len(KINDS) + kind) * span + other)
+        return np.column_stack([key // (len(KINDS) * span), key // span % len(KINDS), key % span]).astype(np.intp)
 
 
 def _closest_approach(p: np.ndarray, dp: np.ndarray) -> np.ndarray:

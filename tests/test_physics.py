@@ -320,3 +320,29 @@ def test_skipping_arbiter_reads_on_untouched_substeps_changes_nothing():
         np.testing.assert_array_equal(p, q)
         np.testing.assert_array_equal(o, u)
         np.testing.assert_array_equal(c, d)
+
+
+@pytest.mark.parametrize("robots_per_slot", [1, 3])
+def test_few_contacts_read_by_dicts_match_the_array_reading(worlds_dir, robots_per_slot):
+    """Contact rows are read with dicts for a few touching pairs and with arrays for many; both
+    readings of every step's pairs (obstacles, walls and robots touched) are the same."""
+    world = load_world(worlds_dir / "fixed20.yaml")
+    rng = np.random.default_rng(5)
+    physics = Physics([world] * 16, robots_per_slot)
+    physics.place(np.arange(16 * robots_per_slot), world.random_free_positions(rng, 16 * robots_per_slot, margin=0.6))
+    simulate, seen = physics._simulate, []
+
+    def recording(robots, v):
+        pairs = simulate(robots, v)
+        seen.append(pairs)
+        return pairs
+
+    physics._simulate = recording
+    for _ in range(60):
+        physics.step(rng.uniform(-1.4, 1.4, (physics.num_robots, 2)))
+    kinds = set()
+    for pairs in seen:
+        few, many = physics._contact_rows_few(pairs), physics._contact_rows(pairs)
+        np.testing.assert_array_equal(few, many)
+        kinds |= set(few[:, 1].tolist())
+    assert {0, 1} <= kinds and (robots_per_slot == 1 or 2 in kinds)   # obstacles, walls (and robots) were touched
