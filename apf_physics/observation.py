@@ -212,10 +212,13 @@ class Observer:
         if not self._moving and not crowd:
             return values
         worlds = self.world_of[robots]
-        when = np.broadcast_to(np.asarray(t, float), (len(robots),))
-        for w in np.unique(worlds).tolist():
+        when = np.asarray(t, float)
+        if when.ndim == 0:
+            when = np.full(len(robots), float(when))
+        groups = [(0, np.arange(len(robots)))] if len(self.worlds) == 1 else \
+            [(w, np.flatnonzero(worlds == w)) for w in np.unique(worlds).tolist()]
+        for w, mine in groups:
             world = self.worlds[w]
-            mine = np.flatnonzero(worlds == w)
             if world.moving:
                 shift = world.moving_offsets(when[mine])                                # (m, M, 2)
                 lo, hi = self._moving_boxes(world)
@@ -248,14 +251,14 @@ class Observer:
             first = np.zeros(local.shape, np.intp)
             inside_box = np.all((local >= lo - field.p0) & (local <= hi + field.p0), axis=-1)
             last = np.where(inside_box[..., None], first, -1)
-        robot, shape = np.nonzero(np.all(first <= last, axis=-1))
+        robot, shape = np.nonzero((first[..., 0] <= last[..., 0]) & (first[..., 1] <= last[..., 1]))
         if not len(robot):
             return
         first, last, base = first[robot, shape], last[robot, shape], local[robot, shape]
         span = (last - first).max(axis=0) + 1
-        a, b = np.meshgrid(np.arange(span[0]), np.arange(span[1]), indexing="ij")
-        dx = first[:, None, 0] + a.ravel()[None]                                        # (pairs, S)
-        dy = first[:, None, 1] + b.ravel()[None]
+        a, b = np.indices((int(span[0]), int(span[1]))).reshape(2, 1, -1)
+        dx = first[:, None, 0] + a                                                      # (pairs, S)
+        dy = first[:, None, 1] + b
         valid = (dx <= last[:, None, 0]) & (dy <= last[:, None, 1])
         px, py = base[:, None, 0] + dx, base[:, None, 1] + dy                           # in the shape's frame
         # discs all at once; polygons one by one
@@ -268,20 +271,16 @@ class Observer:
         d = d[valid]
         term = apf.repulsive_term(d, field.krep, field.p0, field.u_max)
         flat = (h - dy) * k + (dx + h) if lattice else np.zeros_like(dx)                # window point [h - dy, h + dx]
-        # the robots concerned (np.nonzero lists them in order): their rank among them
-        first_of = np.empty(len(robot), bool)
-        first_of[0], first_of[1:] = True, robot[1:] != robot[:-1]
-        near, which = robot[first_of], np.cumsum(first_of) - 1
-        cell = (which[:, None] * values.shape[1] + flat)[valid]
-        size = len(near) * values.shape[1]
-        added = np.bincount(cell, weights=term, minlength=size).reshape(len(near), -1)
-        rows = mine[near]
+        q = values.shape[1]
+        cell = (mine[robot][:, None] * q + flat)[valid]        # index into values as one (n·Q,) row
+        cells, at = np.unique(cell, return_inverse=True)
+        row, col = np.divmod(cells, q)
         # u_wall stays the highest reading: points inside read it, none above it
-        sums = np.minimum(values[rows] + added, world.u_wall)
+        values[row, col] = np.minimum(values[row, col] + np.bincount(at, weights=term), world.u_wall)
         inside = d <= 0
         if inside.any():
-            sums.reshape(-1)[cell[inside]] = world.u_wall
-        values[rows] = sums
+            row, col = np.divmod(cell[inside], q)
+            values[row, col] = world.u_wall
 
     def _moving_discs(self, world: World) -> tuple[np.ndarray, np.ndarray]:
         """Centres ``(M, 2)`` and radii ``(M,)`` of the moving discs where they are written (NaN for polygons)."""

@@ -80,6 +80,19 @@ def test_crossing_family_and_a_crowd_of_learned_leaders():
         assert sum(e.success for e in episodes) >= len(episodes) - 1
 
 
+def test_formation_leaders_default_to_the_window_network_on_table_4s_field():
+    from apf_physics.models import SHIPPED, SHIPPED_FORMATION, shipped_model_for
+
+    world = load_world("four_formations")
+    assert world.field.equals_preset("thesis-general")
+    assert shipped_model_for(world) == SHIPPED["thesis-general"]            # a robot alone: the map network
+    leader_world = world.formation_world(0)
+    assert shipped_model_for(leader_world) == SHIPPED_FORMATION["thesis-general"] != SHIPPED["thesis-general"]
+    planner = make_planner("dqn")
+    planner.reset(leader_world, leader_world.starts[:1])
+    assert planner.observer is not None    # the window network's observer (a map network has none)
+
+
 def test_followers_are_placed_clear_of_other_formations():
     world = three_formations()
     crowd = FormationCrowd(world)
