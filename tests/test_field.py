@@ -98,13 +98,29 @@ def test_gradient_matches_finite_differences(x, y):
     p = np.array([[x, y]])
     h = 1e-6
     u = WORLD.potential
-    # Leave out points where a finite difference straddles a kink (the cap, p0, a polygon's medial axis).
+    # Leave out points where a finite difference straddles a kink (the cap, p0, a polygon's medial
+    # axis, e.g. (12, 12), as far from both inner edges of the L): there the distance's second
+    # difference over ±1e-3 is of order 1e-3 rather than at most 1e-6 / distance.
+    probe = np.array([[1e-3, 0.0], [0.0, 1e-3]])
     for o in WORLD.obstacles:
         dd, _ = o.signed_distance(p)
         assume(abs(dd[0] - WORLD.field.p0) >= 1e-3 and dd[0] >= 0.35)
+        ahead, _ = o.signed_distance(p + probe)
+        behind, _ = o.signed_distance(p - probe)
+        assume(np.all(np.abs(ahead + behind - 2 * dd[0]) < 1e-5))
     numeric = np.array([(u(p + [[h, 0]]) - u(p - [[h, 0]]))[0], (u(p + [[0, h]]) - u(p - [[0, h]]))[0]]) / (2 * h)
     analytic = WORLD.gradient(p)[0]
     np.testing.assert_allclose(analytic, numeric, rtol=1e-4, atol=1e-3)
+
+
+def test_gradient_check_leaves_out_the_medial_axis_of_the_l():
+    """The point hypothesis once drew, (12, 12), is equidistant from two edges of the L: the check above skips it."""
+    p = np.array([[12.0, 12.0]])
+    d, _ = WORLD.obstacles[1].signed_distance(p)
+    probe = np.array([[1e-3, 0.0], [0.0, 1e-3]])
+    ahead, _ = WORLD.obstacles[1].signed_distance(p + probe)
+    behind, _ = WORLD.obstacles[1].signed_distance(p - probe)
+    assert d[0] == pytest.approx(1.0) and np.any(np.abs(ahead + behind - 2 * d[0]) >= 1e-5)
 
 
 def test_raster_equals_potential_at_nodes_and_interpolates():
