@@ -271,7 +271,7 @@ class Atlas:
         self.rasters: list[Raster] = []
         self._image: np.ndarray | None = None
         self._offsets: np.ndarray | None = None   # the last offsets sampled with, and them scaled
-        self._scaled: tuple[np.ndarray, np.ndarray] = (np.zeros((1, 0), np.float32),) * 2
+        self._scaled: tuple[np.ndarray, np.ndarray] | None = None
 
     def add(self, raster: Raster) -> int:
         """Add a raster (its grid must have this atlas's resolution) and return its index."""
@@ -326,8 +326,7 @@ class Atlas:
         scaled = self._scaled_offsets(offsets)
         map_x = index[:, 0:1] + scaled[0]
         map_y = index[:, 1:2] + scaled[1]
-        values = cv2.remap(self._image, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        return values
+        return cv2.remap(self._image, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
     def _scaled_offsets(self, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``offsets`` in image units as float32 rows of x and of y (the last array's kept)."""

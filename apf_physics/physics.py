@@ -207,10 +207,11 @@ class Physics:
         self._slot_tile = np.zeros(self.num_slots, np.intp)
         self._slot_radius = np.zeros(self.num_slots)
         self._slot_moving = np.zeros(self.num_slots, bool)
+        self._any_moving = False
         # per robot, for needs_physics(): its world's clearance raster (three samples each) and
-        # the least clearance that needs no physics
+        # twice the least clearance that needs no physics
         self._sample_atlas = np.zeros(3 * self.num_robots, np.intp)
-        self._free_above = np.zeros(self.num_robots)
+        self._free_twice = np.zeros(self.num_robots)
         for s, world in enumerate(worlds):
             self._assign(s, world)
 
@@ -259,7 +260,7 @@ class Physics:
         if id(world) not in self._atlas_ids:
             self._atlas_ids[id(world)] = self._atlas.add(world.clearance_raster(CLEARANCE_RESOLUTION, CLEARANCE_CAP))
         self.worlds[slot] = world
-        self._any_moving = getattr(self, "_any_moving", False) or bool(world.moving)
+        self._any_moving = self._any_moving or bool(world.moving)   # stays set: moving obstacles were met
         self._moving_slots = None
         self._slot_moving[slot] = bool(world.moving)
         self._slot_tile[slot] = self._tiles[key]
@@ -267,8 +268,7 @@ class Physics:
         m = self.robots_per_slot
         self._sample_atlas[3 * m * slot:3 * m * (slot + 1)] = self._atlas_ids[id(world)]
         # the raster is within 0.71 / resolution of the clearance (see World.clearance_raster)
-        self._free_above[m * slot:m * (slot + 1)] = world.robot_radius + CONTACT_MARGIN + 0.71 / CLEARANCE_RESOLUTION
-        self._free_twice = 2 * self._free_above
+        self._free_twice[m * slot:m * (slot + 1)] = 2 * (world.robot_radius + CONTACT_MARGIN + 0.71 / CLEARANCE_RESOLUTION)
 
     def _build_tile(self, world: World) -> int:
         """Add ``world``'s obstacles and walls as static shapes at a fresh offset; returns the tile index."""

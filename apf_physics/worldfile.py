@@ -15,6 +15,7 @@ rasters the physics and the planners build, the physics' substeps, the field's v
 
 from __future__ import annotations
 
+import contextlib
 import difflib
 import math
 import numbers
@@ -24,7 +25,7 @@ import reprlib
 import stat
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence, TypeVar
+from typing import Any, Callable, Iterator, Mapping, Sequence, TypeVar
 
 import numpy as np
 import yaml
@@ -826,11 +827,13 @@ def _file_kind(mode: int) -> str:
     return "not a regular file"
 
 
-def _read_regular_file(path: str | Path, kind: str, error: type[UserError]) -> bytes:
-    """The bytes of ``path`` if it is a regular file of at most :data:`MAX_FILE_BYTES`.
+@contextlib.contextmanager
+def open_regular_file(path: str | Path, kind: str, error: type[UserError]) -> Iterator[tuple[int, os.stat_result]]:
+    """``(fd, stat)`` of ``path`` opened for reading, if it is a regular file; closed afterwards.
 
     Opened without blocking (a FIFO would wait for a writer forever) and checked with
-    ``fstat`` on the open file, so what is read is what was checked.
+    ``fstat`` on the open file, so what is read is what was checked. Every failure to open,
+    check or read is one ``error`` naming the file and its ``kind`` (``"world"``, ``"model"``).
     """
     source = str(path)
     try:
@@ -843,8 +846,18 @@ def _read_regular_file(path: str | Path, kind: str, error: type[UserError]) -> b
         info = os.fstat(fd)
         if not stat.S_ISREG(info.st_mode):
             raise error(f"{source}: cannot read the {kind} file: it is {_file_kind(info.st_mode)}, not a regular file")
+        yield fd, info
+    except OSError as exc:
+        raise error(f"{source}: cannot read the {kind} file ({exc.strerror or exc})") from None
+    finally:
+        os.close(fd)
+
+
+def _read_regular_file(path: str | Path, kind: str, error: type[UserError]) -> bytes:
+    """The bytes of ``path`` if it is a regular file of at most :data:`MAX_FILE_BYTES`."""
+    with open_regular_file(path, kind, error) as (fd, info):
         if info.st_size > MAX_FILE_BYTES:
-            raise error(f"{source}: the {kind} file is {info.st_size:,} bytes, over the limit of {MAX_FILE_BYTES:,}")
+            raise error(f"{path}: the {kind} file is {info.st_size:,} bytes, over the limit of {MAX_FILE_BYTES:,}")
         chunks, total = [], 0
         while total <= MAX_FILE_BYTES:
             chunk = os.read(fd, MAX_FILE_BYTES + 1 - total)
@@ -853,12 +866,8 @@ def _read_regular_file(path: str | Path, kind: str, error: type[UserError]) -> b
             chunks.append(chunk)
             total += len(chunk)
         if total > MAX_FILE_BYTES:
-            raise error(f"{source}: the {kind} file grew over the limit of {MAX_FILE_BYTES:,} bytes while being read")
+            raise error(f"{path}: the {kind} file grew over the limit of {MAX_FILE_BYTES:,} bytes while being read")
         return b"".join(chunks)
-    except OSError as exc:
-        raise error(f"{source}: cannot read the {kind} file ({exc.strerror or exc})") from None
-    finally:
-        os.close(fd)
 
 
 def read_yaml_file(path: str | Path, kind: str, error: type[UserError] = UserError) -> Any:

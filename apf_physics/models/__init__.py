@@ -42,7 +42,8 @@ e.g. one of several formations crossing): the window network, which sees the oth
 robots in its window, rather than the map network, whose values are those of the static map and
 leave meeting robots to the right of way. Chosen on a validation set of crossing formations
 (``generate --family crossing --count 60 --seed 8``): every formation arrived in 60/60 worlds
-with ``general.pt`` leaders, 56/60 with ``map.pt``."""
+with ``general.pt`` leaders, 56/60 with ``map.pt``. A lone formation on Table 4's field (no other
+robots to see) gets it too, as a leader: that case was not compared."""
 
 
 def shipped_model_for(world: World) -> Path:

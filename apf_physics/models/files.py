@@ -24,14 +24,12 @@ import dataclasses
 import hashlib
 import io
 import json
+import math
 import os
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
-
-import math
-import stat
 
 import numpy as np
 import torch
@@ -41,7 +39,7 @@ from apf_physics.errors import ModelError
 from apf_physics.models.mapnet import MapNetwork
 from apf_physics.models.network import OBS_TRANSFORMS, QNetwork
 from apf_physics.observation import CHANNELS, SCALES, ObserverConfig
-from apf_physics.worldfile import RASTER_MARGIN
+from apf_physics.worldfile import RASTER_MARGIN, open_regular_file
 
 MAGIC = b"APF-PHYSICS-DQN\n"
 """First line of every model or checkpoint file."""
@@ -163,16 +161,7 @@ def read_file(path: str | os.PathLike) -> tuple[dict, dict]:
             format version, truncated, or fails its checksum; one line each.
     """
     path = Path(path)
-    try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
-    except FileNotFoundError:
-        raise ModelError(f"{path}: no such model file") from None
-    except OSError as exc:
-        raise ModelError(f"{path}: cannot read the model file ({exc.strerror or exc})") from None
-    try:
-        info = os.fstat(fd)
-        if not stat.S_ISREG(info.st_mode):
-            raise ModelError(f"{path}: not a model file (it is not a regular file)")
+    with open_regular_file(path, "model", ModelError) as (fd, info):
         head = _read_exactly(fd, min(info.st_size, len(MAGIC) + MAX_HEADER_BYTES))
         if not head.startswith(MAGIC):
             raise ModelError(f"{path}: not an apf-physics model file (it does not start with {MAGIC[:-1].decode()!r})")
@@ -200,10 +189,6 @@ def read_file(path: str | os.PathLike) -> tuple[dict, dict]:
             raise ModelError(f"{path}: corrupt model file (metadata of {n_meta:,} bytes, at most {MAX_META_BYTES:,})")
         os.lseek(fd, end + 1, os.SEEK_SET)
         body = _read_exactly(fd, body_bytes)
-    except OSError as exc:
-        raise ModelError(f"{path}: cannot read the model file ({exc.strerror or exc})") from None
-    finally:
-        os.close(fd)
     if len(body) != n_meta + n_payload:
         raise ModelError(f"{path}: truncated model file (it changed while being read)")
     if hashlib.sha256(body).hexdigest() != digest:
@@ -473,16 +458,7 @@ def load_model(
     if observer.shape != obs_shape:
         raise ModelError(f"{path}: the model's observer builds {observer.shape} observations, "
                          f"but its network takes {obs_shape}")
-    state = tensors.get("q_network")
-    if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
-        raise ModelError(f"{path}: not a usable model: the payload has no 'q_network' weights")
-    network = QNetwork(**arch)
-    try:
-        network.load_state_dict(state)
-    except (RuntimeError, ValueError, TypeError, KeyError) as exc:
-        raise ModelError(f"{path}: the weights do not fit the network the metadata describes ({_one_line(exc)})") from None
-    network.eval()
-    _finite_weights(path, network)
+    network = _with_weights(path, QNetwork(**arch), tensors)
     if expect_obs_shape is not None and tuple(int(v) for v in expect_obs_shape) != obs_shape:
         raise ModelError(
             f"{path}: the model expects observations of shape {obs_shape} (C, k, k), "
@@ -501,6 +477,20 @@ def _check_field(path: Path, field: dict[str, float], expect_field: Any) -> None
             raise ModelError(f"{path}: the model was trained in another field: {diffs}")
 
 
+def _with_weights(path: Path, network: torch.nn.Module, tensors: dict) -> torch.nn.Module:
+    """``network`` with the payload's ``q_network`` weights, checked to fit and be finite, in eval mode."""
+    state = tensors.get("q_network")
+    if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
+        raise ModelError(f"{path}: not a usable model: the payload has no 'q_network' weights")
+    try:
+        network.load_state_dict(state)
+    except (RuntimeError, ValueError, TypeError, KeyError) as exc:
+        raise ModelError(f"{path}: the weights do not fit the network the metadata describes ({_one_line(exc)})") from None
+    network.eval()
+    _finite_weights(path, network)
+    return network
+
+
 def _finite_weights(path: Path, network: torch.nn.Module) -> None:
     bad = sum(int((~torch.isfinite(p)).sum()) for p in network.state_dict().values() if p.is_floating_point())
     if bad:
@@ -515,15 +505,6 @@ def _load_map_model(path: Path, schema: _Schema, meta: dict, tensors: dict, arch
         raise ModelError(f"{path}: a map-planning model (it sees the whole map, not a window of "
                          f"{tuple(expect_obs_shape)}): use it with the dqn planner, not in an environment")
     field = schema.field(meta)
-    state = tensors.get("q_network")
-    if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
-        raise ModelError(f"{path}: not a usable model: the payload has no 'q_network' weights")
-    network = MapNetwork(**{k: v for k, v in arch.items() if k != "type"})
-    try:
-        network.load_state_dict(state)
-    except (RuntimeError, ValueError, TypeError, KeyError) as exc:
-        raise ModelError(f"{path}: the weights do not fit the network the metadata describes ({_one_line(exc)})") from None
-    network.eval()
-    _finite_weights(path, network)
+    network = _with_weights(path, MapNetwork(**{k: v for k, v in arch.items() if k != "type"}), tensors)
     _check_field(path, field, expect_field)
     return SavedModel(path=path, network=network, obs_shape=(), field=field, observer=None, meta=meta)

@@ -42,8 +42,8 @@ from apf_physics.rl import evaluation
 from apf_physics.rl.config import TrainConfig, differing_fields
 from apf_physics.rl.phases import Phase, draw_pool
 from apf_physics.rl.rundir import RunDir
-from apf_physics.rl.trainer import (CSV_COLUMNS, Counters, Evaluations, TrainResult, next_multiple, save_curve,
-                                    stop_reason)
+from apf_physics.rl.trainer import (Counters, Evaluations, TrainResult, next_multiple, run_training,
+                                    save_curve, stop_reason)
 from apf_physics.search import SearchGrid
 from apf_physics.world import World
 
@@ -173,22 +173,7 @@ def train_imitation(config: TrainConfig, phases: Sequence[Phase], out_dir: str |
 
     Arguments and result as :func:`apf_physics.rl.trainer.train`; steps count updates.
     """
-    if not phases:
-        raise UserError("nothing to train: no phases")
-    if resume and out_dir is None:
-        raise UserError("resuming needs the output folder of the run to continue")
-    given = isinstance(out_dir, RunDir)
-    run = out_dir if given else RunDir(out_dir, CSV_COLUMNS) if out_dir is not None else None
-    previous_threads = torch.get_num_threads()
-    torch.set_num_threads(config.threads)
-    try:
-        if run is not None and not resume and run.last.exists():
-            raise UserError(f"{run.path} already holds a training run; resume it or train into another folder")
-        return _train(config, list(phases), run, resume, progress)
-    finally:
-        torch.set_num_threads(previous_threads)
-        if run is not None and not given:
-            run.close()
+    return run_training(_train, config, phases, out_dir, resume, progress)
 
 
 def _train(config: TrainConfig, phases: list[Phase], run: Optional[RunDir], resume: bool,

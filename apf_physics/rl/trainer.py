@@ -391,6 +391,15 @@ def train(config: TrainConfig, phases: Sequence[Phase], out_dir: str | Path | Ru
         UserError: Nothing to train, worlds of different fields, a folder locked by another run
             or holding a run already (without ``resume``), or ``resume`` without a usable checkpoint.
     """
+    return run_training(_train, config, phases, out_dir, resume, progress)
+
+
+def run_training(body: Callable[..., TrainResult], config: TrainConfig, phases: Sequence[Phase],
+                 out_dir: str | Path | RunDir | None, resume: bool, progress: bool) -> TrainResult:
+    """What every trainer's entry point does around its loop ``body(config, phases, run, resume, progress)``:
+    check the phases (some, of one field) and the resume, open the run's folder (``run``, None
+    without ``out_dir``) unless given open, and train on ``config.threads`` torch threads.
+    """
     if not phases:
         raise UserError("nothing to train: no phases")
     fields = {tuple(w.field.as_dict().items()) for p in phases for w in (*p.worlds, *p.validation.worlds)}
@@ -405,7 +414,7 @@ def train(config: TrainConfig, phases: Sequence[Phase], out_dir: str | Path | Ru
     try:
         if run is not None and not resume and run.last.exists():
             raise UserError(f"{run.path} already holds a training run; resume it or train into another folder")
-        return _train(config, list(phases), run, resume, progress)
+        return body(config, list(phases), run, resume, progress)
     finally:
         torch.set_num_threads(previous_threads)
         if run is not None and not given:
