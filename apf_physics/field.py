@@ -24,6 +24,7 @@ from typing import Sequence
 import numpy as np
 
 from apf_physics.obstacles import Obstacle
+from apf_physics.spatial import ShapeSet
 
 FIELD_PRESETS: dict[str, dict[str, float]] = {
     # SPEC §1, thesis Tables 2–4. u_max is the cap used in place of infinity (thesis Fig. 11).
@@ -113,44 +114,35 @@ def repulsive_term_slope(d: np.ndarray, krep: float, p0: float, u_max: float) ->
     return np.where(live, -krep * (1.0 / safe - 1.0 / p0) / (safe * safe), 0.0)
 
 
-def _near_obstacle(xs: np.ndarray, ys: np.ndarray, obstacle: Obstacle, reach: float) -> np.ndarray:
-    """Indices of the points (given as contiguous x and y columns) within ``reach`` of the obstacle's bounding box."""
-    lo, hi = obstacle.bounds
-    mask = (xs >= lo[0] - reach) & (xs <= hi[0] + reach)
-    mask &= ys >= lo[1] - reach
-    mask &= ys <= hi[1] + reach
-    return np.flatnonzero(mask)
+def _shape_set(obstacles: Sequence[Obstacle] | ShapeSet, params: FieldParams) -> ShapeSet:
+    """``obstacles`` ready for queries out to ``p0`` (a world passes its own, built once)."""
+    if isinstance(obstacles, ShapeSet):
+        if obstacles.reach < params.p0:
+            raise ValueError(f"a shape set of reach {obstacles.reach:g} cannot give a field of range p0 = {params.p0:g}")
+        return obstacles
+    return ShapeSet(obstacles, params.p0)
 
 
-def repulsive(points: np.ndarray, obstacles: Sequence[Obstacle], params: FieldParams) -> np.ndarray:
-    """``Σ_O U_rep,O`` (SPEC eq. 4–7), each term capped at ``u_max``.
+def repulsive(points: np.ndarray, obstacles: Sequence[Obstacle] | ShapeSet, params: FieldParams) -> np.ndarray:
+    """``Σ_O U_rep,O`` (docs/model.md eq. 4–7), each term capped at ``u_max``.
 
-    Only points near an obstacle's bounding box are measured against it: beyond ``p0``
-    the term is 0, which keeps rasterising large maps cheap.
+    Only the (point, obstacle) pairs within ``p0`` are measured (:class:`~apf_physics.spatial.ShapeSet`):
+    beyond, the term is 0, so the cost does not grow with the number of obstacles.
     """
-    total = np.zeros(len(points))
-    xs, ys = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])
-    for obstacle in obstacles:
-        idx = _near_obstacle(xs, ys, obstacle, params.p0)
-        if len(idx):
-            d, _ = obstacle.signed_distance(points[idx])
-            total[idx] += repulsive_term(d, params.krep, params.p0, params.u_max)
-    return total
+    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    who, _, d, _ = _shape_set(obstacles, params).pairs(points)
+    return np.bincount(who, weights=repulsive_term(d, params.krep, params.p0, params.u_max), minlength=len(points))
 
 
-def repulsive_gradient(points: np.ndarray, obstacles: Sequence[Obstacle], params: FieldParams) -> np.ndarray:
+def repulsive_gradient(points: np.ndarray, obstacles: Sequence[Obstacle] | ShapeSet, params: FieldParams) -> np.ndarray:
     """``Σ_O dU_rep/dd · ∇d``, with ``∇d = (P − Q)/d`` for the nearest boundary point Q."""
-    grad = np.zeros((len(points), 2))
-    xs, ys = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])
-    for obstacle in obstacles:
-        idx = _near_obstacle(xs, ys, obstacle, params.p0)
-        if len(idx):
-            p = points[idx]
-            d, nearest = obstacle.signed_distance(p)
-            slope = repulsive_term_slope(d, params.krep, params.p0, params.u_max)
-            safe = np.where(d > 0, d, 1.0)
-            grad[idx] += (slope / safe)[:, None] * (p - nearest)
-    return grad
+    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    who, _, d, nearest = _shape_set(obstacles, params).pairs(points)
+    slope = repulsive_term_slope(d, params.krep, params.p0, params.u_max)
+    safe = np.where(d > 0, d, 1.0)
+    pull = (slope / safe)[:, None] * (points[who] - nearest)
+    return np.column_stack([np.bincount(who, weights=pull[:, 0], minlength=len(points)),
+                            np.bincount(who, weights=pull[:, 1], minlength=len(points))])
 
 
 def discs_repulsive(points: np.ndarray, centres: np.ndarray, radius: float, params: FieldParams) -> np.ndarray:
@@ -167,7 +159,8 @@ def discs_repulsive_gradient(points: np.ndarray, centres: np.ndarray, radius: fl
     return np.einsum("nk,nkj->nj", np.where(r > 0, slope / np.where(r > 0, r, 1.0), 0.0), diff)
 
 
-def potential(points: np.ndarray, targets: np.ndarray, obstacles: Sequence[Obstacle], params: FieldParams) -> np.ndarray:
+def potential(points: np.ndarray, targets: np.ndarray, obstacles: Sequence[Obstacle] | ShapeSet,
+              params: FieldParams) -> np.ndarray:
     """Total ``U = U_att + U_rep + U_bh`` (SPEC eq. 11) at each point."""
     points = np.asarray(points, dtype=float).reshape(-1, 2)
     d = _target_distances(points, targets)
@@ -177,7 +170,8 @@ def potential(points: np.ndarray, targets: np.ndarray, obstacles: Sequence[Obsta
     return u + repulsive(points, obstacles, params)
 
 
-def gradient(points: np.ndarray, targets: np.ndarray, obstacles: Sequence[Obstacle], params: FieldParams) -> np.ndarray:
+def gradient(points: np.ndarray, targets: np.ndarray, obstacles: Sequence[Obstacle] | ShapeSet,
+             params: FieldParams) -> np.ndarray:
     """``∇U`` at each point; the force is ``F = −∇U`` (SPEC eq. 12)."""
     points = np.asarray(points, dtype=float).reshape(-1, 2)
     return (attractive_gradient(points, targets, params.katt)
@@ -216,6 +210,18 @@ class Grid:
     def to_world(self, index: np.ndarray) -> np.ndarray:
         """World point of each continuous ``(col, row)`` index."""
         return np.asarray(index, dtype=float) / self.resolution + np.asarray(self.origin)
+
+    def map_nodes(self, function, chunk: int) -> np.ndarray:
+        """``function(points)`` at every node, ``chunk`` nodes at a time, as a ``(rows, cols)`` array."""
+        rows, cols = self.shape
+        out = np.empty(rows * cols)
+        xs = self.origin[0] + np.arange(cols) / self.resolution
+        step = max(1, chunk // max(cols, 1))
+        for r0 in range(0, rows, step):
+            ys = self.origin[1] + np.arange(r0, min(rows, r0 + step)) / self.resolution
+            gx, gy = np.meshgrid(xs, ys)
+            out[r0 * cols:r0 * cols + gx.size] = function(np.column_stack([gx.ravel(), gy.ravel()]))
+        return out.reshape(rows, cols)
 
     def node_points(self) -> np.ndarray:
         """All node coordinates, row-major, ``(rows*cols, 2)``."""

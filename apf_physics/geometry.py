@@ -277,3 +277,75 @@ def near_any(points: np.ndarray, centres: np.ndarray, reach: float) -> np.ndarra
         d = np.hypot(points[candidates, None, 0] - centres[None, :, 0], points[candidates, None, 1] - centres[None, :, 1])
         out[candidates] = d.min(axis=1) <= reach
     return out
+
+
+def nearest_in_rows(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per row of a boolean grid, the nearest set column at or left of, and at or right of, each column.
+
+    Returns:
+        ``(left, right)``, each ``(rows, cols)`` int32: ``-2**30`` or ``2**30`` where there is none.
+    """
+    rows, cols = mask.shape
+    index = np.arange(cols, dtype=np.int32)
+    none = np.int32(2**30)
+    left = np.maximum.accumulate(np.where(mask, index, -none), axis=1).astype(np.int32)
+    right = np.minimum.accumulate(np.where(mask, index, none)[:, ::-1], axis=1)[:, ::-1].astype(np.int32)
+    return left, right
+
+
+def nearest_cell_distance(u: np.ndarray, left: np.ndarray, right: np.ndarray,
+                          limit: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+    """Distance from points to the nearest set cell of a grid of unit cells, and the nearest point of it.
+
+    Cell ``[r, c]`` is the square ``[c, c+1] × [r, r+1]``. Rows are visited outward from each
+    point's own; in each, the nearest set cell is the nearest set column on the left or on
+    the right (:func:`nearest_in_rows`). A point is done once the next row is no nearer than
+    its best so far, so the work grows with the distance searched, not the grid's size.
+
+    Args:
+        u: (N, 2) points in cell units.
+        left, right: The tables of :func:`nearest_in_rows`.
+        limit: Distances beyond this are not searched: such points get ``limit``.
+
+    Returns:
+        ``(distance (N,), nearest (N, 2))`` in cell units (a point with none within ``limit``:
+        ``limit`` and itself).
+    """
+    rows, cols = left.shape
+    n = len(u)
+    best2 = np.full(n, np.inf)
+    nearest = u.copy()
+    x, y = u[:, 0], u[:, 1]
+    col = np.clip(np.floor(x), 0, cols - 1).astype(np.intp)
+    row0 = np.floor(y).astype(np.intp)
+    active = np.arange(n)
+    cap = float(limit) if np.isfinite(limit) else float(rows + cols + abs(y).max(initial=0) + abs(x).max(initial=0))
+    k = 0
+    while len(active):
+        for r in ((row0[active] + k,) if k == 0 else (row0[active] - k, row0[active] + k)):
+            ok = (r >= 0) & (r < rows)
+            if not ok.any():
+                continue
+            who, rr = active[ok], r[ok]
+            dy = np.maximum(np.maximum(rr - y[who], y[who] - (rr + 1)), 0.0)
+            for table in (left, right):
+                c = table[rr, col[who]]
+                found = np.abs(c) < 2**29
+                dx = np.maximum(np.maximum(c - x[who], x[who] - (c + 1)), 0.0)
+                d2 = np.where(found, dx * dx + dy * dy, np.inf)
+                better = d2 < best2[who]
+                if better.any():
+                    b = who[better]
+                    best2[b] = d2[better]
+                    cb, rb = c[better], rr[better]
+                    nearest[b, 0] = np.clip(x[b], cb, cb + 1)
+                    nearest[b, 1] = np.clip(y[b], rb, rb + 1)
+        k += 1
+        # the rows k away are at least k - 1 (plus the part of a row) away: stop once that is no nearer
+        gap = float(k - 1)
+        active = active[(gap * gap < np.minimum(best2[active], cap * cap)) & (gap <= cap)]
+    distance = np.sqrt(best2)
+    far = ~(distance <= cap)
+    distance[far] = cap
+    nearest[far] = u[far]
+    return distance, nearest

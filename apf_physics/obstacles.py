@@ -1,9 +1,10 @@
 """Obstacle types: the shapes that the world, the field and the physics all share.
 
-Both are stored in world coordinates. A polygon is simple (its edges do not cross),
-counter-clockwise, concave allowed; a circle of radius 0 is the thesis's point obstacle.
+All are stored in world coordinates. A polygon is simple (its edges do not cross),
+counter-clockwise, concave allowed; a circle of radius 0 is the thesis's point obstacle; a
+grid is the occupied cells of an occupancy map (a ROS map or a MovingAI map), one obstacle.
 
-Any obstacle may move: a :class:`Motion` translates it along a route, as a pure function of
+Any polygon or circle may move: a :class:`Motion` translates it along a route, as a pure function of
 the control step ``t`` (no rotation). The shape as stored is where it is at route offset
 ``[0, 0]``; :meth:`PolygonObstacle.at` gives the shape at a step.
 """
@@ -15,7 +16,7 @@ from typing import Any, Union
 
 import numpy as np
 
-from apf_physics import geometry
+from apf_physics import geometry, mapfiles
 
 
 @dataclass(frozen=True, eq=False)
@@ -156,7 +157,88 @@ class CircleObstacle:
         return data
 
 
-Obstacle = Union[PolygonObstacle, CircleObstacle]
+@dataclass(frozen=True, eq=False)
+class GridObstacle:
+    """The occupied cells of an occupancy grid, as **one** obstacle (docs/model.md, "Obstacles").
+
+    Its distance ``d_O`` is the exact Euclidean distance to the union of the occupied cells
+    (negative inside, to the nearest free cell), so a wall is one wall however it was cut.
+    Cells outside the grid are free.
+
+    Attributes:
+        occupied: ``(rows, cols)`` bool; row 0 is the lowest y (unknown cells are occupied).
+        cell: Side of a cell [world units].
+        origin: World coordinates of the lower-left corner of cell ``[0, 0]``.
+        spec: The world file's ``grid:`` mapping it was read from (written back by :meth:`to_dict`).
+    """
+
+    occupied: np.ndarray
+    cell: float
+    origin: tuple[float, float] = (0.0, 0.0)
+    spec: dict = field(default_factory=dict, compare=False)
+    motion: None = None
+    _tables: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Lower-left and upper-right corners of the grid."""
+        rows, cols = self.occupied.shape
+        lo = np.asarray(self.origin, float)
+        return lo, lo + self.cell * np.array([cols, rows], float)
+
+    @property
+    def thickness(self) -> float:
+        """One cell: the thinnest wall a grid can hold."""
+        return float(self.cell)
+
+    def rectangles(self) -> np.ndarray:
+        """``(R, 4)`` world boxes ``[x0, y0, x1, y1]`` that tile the occupied cells exactly (cached)."""
+        if "boxes" not in self._tables:
+            cells = mapfiles.occupancy_rectangles(self.occupied).astype(float)
+            self._tables["boxes"] = cells * self.cell + np.tile(np.asarray(self.origin, float), 2)
+        return self._tables["boxes"]
+
+    def _search_tables(self, inside: bool) -> tuple[np.ndarray, np.ndarray]:
+        """For the grid padded by one free cell: the nearest column at or left of, and at or
+        right of, each cell that is occupied (``inside`` False) or free (True), per row."""
+        key = ("free" if inside else "occupied")
+        if key not in self._tables:
+            padded = np.pad(self.occupied, 1, constant_values=False)
+            self._tables[key] = geometry.nearest_in_rows(~padded if inside else padded)
+        return self._tables[key]
+
+    def signed_distance(self, points: np.ndarray, reach: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+        """Signed distance of ``(N, 2)`` points to the occupied cells (negative inside) and the nearest boundary point.
+
+        Exact wherever ``|d| ≤ reach``; farther points get ``±reach`` (and a nearest point
+        that is not meaningful). The search visits rows outward from each point's own, so
+        its cost grows with ``reach`` in cells, not with the size of the grid.
+        """
+        points = np.asarray(points, float).reshape(-1, 2)
+        u = (points - np.asarray(self.origin, float)) / self.cell + 1.0     # padded cell coordinates
+        rows, cols = self.occupied.shape
+        col = np.floor(u[:, 0]).astype(np.intp)
+        row = np.floor(u[:, 1]).astype(np.intp)
+        within = (col >= 1) & (col <= cols) & (row >= 1) & (row <= rows)
+        inside = np.zeros(len(points), bool)
+        inside[within] = self.occupied[row[within] - 1, col[within] - 1]
+        d = np.empty(len(points))
+        nearest = np.empty((len(points), 2))
+        limit = reach / self.cell
+        for flag in (False, True):
+            mine = np.flatnonzero(inside == flag)
+            if len(mine):
+                left, right = self._search_tables(flag)
+                dist, near = geometry.nearest_cell_distance(u[mine], left, right, limit)
+                d[mine] = dist * self.cell * (-1.0 if flag else 1.0)
+                nearest[mine] = (near - 1.0) * self.cell + np.asarray(self.origin, float)
+        return d, nearest
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"grid": dict(self.spec)}
+
+
+Obstacle = Union[PolygonObstacle, CircleObstacle, GridObstacle]
 
 
 def obstacle_at(obstacle: Obstacle, t: float) -> Obstacle:

@@ -20,8 +20,18 @@ from apf_physics import geometry
 from apf_physics.errors import WorldError
 from apf_physics.field import FieldParams
 from apf_physics.obstacles import CircleObstacle, Obstacle, obstacle_at
+from apf_physics.spatial import ShapeSet
 
 T = TypeVar("T")
+
+CLEARANCE_REACH = 2.5
+"""Clearance is measured exactly up to this much beyond a robot's radius (the map network's
+clearance feature saturates at 2 beyond the radius)."""
+MOVE_REACH = 1.5
+"""Clearance along moves (:meth:`World.path_clearance`) is exact up to this much beyond a robot's
+radius: every test of a move asks about less (the shield's room saturates at 1 beyond its margin)."""
+RASTER_CHUNK = 1 << 18
+"""Raster nodes computed at a time (bounds the temporaries of a large map)."""
 
 
 @dataclass(frozen=True)
@@ -178,29 +188,47 @@ class World:
         return tuple(obstacle_at(o, t) for o in self.obstacles) + crowd
 
     # -- the field ---------------------------------------------------------------------
+    @property
+    def reach(self) -> float:
+        """How far distances to obstacles are exact: the field's range ``p0``, and
+        :data:`CLEARANCE_REACH` beyond the robot's radius, whichever is farther."""
+        return max(self.field.p0, self.robot_radius + CLEARANCE_REACH)
+
+    @property
+    def shapes(self) -> ShapeSet:
+        """The static obstacles, indexed for distance queries within :attr:`reach` (built once)."""
+        return self.cached("shapes", lambda: ShapeSet(self.static_obstacles, self.reach))
+
+    @property
+    def near_shapes(self) -> ShapeSet:
+        """The static obstacles indexed for the clearance of moves: exact up to :data:`MOVE_REACH`
+        beyond the robot's radius, fewer candidates per point than :attr:`shapes` (built once)."""
+        return self.cached("near_shapes", lambda: ShapeSet(self.static_obstacles, self.robot_radius + MOVE_REACH))
+
+    def _moving_shapes(self, t: float) -> tuple[Obstacle, ...]:
+        """The moving obstacles where they are at step ``t``, and the crowd's discs."""
+        return (tuple(obstacle_at(self.obstacles[i], t) for i in self.moving)
+                + tuple(CircleObstacle(c, self.robot_radius) for c in self.crowd))
+
     def potential(self, points: np.ndarray, t: float = 0.0) -> np.ndarray:
-        """Total potential U at ``(N, 2)`` points at control step ``t`` (SPEC §1)."""
-        u = apf.potential(points, self.targets, self._shapes_at(t), self.field)
-        if len(self.crowd):
-            u += apf.discs_repulsive(np.asarray(points, float).reshape(-1, 2), self.crowd, self.robot_radius, self.field)
-        return u
+        """Total potential U at ``(N, 2)`` points at control step ``t`` (docs/model.md §1)."""
+        points = np.asarray(points, float).reshape(-1, 2)
+        u = apf.potential(points, self.targets, self.shapes, self.field)
+        others = self._moving_shapes(t)
+        return u + apf.repulsive(points, others, self.field) if others else u
 
     def gradient(self, points: np.ndarray, t: float = 0.0) -> np.ndarray:
         """``∇U`` at ``(N, 2)`` points at control step ``t``."""
-        g = apf.gradient(points, self.targets, self._shapes_at(t), self.field)
-        if len(self.crowd):
-            g += apf.discs_repulsive_gradient(np.asarray(points, float).reshape(-1, 2), self.crowd, self.robot_radius,
-                                              self.field)
-        return g
-
-    def _shapes_at(self, t: float) -> tuple[Obstacle, ...]:
-        return self.obstacles if not self.moving else tuple(obstacle_at(o, t) for o in self.obstacles)
+        points = np.asarray(points, float).reshape(-1, 2)
+        g = apf.gradient(points, self.targets, self.shapes, self.field)
+        others = self._moving_shapes(t)
+        return g + apf.repulsive_gradient(points, others, self.field) if others else g
 
     def raster(self, resolution: int = 4) -> apf.Raster:
         """U at step 0 at the nodes of a grid over the map, ``resolution`` nodes per unit; built once and cached."""
         def build() -> apf.Raster:
             grid = apf.Grid.covering((0.0, 0.0), self.size, resolution)
-            return apf.Raster(grid, self.potential(grid.node_points()).reshape(grid.shape))
+            return apf.Raster(grid, grid.map_nodes(lambda nodes: self.potential(nodes), RASTER_CHUNK))
         return self.cached(("potential", int(resolution)), build)
 
     @property
@@ -224,25 +252,29 @@ class World:
         return d
 
     # -- geometry ----------------------------------------------------------------------
-    def obstacle_distance(self, points: np.ndarray, t: np.ndarray | float = 0.0, static: bool = False) -> np.ndarray:
+    def obstacle_distance(self, points: np.ndarray, t: np.ndarray | float = 0.0, static: bool = False,
+                          near: bool = False) -> np.ndarray:
         """Signed distance to the nearest obstacle's boundary (negative inside); +inf without obstacles.
+
+        Exact up to :attr:`reach`; a point farther from every static obstacle reads :attr:`reach`
+        (:class:`~apf_physics.spatial.ShapeSet`).
 
         Args:
             points: (N, 2) points.
             t: Control step at which moving obstacles are taken: one for all points, or (N,).
             static: Leave the moving obstacles out.
+            near: Exact only up to :data:`MOVE_REACH` beyond the robot's radius (:attr:`near_shapes`), for
+                the clearance of moves.
         """
         points = np.asarray(points, dtype=float).reshape(-1, 2)
-        best = np.full(len(points), np.inf)
-        for obstacle in self.obstacles:
-            if obstacle.motion is None:
-                d, _ = obstacle.signed_distance(points)
-            elif static:
-                continue
-            else:   # measure in the obstacle's own frame: points moved back by its offset at t
-                d, _ = obstacle.signed_distance(points - obstacle.motion.offset(t))
+        best = (self.near_shapes if near else self.shapes).distance(points)
+        if static:
+            return best
+        for i in self.moving:   # measured in the obstacle's own frame: points moved back by its offset at t
+            obstacle = self.obstacles[i]
+            d, _ = obstacle.signed_distance(points - obstacle.motion.offset(t))
             best = np.minimum(best, d)
-        if len(self.crowd) and not static:
+        if len(self.crowd):
             gap = np.hypot(points[:, None, 0] - self.crowd[None, :, 0], points[:, None, 1] - self.crowd[None, :, 1])
             best = np.minimum(best, gap.min(axis=1) - self.robot_radius)
         return best
@@ -253,15 +285,19 @@ class World:
         w, h = self.size
         return np.minimum.reduce([points[:, 0], w - points[:, 0], points[:, 1], h - points[:, 1]])
 
-    def clearance(self, points: np.ndarray, t: np.ndarray | float = 0.0) -> np.ndarray:
-        """Distance from each point to the nearest obstacle (at step ``t``) or the map's edge (negative when blocked)."""
-        return np.minimum(self.obstacle_distance(points, t), self.edge_distance(points))
+    def clearance(self, points: np.ndarray, t: np.ndarray | float = 0.0, near: bool = False) -> np.ndarray:
+        """Distance from each point to the nearest obstacle (at step ``t``) or the map's edge (negative when blocked).
+
+        ``near``: exact only up to :data:`MOVE_REACH` beyond the robot's radius (see :meth:`obstacle_distance`).
+        """
+        return np.minimum(self.obstacle_distance(points, t, near=near), self.edge_distance(points))
 
     def path_clearance(self, a: np.ndarray, b: np.ndarray, spacing: np.ndarray | float,
                        t: float | None = None, during: bool = True) -> np.ndarray:
         """Least clearance sampled along each straight segment ``a[i] → b[i]``.
 
         Samples are at most ``spacing`` apart, ends included (:func:`~apf_physics.geometry.segment_samples`).
+        Exact up to :data:`MOVE_REACH` beyond the robot's radius; more clearance reads as that.
         Clearance changes no faster than distance, so no point of a segment is nearer to a
         static obstacle than the returned value minus ``spacing / 2``: subtract that for a bound.
 
@@ -281,42 +317,37 @@ class World:
         a = np.asarray(a, float).reshape(-1, 2)
         points, owner = geometry.segment_samples(a, b, spacing)
         if t is None or not self.moving:
-            clearance = self.static_clearance(points)
+            clearance = self.static_clearance(points, near=True)
         elif not during:
-            clearance = self.clearance(points, t)
+            clearance = self.clearance(points, t, near=True)
         else:
             along = np.hypot(*(points - a[owner]).T)
             length = np.hypot(*(np.asarray(b, float).reshape(-1, 2) - a).T)[owner]
-            clearance = self.clearance(points, t + np.where(length > 0, along / np.where(length > 0, length, 1.0), 0.0))
+            clearance = self.clearance(points, t + np.where(length > 0, along / np.where(length > 0, length, 1.0), 0.0),
+                                       near=True)
         out = np.full(len(a), np.inf)
         np.minimum.at(out, owner, clearance)
         return out
 
-    def static_clearance(self, points: np.ndarray) -> np.ndarray:
-        """Distance from each point to the nearest static obstacle or the map's edge (negative when blocked)."""
-        return np.minimum(self.obstacle_distance(points, static=True), self.edge_distance(points))
+    def static_clearance(self, points: np.ndarray, near: bool = False) -> np.ndarray:
+        """Distance from each point to the nearest static obstacle or the map's edge (negative when blocked).
+
+        ``near``: exact only up to :data:`MOVE_REACH` beyond the robot's radius (see :meth:`obstacle_distance`).
+        """
+        return np.minimum(self.obstacle_distance(points, static=True, near=near), self.edge_distance(points))
 
     def clearance_raster(self, resolution: int = 8, cap: float = 4.0, margin: float = 2.0) -> apf.Raster:
         """``min(clearance, cap)`` from the static obstacles, at the nodes of a grid over the map and ``margin`` beyond; cached.
 
-        Capped clearance is still 1-Lipschitz, and only points within ``cap`` of an obstacle's
-        bounding box are measured against it, so large sparse maps are cheap. A bilinear
+        Capped clearance is still 1-Lipschitz (``cap`` must not exceed :attr:`reach`). A bilinear
         sample is within ``0.71 / resolution`` of the true capped clearance (the largest
         weighted distance to a cell's corners, at its centre). Beyond the map's edge the
         clearance is negative.
         """
         def build() -> apf.Raster:
             grid = apf.Grid.covering((-margin, -margin), (self.size[0] + margin, self.size[1] + margin), resolution)
-            nodes = grid.node_points()
-            values = np.minimum(self.edge_distance(nodes), cap)
-            xs, ys = nodes[:, 0], nodes[:, 1]
-            for obstacle in self.static_obstacles:
-                lo, hi = obstacle.bounds
-                near = np.flatnonzero((xs >= lo[0] - cap) & (xs <= hi[0] + cap) & (ys >= lo[1] - cap) & (ys <= hi[1] + cap))
-                if len(near):
-                    d, _ = obstacle.signed_distance(nodes[near])
-                    values[near] = np.minimum(values[near], d)
-            return apf.Raster(grid, values.reshape(grid.shape))
+            values = grid.map_nodes(lambda nodes: np.minimum(self.static_clearance(nodes), cap), RASTER_CHUNK)
+            return apf.Raster(grid, values)
         return self.cached(("clearance_raster", int(resolution), float(cap), float(margin)), build)
 
     @property

@@ -15,14 +15,12 @@ rasters the physics and the planners build, the physics' substeps, the field's v
 
 from __future__ import annotations
 
-import contextlib
 import difflib
 import math
 import numbers
 import os
 import re
 import reprlib
-import stat
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, Sequence, TypeVar
@@ -34,6 +32,7 @@ from apf_physics import geometry
 from apf_physics.bundled import resolve_world
 from apf_physics.errors import UserError, WorldError
 from apf_physics.field import FIELD_PRESETS, FieldParams
+from apf_physics.safefile import MAX_FILE_BYTES, open_regular_file, read_regular_file  # noqa: F401 (public here too)
 from apf_physics.obstacles import CircleObstacle, Motion, Obstacle, PolygonObstacle
 from apf_physics.world import FormationSpec, FormationTask, World
 
@@ -41,8 +40,6 @@ T = TypeVar("T")
 
 # -- limits (README "World files") -------------------------------------------------------
 # Reading: what any YAML file (world or curriculum) may hold.
-MAX_FILE_BYTES = 10 * 2**20
-"""Largest file read [bytes] (a world of 10,000 boxes is about 0.7 MB)."""
 MAX_DEPTH = 32
 """Deepest nesting of lists and mappings (a world file needs 5)."""
 MAX_NODES = 500_000
@@ -819,57 +816,6 @@ def _load_yaml(text: str) -> Any:
     return document
 
 
-def _file_kind(mode: int) -> str:
-    for test, kind in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
-                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket")):
-        if test(mode):
-            return kind
-    return "not a regular file"
-
-
-@contextlib.contextmanager
-def open_regular_file(path: str | Path, kind: str, error: type[UserError]) -> Iterator[tuple[int, os.stat_result]]:
-    """``(fd, stat)`` of ``path`` opened for reading, if it is a regular file; closed afterwards.
-
-    Opened without blocking (a FIFO would wait for a writer forever) and checked with
-    ``fstat`` on the open file, so what is read is what was checked. Every failure to open,
-    check or read is one ``error`` naming the file and its ``kind`` (``"world"``, ``"model"``).
-    """
-    source = str(path)
-    try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
-    except FileNotFoundError:
-        raise error(f"{source}: no such {kind} file") from None
-    except OSError as exc:
-        raise error(f"{source}: cannot read the {kind} file ({exc.strerror or exc})") from None
-    try:
-        info = os.fstat(fd)
-        if not stat.S_ISREG(info.st_mode):
-            raise error(f"{source}: cannot read the {kind} file: it is {_file_kind(info.st_mode)}, not a regular file")
-        yield fd, info
-    except OSError as exc:
-        raise error(f"{source}: cannot read the {kind} file ({exc.strerror or exc})") from None
-    finally:
-        os.close(fd)
-
-
-def _read_regular_file(path: str | Path, kind: str, error: type[UserError]) -> bytes:
-    """The bytes of ``path`` if it is a regular file of at most :data:`MAX_FILE_BYTES`."""
-    with open_regular_file(path, kind, error) as (fd, info):
-        if info.st_size > MAX_FILE_BYTES:
-            raise error(f"{path}: the {kind} file is {info.st_size:,} bytes, over the limit of {MAX_FILE_BYTES:,}")
-        chunks, total = [], 0
-        while total <= MAX_FILE_BYTES:
-            chunk = os.read(fd, MAX_FILE_BYTES + 1 - total)
-            if not chunk:
-                break
-            chunks.append(chunk)
-            total += len(chunk)
-        if total > MAX_FILE_BYTES:
-            raise error(f"{path}: the {kind} file grew over the limit of {MAX_FILE_BYTES:,} bytes while being read")
-        return b"".join(chunks)
-
-
 def read_yaml_file(path: str | Path, kind: str, error: type[UserError] = UserError) -> Any:
     """Read a YAML file within the limits, turning every failure into one ``error`` naming the file.
 
@@ -879,7 +825,7 @@ def read_yaml_file(path: str | Path, kind: str, error: type[UserError] = UserErr
         error: The exception class to raise.
     """
     source = str(path)
-    data = _read_regular_file(path, kind, error)
+    data = read_regular_file(path, kind, error)
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:

@@ -15,7 +15,10 @@ PACKAGE = Path(__file__).resolve().parent.parent / "apf_physics"
 
 LAYERS = [
     ("errors", "geometry"),
+    ("safefile",),
+    ("mapfiles",),
     ("obstacles",),
+    ("spatial",),
     ("field",),
     ("world", "bundled"),
     ("worldfile",),
