@@ -323,7 +323,14 @@ def read_ros_map(yaml_path: str | Path) -> OccupancyMap:
         raise WorldError(f"{source}: not valid YAML: {reason if len(reason) <= 100 else reason[:97] + '...'}") from None
     if not isinstance(spec, dict):
         raise WorldError(f"{source}: expected a mapping of map_server keys ({', '.join(ROS_KEYS)}), got {_kind(spec)}")
+    return ros_map_from_dict(spec, source, Path(yaml_path).parent)
 
+
+def ros_map_from_dict(spec: dict, source: str, folder: str | Path) -> OccupancyMap:
+    """A ROS map from the keys of its YAML (``image`` relative to ``folder``); see :func:`read_ros_map`.
+
+    A world file's ``grid:`` may hold these keys inline; ``source`` names it in messages.
+    """
     problems: list[str] = []
 
     def bad(key: str, problem: str) -> None:
@@ -343,7 +350,7 @@ def read_ros_map(yaml_path: str | Path) -> OccupancyMap:
         if not isinstance(value, str) or not value.strip():
             bad("image", f"expected the image's path, got {_kind(value)}")
         else:
-            image = Path(yaml_path).parent / value
+            image = Path(folder) / value
             if not os.path.exists(image):
                 bad("image", f"no such file {image}")
                 image = None

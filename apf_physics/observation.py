@@ -105,7 +105,7 @@ def observation_raster(world: World, margin: int, resolution: int) -> Raster:
     def build() -> Raster:
         grid = Grid.covering((-margin, -margin), (world.size[0] + margin, world.size[1] + margin), resolution)
         nodes = grid.node_points()
-        values = apf.potential(nodes, world.targets, world.static_obstacles, world.field)
+        values = apf.potential(nodes, world.targets, world.shapes, world.field)
         blocked = (world.edge_distance(nodes) < 0) | (world.obstacle_distance(nodes, static=True) <= 0)
         values[blocked] = world.u_wall
         return Raster(grid, values.reshape(grid.shape))

@@ -44,7 +44,7 @@ import pymunk.batch
 
 from apf_physics.errors import UserError
 from apf_physics.field import Atlas
-from apf_physics.obstacles import CircleObstacle, PolygonObstacle
+from apf_physics.obstacles import CircleObstacle, GridObstacle, PolygonObstacle
 from apf_physics.world import World
 
 WALL_THICKNESS = 1.0  # of the slabs around each map [units]
@@ -257,8 +257,9 @@ class Physics:
         key = (id(world.obstacles), self._lane(slot, world))
         if key not in self._tiles:
             self._tiles[key] = self._build_tile(world)
-        if id(world) not in self._atlas_ids:
-            self._atlas_ids[id(world)] = self._atlas.add(world.clearance_raster(CLEARANCE_RESOLUTION, CLEARANCE_CAP))
+        raster = world.clearance_raster(CLEARANCE_RESOLUTION, CLEARANCE_CAP)   # shared by worlds of one map
+        if id(raster) not in self._atlas_ids:
+            self._atlas_ids[id(raster)] = self._atlas.add(raster)
         self.worlds[slot] = world
         self._any_moving = self._any_moving or bool(world.moving)   # stays set: moving obstacles were met
         self._moving_slots = None
@@ -266,7 +267,7 @@ class Physics:
         self._slot_tile[slot] = self._tiles[key]
         self._slot_radius[slot] = world.robot_radius
         m = self.robots_per_slot
-        self._sample_atlas[3 * m * slot:3 * m * (slot + 1)] = self._atlas_ids[id(world)]
+        self._sample_atlas[3 * m * slot:3 * m * (slot + 1)] = self._atlas_ids[id(raster)]
         # the raster is within 0.71 / resolution of the clearance (see World.clearance_raster)
         self._free_twice[m * slot:m * (slot + 1)] = 2 * (world.robot_radius + CONTACT_MARGIN + 0.71 / CLEARANCE_RESOLUTION)
 
@@ -775,6 +776,9 @@ def _obstacle_shapes(body: pymunk.Body, obstacle, offset: tuple[float, float]) -
     elif isinstance(obstacle, CircleObstacle):
         cx, cy = obstacle.center
         shapes = [pymunk.Circle(body, obstacle.radius, offset=(cx + ox, cy + oy))]
+    elif isinstance(obstacle, GridObstacle):   # the occupied cells, as few boxes that tile them exactly
+        shapes = [pymunk.Poly(body, [(x0 + ox, y0 + oy), (x1 + ox, y0 + oy), (x1 + ox, y1 + oy), (x0 + ox, y1 + oy)])
+                  for x0, y0, x1, y1 in obstacle.rectangles().tolist()]
     else:
         raise TypeError(f"unknown obstacle {obstacle!r}")
     for shape in shapes:

@@ -19,7 +19,7 @@ from apf_physics import field as apf
 from apf_physics import geometry
 from apf_physics.errors import WorldError
 from apf_physics.field import FieldParams
-from apf_physics.obstacles import CircleObstacle, Obstacle, obstacle_at
+from apf_physics.obstacles import CircleObstacle, GridObstacle, Obstacle, obstacle_at
 from apf_physics.spatial import ShapeSet
 
 T = TypeVar("T")
@@ -32,6 +32,39 @@ MOVE_REACH = 1.5
 radius: every test of a move asks about less (the shield's room saturates at 1 beyond its margin)."""
 RASTER_CHUNK = 1 << 18
 """Raster nodes computed at a time (bounds the temporaries of a large map)."""
+
+
+@dataclass(frozen=True)
+class Frame:
+    """How a world file's coordinates become the world's (docs/model.md, "Units").
+
+    The world is laid out in **steps**: one unit is the robot's travel per control step, and
+    the map's lower-left corner is the origin. A world file in metres with ``robot: {step:
+    0.25}`` and a ROS map whose origin is ``[-10, -5]`` read ``(x_file − offset) / unit``.
+
+    Attributes:
+        offset: File coordinates of the world's origin.
+        unit: File units per step.
+    """
+
+    offset: tuple[float, float] = (0.0, 0.0)
+    unit: float = 1.0
+
+    def to_file(self, points: np.ndarray) -> np.ndarray:
+        """Points in the world file's coordinates."""
+        return np.asarray(points, float) * self.unit + np.asarray(self.offset, float)
+
+    def field_to_file(self, params: FieldParams) -> dict[str, float]:
+        """The field's parameters in file units (U keeps its values at corresponding points)."""
+        u = self.unit
+        return {"katt": params.katt / u**2, "krep": params.krep * u**2, "kstr": params.kstr / u**2,
+                "p0": params.p0 * u, "ps": params.ps * u, "u_max": params.u_max}
+
+    def field_from_file(self, values: dict[str, float]) -> dict[str, float]:
+        """The inverse of :meth:`field_to_file`."""
+        u = self.unit
+        return {"katt": values["katt"] * u**2, "krep": values["krep"] / u**2, "kstr": values["kstr"] * u**2,
+                "p0": values["p0"] / u, "ps": values["ps"] / u, "u_max": values["u_max"]}
 
 
 @dataclass(frozen=True)
@@ -99,6 +132,7 @@ class World:
         formation: The formation, if the world file defines one.
         source: The file the world came from, for messages.
         formations: Several formations, each to its own target (the world file's ``formations:``).
+        frame: How the world file's coordinates map to the world's (its units and origin).
         crowd: ``(K, 2)`` centres of other robots, discs of :attr:`robot_radius` that repel and
             block like obstacles: the robots of other formations, as one leader sees them
             (:meth:`among`). Empty for a world as read from its file.
@@ -116,7 +150,9 @@ class World:
     source: str | None = None
     formations: tuple[FormationTask, ...] = ()
     crowd: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
+    frame: Frame = Frame()
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
+    _static: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def label(self) -> str:
@@ -129,30 +165,40 @@ class World:
         A view: it shares this world's cache (rasters of the static field stay valid; the
         crowd's discs are added where they are, like moving obstacles).
         """
-        return replace(self, crowd=np.asarray(robots, float).reshape(-1, 2), _cache=self._cache)
+        return replace(self, crowd=np.asarray(robots, float).reshape(-1, 2), _cache=self._cache, _static=self._static)
+
+    def with_task(self, targets: np.ndarray, starts: np.ndarray, name: str | None = None) -> World:
+        """This world with other targets and starts, sharing what is built from its static
+        obstacles alone (indexes, clearance rasters): many scenarios on one map cost one map."""
+        return replace(self, name=name or self.name, targets=np.asarray(targets, float).reshape(-1, 2),
+                       starts=np.asarray(starts, float).reshape(-1, 2), _cache={}, _static=self._static)
 
     def formation_world(self, index: int) -> World:
         """The world as formation ``index`` sees it: its own target and start (and formation); cached."""
         def build() -> World:
             task = self.formations[index]
             return replace(self, name=f"{self.name}#{index}", targets=task.target.reshape(1, 2),
-                           starts=task.start.reshape(1, 2), formation=task.spec, formations=(), _cache={})
+                           starts=task.start.reshape(1, 2), formation=task.spec, formations=(), _cache={},
+                           _static=self._static)
         return self.cached(("formation_world", int(index)), build)
 
-    def cached(self, key: Hashable, build: Callable[[], T]) -> T:
+    def cached(self, key: Hashable, build: Callable[[], T], static: bool = False) -> T:
         """What ``build()`` returns, built once per world and key (rasters, free cells, search grids).
 
-        A world is immutable, so anything derived from it alone can be kept with it.
+        A world is immutable, so anything derived from it alone can be kept with it. ``static``:
+        it depends only on the map, its static obstacles and the robot's radius, and is shared
+        with the worlds of other targets made by :meth:`with_task`.
         """
-        if key not in self._cache:
-            self._cache[key] = build()
-        return self._cache[key]
+        cache = self._static if static else self._cache
+        if key not in cache:
+            cache[key] = build()
+        return cache[key]
 
     # -- obstacles in time -----------------------------------------------------------------
     @property
     def static_obstacles(self) -> tuple[Obstacle, ...]:
         """The obstacles that do not move."""
-        return self.cached("static", lambda: tuple(o for o in self.obstacles if o.motion is None))
+        return self.cached("static", lambda: tuple(o for o in self.obstacles if o.motion is None), static=True)
 
     @property
     def moving(self) -> tuple[int, ...]:
@@ -197,13 +243,14 @@ class World:
     @property
     def shapes(self) -> ShapeSet:
         """The static obstacles, indexed for distance queries within :attr:`reach` (built once)."""
-        return self.cached("shapes", lambda: ShapeSet(self.static_obstacles, self.reach))
+        return self.cached("shapes", lambda: ShapeSet(self.static_obstacles, self.reach), static=True)
 
     @property
     def near_shapes(self) -> ShapeSet:
         """The static obstacles indexed for the clearance of moves: exact up to :data:`MOVE_REACH`
         beyond the robot's radius, fewer candidates per point than :attr:`shapes` (built once)."""
-        return self.cached("near_shapes", lambda: ShapeSet(self.static_obstacles, self.robot_radius + MOVE_REACH))
+        return self.cached("near_shapes", lambda: ShapeSet(self.static_obstacles, self.robot_radius + MOVE_REACH),
+                           static=True)
 
     def _moving_shapes(self, t: float) -> tuple[Obstacle, ...]:
         """The moving obstacles where they are at step ``t``, and the crowd's discs."""
@@ -348,7 +395,7 @@ class World:
             grid = apf.Grid.covering((-margin, -margin), (self.size[0] + margin, self.size[1] + margin), resolution)
             values = grid.map_nodes(lambda nodes: np.minimum(self.static_clearance(nodes), cap), RASTER_CHUNK)
             return apf.Raster(grid, values)
-        return self.cached(("clearance_raster", int(resolution), float(cap), float(margin)), build)
+        return self.cached(("clearance_raster", int(resolution), float(cap), float(margin)), build, static=True)
 
     @property
     def thinnest_obstacle(self) -> float:
@@ -374,7 +421,7 @@ class World:
             ys = np.arange(h / 2, self.size[1], h)
             centres = np.column_stack([a.ravel() for a in np.meshgrid(xs, ys)])
             return centres[self.clearance(centres) > margin + h / np.sqrt(2)]
-        return self.cached(("free_cells", float(margin), int(resolution)), build)
+        return self.cached(("free_cells", float(margin), int(resolution)), build, static=True)
 
     def start_cells(self) -> np.ndarray:
         """The :meth:`free_cells` (resolution 4) in which every point is farther than the goal tolerance from every target."""
@@ -405,19 +452,51 @@ class World:
 
     # -- serialisation -----------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
-        """The world as the world-file contract's mapping (round-trips through ``world_from_dict``)."""
-        data: dict[str, Any] = {
-            "name": self.name,
-            "size": list(self.size),
-            "robot_radius": self.robot_radius,
-            "goal_tolerance": self.goal_tolerance,
-            "field": self.field.as_dict(),
-            "obstacles": [o.to_dict() for o in self.obstacles],
-            "targets": self.targets.tolist(),
-            "starts": self.starts.tolist(),
-        }
+        """The world as the world-file contract's mapping, in the file's units (round-trips through ``world_from_dict``)."""
+        frame, u = self.frame, self.frame.unit
+        grids = [o for o in self.obstacles if isinstance(o, GridObstacle)]
+        data: dict[str, Any] = {"name": self.name}
+        if grids:
+            data["grid"] = dict(grids[0].spec)
+        else:
+            data["size"] = [self.size[0] * u, self.size[1] * u]
+        data.update({
+            "robot": {"radius": self.robot_radius * u, "step": u},
+            "goal_tolerance": self.goal_tolerance * u,
+            "field": frame.field_to_file(self.field),
+            "obstacles": [_obstacle_to_file(o, frame) for o in self.obstacles if not isinstance(o, GridObstacle)],
+            "targets": frame.to_file(self.targets).tolist(),
+            "starts": frame.to_file(self.starts).tolist(),
+        })
         if self.formation is not None:
-            data["formation"] = self.formation.to_dict()
+            data["formation"] = _formation_to_file(self.formation.to_dict(), u)
         if self.formations:
-            data["formations"] = [task.to_dict() for task in self.formations]
+            data["formations"] = [{**_formation_to_file(task.spec.to_dict(), u),
+                                   "start": frame.to_file(task.start).tolist(),
+                                   "target": frame.to_file(task.target).tolist()} for task in self.formations]
         return data
+
+
+def _formation_to_file(spec: dict[str, Any], unit: float) -> dict[str, Any]:
+    spec = dict(spec, comm_range=spec["comm_range"] * unit, spacing=spec["spacing"] * unit)
+    if "offsets" in spec:
+        spec["offsets"] = (np.asarray(spec["offsets"], float) * unit).tolist()
+    return spec
+
+
+def _obstacle_to_file(obstacle: Obstacle, frame: Frame) -> dict[str, Any]:
+    """An obstacle's world-file mapping, in the file's units."""
+    u = frame.unit
+    moved = obstacle.moved(np.zeros(2))   # the shape alone
+    if isinstance(moved, CircleObstacle):
+        data: dict[str, Any] = {"circle": {"center": frame.to_file(moved.center).tolist(), "radius": moved.radius * u}}
+    else:
+        data = {"polygon": frame.to_file(moved.vertices).tolist()}
+    if obstacle.motion is not None:
+        motion = obstacle.motion.to_dict()
+        motion["path"] = (np.asarray(motion["path"], float) * u).tolist()
+        motion["speed"] = motion["speed"] * u
+        if "phase" in motion:
+            motion["phase"] = motion["phase"] * u
+        data["motion"] = motion
+    return data

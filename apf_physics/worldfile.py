@@ -33,8 +33,9 @@ from apf_physics.bundled import resolve_world
 from apf_physics.errors import UserError, WorldError
 from apf_physics.field import FIELD_PRESETS, FieldParams
 from apf_physics.safefile import MAX_FILE_BYTES, open_regular_file, read_regular_file  # noqa: F401 (public here too)
-from apf_physics.obstacles import CircleObstacle, Motion, Obstacle, PolygonObstacle
-from apf_physics.world import FormationSpec, FormationTask, World
+from apf_physics import mapfiles
+from apf_physics.obstacles import CircleObstacle, GridObstacle, Motion, Obstacle, PolygonObstacle
+from apf_physics.world import FormationSpec, FormationTask, Frame, World
 
 T = TypeVar("T")
 
@@ -91,8 +92,9 @@ RASTER_BYTES_PER_TARGET = 1_500
 """Further peak bytes per square unit per target: U is computed from a column per target
 (measured 370 at the default 4 nodes per unit; 1,500 covers a model's observer at 8)."""
 
-_TOP_KEYS = {"name", "size", "robot_radius", "goal_tolerance", "field", "obstacles", "targets", "starts", "formation",
-             "formations"}
+_TOP_KEYS = {"name", "size", "grid", "robot", "robot_radius", "goal_tolerance", "field", "obstacles", "targets", "starts",
+             "formation", "formations"}
+_GRID_KEYS = {"image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh", "mode", "map", "movingai", "cell"}
 _REQUIRED = ("size", "field", "targets")
 
 
@@ -257,7 +259,8 @@ def _parse_name(check: _Checker, value: Any) -> str:
     return value
 
 
-def _parse_field(check: _Checker, value: Any) -> FieldParams:
+def _parse_field(check: _Checker, value: Any, frame: Frame = Frame()) -> FieldParams:
+    """The field in steps: a preset's values are in steps; numbers written in the file are in its units."""
     known = f"(known: {', '.join(FIELD_PRESETS)})"
     if isinstance(value, str):
         if value not in FIELD_PRESETS:
@@ -272,7 +275,7 @@ def _parse_field(check: _Checker, value: Any) -> FieldParams:
         preset = raw["preset"]
         if not isinstance(preset, str) or preset not in FIELD_PRESETS:
             raise check.bad("field.preset", f"unknown preset {_short(preset)} {known}")
-        base = dict(FIELD_PRESETS[preset])
+        base = frame.field_to_file(FieldParams.preset(preset))
     base.update({k: v for k, v in raw.items() if k in names})
     values = {}
     for name in names:
@@ -284,15 +287,20 @@ def _parse_field(check: _Checker, value: Any) -> FieldParams:
                                      nonnegative=not positive)
     if len(check.problems) > problems:
         raise _Invalid
-    return FieldParams(**values)
+    if frame.unit == 1.0:
+        return FieldParams(**values)
+    with np.errstate(all="ignore"):
+        return FieldParams(**{k: float(v) for k, v in frame.field_from_file(values).items()})
 
 
-def _outside(size: tuple[float, float] | None, lower: np.ndarray, upper: np.ndarray) -> str | None:
-    """What to say if the box ``[lower, upper]`` leaves the map, else None (also when the size is unknown)."""
-    if size is None:
+def _outside(box: tuple[np.ndarray, np.ndarray] | None, lower: np.ndarray, upper: np.ndarray) -> str | None:
+    """What to say if ``[lower, upper]`` leaves the map ``box`` (its corners in file coordinates),
+    else None (also when the map is unknown)."""
+    if box is None:
         return None
-    if lower[0] < 0 or lower[1] < 0 or upper[0] > size[0] or upper[1] > size[1]:
-        return f"reaches outside the map [0, {size[0]:g}] x [0, {size[1]:g}]"
+    lo, hi = box
+    if lower[0] < lo[0] or lower[1] < lo[1] or upper[0] > hi[0] or upper[1] > hi[1]:
+        return f"reaches outside the map [{lo[0]:g}, {hi[0]:g}] x [{lo[1]:g}, {hi[1]:g}]"
     return None
 
 
@@ -313,7 +321,7 @@ def _parse_motion(check: _Checker, value: Any, key: str) -> Motion:
     return Motion(path, speed, loop, phase)
 
 
-def _parse_obstacle(check: _Checker, value: Any, key: str, size: tuple[float, float] | None) -> Obstacle:
+def _parse_obstacle(check: _Checker, value: Any, key: str, box: tuple[np.ndarray, np.ndarray] | None) -> Obstacle:
     problems = len(check.problems)
     body = check.mapping(value, key, {"polygon", "circle", "motion"})
     shapes = [k for k in ("polygon", "circle") if k in body]
@@ -333,7 +341,7 @@ def _parse_obstacle(check: _Checker, value: Any, key: str, size: tuple[float, fl
         area = geometry.polygon_area(vertices)
         if abs(area) < 1e-12:
             raise check.bad(k, "polygon has zero area (its vertices are collinear)")
-        outside = _outside(size, vertices.min(axis=0) + reach[0], vertices.max(axis=0) + reach[1])
+        outside = _outside(box, vertices.min(axis=0) + reach[0], vertices.max(axis=0) + reach[1])
         if outside:
             raise check.bad(k, f"polygon {outside}" + (" on its route" if motion is not None else ""))
         if len(check.problems) > problems:
@@ -346,13 +354,13 @@ def _parse_obstacle(check: _Checker, value: Any, key: str, size: tuple[float, fl
     if center is None or radius is None or len(check.problems) > problems:
         raise _Invalid
     c = np.array(center)
-    outside = _outside(size, c - radius + reach[0], c + radius + reach[1])
+    outside = _outside(box, c - radius + reach[0], c + radius + reach[1])
     if outside:
         raise check.bad(k, f"circle {outside}" + (" on its route" if motion is not None else ""))
     return CircleObstacle(c, radius, motion)
 
 
-def _parse_obstacles(check: _Checker, value: Any, size: tuple[float, float] | None) -> tuple[Obstacle, ...]:
+def _parse_obstacles(check: _Checker, value: Any, box: tuple[np.ndarray, np.ndarray] | None) -> tuple[Obstacle, ...]:
     if value is None:
         return ()
     if not isinstance(value, list):
@@ -363,7 +371,7 @@ def _parse_obstacles(check: _Checker, value: Any, size: tuple[float, float] | No
                    if isinstance(o, Mapping) and isinstance(o.get("polygon"), (list, tuple)))
     if vertices > MAX_VERTICES:
         raise check.bad("obstacles", f"at most {MAX_VERTICES:,} polygon vertices in all, got {vertices:,}")
-    parsed = [check.attempt(_parse_obstacle, check, o, f"obstacles[{i}]", size) for i, o in enumerate(value)]
+    parsed = [check.attempt(_parse_obstacle, check, o, f"obstacles[{i}]", box) for i, o in enumerate(value)]
     if any(o is None for o in parsed):
         raise _Invalid
     return tuple(parsed)
@@ -536,20 +544,6 @@ def _check_together(check: _Checker, size, robot_radius, goal_tolerance, params,
                                     f"got {goal_tolerance:g}")
 
 
-def _near(world: World, points: np.ndarray, reach: float) -> World:
-    """``world`` with only the obstacles whose bounding box is within ``reach`` of a point (and
-    any that move): the others cannot change a verdict that looks no farther than ``reach``."""
-    if len(world.obstacles) <= 64 or not len(points):
-        return world
-    lo = np.array([o.bounds[0] for o in world.obstacles]) - reach
-    hi = np.array([o.bounds[1] for o in world.obstacles]) + reach
-    keep = np.array([getattr(o, "motion", None) is not None for o in world.obstacles])
-    for first in range(0, len(points), 256):
-        p = points[first:first + 256, None, :]
-        keep |= np.any(np.all((p >= lo[None]) & (p <= hi[None]), axis=2), axis=0)
-    return replace(world, obstacles=tuple(o for o, k in zip(world.obstacles, keep.tolist()) if k), _cache={})
-
-
 def _check_placement(check: _Checker, world: World) -> None:
     """Targets and starts inside the map and outside the obstacles; starts not yet at a target."""
     size, radius = world.size, world.robot_radius
@@ -559,22 +553,24 @@ def _check_placement(check: _Checker, world: World) -> None:
         edge = world.edge_distance(pts)
         inside = np.full(len(pts), np.inf)
         in_map = np.flatnonzero(edge >= margin)
-        inside[in_map] = _near(world, pts[in_map], margin + 1e-6).obstacle_distance(pts[in_map])
+        inside[in_map] = world.obstacle_distance(pts[in_map])
         # (a formation's start is checked against its own target: _check_formations)
         reached = (world.distance_to_target(pts) <= world.goal_tolerance if key == "starts" and not world.formations
                    else np.zeros(len(pts), bool))
         for i in np.flatnonzero((edge < margin) | (inside < margin) | (inside <= 0) | reached).tolist():
-            where, at = f"{key}[{i}]", pts[i].tolist()
+            where, at = f"{key}[{i}]", [round(v, 9) for v in world.frame.to_file(pts[i]).tolist()]
             if edge[i] < 0:
-                check.bad(where, f"{at} is outside the map [0, {size[0]:g}] x [0, {size[1]:g}]")
+                lo, hi = world.frame.to_file([0.0, 0.0]), world.frame.to_file(size)
+                check.bad(where, f"{at} is outside the map [{lo[0]:g}, {hi[0]:g}] x [{lo[1]:g}, {hi[1]:g}]")
             elif edge[i] < margin:
-                check.bad(where, f"{at} is closer than the robot radius {radius:g} to the map's edge")
+                check.bad(where, f"{at} is closer than the robot radius {radius * world.frame.unit:g} to the map's edge")
             elif inside[i] <= 0:
                 check.bad(where, f"{at} is inside an obstacle")
             elif inside[i] < margin:
-                check.bad(where, f"{at} is closer than the robot radius {radius:g} to an obstacle")
+                check.bad(where, f"{at} is closer than the robot radius {radius * world.frame.unit:g} to an obstacle")
             else:
-                check.bad(where, f"{at} is already within goal_tolerance {world.goal_tolerance:g} of a target")
+                check.bad(where, f"{at} is already within goal_tolerance {world.goal_tolerance * world.frame.unit:g} "
+                                 "of a target")
 
 
 def _check_formations(check: _Checker, world: World) -> None:
@@ -613,21 +609,82 @@ def _check_routes(check: _Checker, world: World) -> None:
                 check.bad(f"obstacles[{i}].motion", f"the obstacle sweeps over targets[{k}] {target.tolist()}")
 
 
+def _parse_robot(check: _Checker, data: Mapping[str, Any]) -> tuple[float | None, float | None]:
+    """``(radius, step)`` in file units, from ``robot: {radius, step}`` (or the older ``robot_radius``).
+
+    Unset, the radius is a quarter of the step and the step is one file unit.
+    """
+    robot = check.attempt(check.mapping, data["robot"], "robot", {"radius", "step"}) if "robot" in data else {}
+    if robot is None:
+        return None, None
+    if "radius" in robot and "robot_radius" in data:
+        check.bad("robot_radius", "given twice: write robot: {radius: ...} alone")
+    step = check.attempt(check.number, robot.get("step", 1.0), "robot.step", positive=True)
+    if "radius" in robot:
+        radius = check.attempt(check.number, robot["radius"], "robot.radius", positive=True)
+    elif "robot_radius" in data:
+        radius = check.attempt(check.number, data["robot_radius"], "robot_radius", positive=True)
+    else:
+        radius = None if step is None else 0.25 * step
+    return radius, step
+
+
+def _parse_grid(check: _Checker, value: Any, source: str) -> mapfiles.OccupancyMap:
+    """The ``grid:`` layer: a ROS map (its YAML with ``map:``, or its keys inline) or a MovingAI map."""
+    body = check.mapping(value, "grid", _GRID_KEYS)
+    folder = Path(source).parent if source != "<dict>" else Path.cwd()
+
+    def path_of(key: str) -> Path:
+        name = body[key]
+        if not isinstance(name, str) or not name:
+            raise check.bad(f"grid.{key}", f"expected a file name, got {_kind(name)}")
+        return (folder / name).resolve()
+
+    try:
+        if "movingai" in body:
+            extra = set(body) - {"movingai", "cell"}
+            if extra:
+                raise check.bad("grid", f"a MovingAI grid takes movingai and cell, not {', '.join(sorted(extra))}")
+            cell = check.number(body.get("cell", 1.0), "grid.cell", positive=True)
+            return mapfiles.read_movingai_map(path_of("movingai"), cell)
+        if "map" in body:
+            if set(body) != {"map"}:
+                raise check.bad("grid", "'map: FILE.yaml' names a ROS map YAML, which holds the other keys")
+            return mapfiles.read_ros_map(path_of("map"))
+        if "image" not in body:
+            raise check.bad("grid", "give 'movingai: FILE.map', 'map: FILE.yaml' (a ROS map) or the ROS map keys "
+                                    "inline (image, resolution, origin, ...)")
+        return mapfiles.ros_map_from_dict({k: v for k, v in body.items()}, str(source), folder)
+    except WorldError as exc:   # the map file's own problems, each naming that file
+        for line in str(exc).splitlines():
+            check.bad("grid", line.removeprefix(f"{source}: "))
+        raise _Invalid from None
+
+
 def _build(check: _Checker, data: Any, source: str) -> World | None:
     if not isinstance(data, Mapping):
         check.bad("", f"a world file must be a mapping of keys, got {_kind(data)}")
         return None
     several = data.get("formations") is not None
-    check.mapping(data, "", _TOP_KEYS, required=("size", "field") if several else _REQUIRED)
+    has_grid = data.get("grid") is not None
+    required = [k for k in (("field",) if several else ("field", "targets"))] + ([] if has_grid else ["size"])
+    check.mapping(data, "", _TOP_KEYS, required=required)
     if several and data.get("formation") is not None:
         check.bad("formation", "'formation' and 'formations' together: give one formation, or a list of them")
-    size = check.attempt(_parse_size, check, data["size"]) if "size" in data else None
+    if has_grid and "size" in data:
+        check.bad("size", "a world with a grid takes its size from the grid: leave size out")
+    grid = check.attempt(_parse_grid, check, data["grid"], source) if has_grid else None
+    size = grid.size if grid is not None else (check.attempt(_parse_size, check, data["size"]) if "size" in data else None)
+    offset = np.asarray(grid.origin if grid is not None else (0.0, 0.0), float)
+    box = (offset, offset + np.asarray(size, float)) if size is not None else None
     default_name = Path(source).stem if source != "<dict>" else "world"
     name = check.attempt(_parse_name, check, data.get("name", default_name))
-    robot_radius = check.attempt(check.number, data.get("robot_radius", 0.25), "robot_radius", positive=True)
-    goal_tolerance = check.attempt(check.number, data.get("goal_tolerance", 0.75), "goal_tolerance", positive=True)
-    params = check.attempt(_parse_field, check, data["field"]) if "field" in data else None
-    obstacles = check.attempt(_parse_obstacles, check, data.get("obstacles"), size)
+    robot_radius, step = _parse_robot(check, data)
+    frame = Frame((float(offset[0]), float(offset[1])), float(step if step is not None else 1.0))
+    goal_tolerance = check.attempt(check.number, data.get("goal_tolerance", 0.75 * frame.unit), "goal_tolerance",
+                                   positive=True)
+    params = check.attempt(_parse_field, check, data["field"], frame) if "field" in data else None
+    obstacles = check.attempt(_parse_obstacles, check, data.get("obstacles"), box)
     targets = (check.attempt(check.points, data["targets"], "targets", at_least=1, at_most=MAX_TARGETS, what="targets")
                if "targets" in data else None)
     starts = check.attempt(check.points, data.get("starts") or [], "starts", at_most=MAX_STARTS, what="starts")
@@ -639,15 +696,54 @@ def _build(check: _Checker, data: Any, source: str) -> World | None:
             targets = np.array([task.target for task in formations])
         if not data.get("starts"):
             starts = np.array([task.start for task in formations])
+    # everything in steps, from the map's lower-left corner (docs/model.md, "Units")
+    u = frame.unit
+    to_world = (lambda pts: (np.asarray(pts, float) - offset) / u)
+    size = None if size is None else (size[0] / u, size[1] / u)
+    robot_radius = None if robot_radius is None else robot_radius / u
+    goal_tolerance = None if goal_tolerance is None else goal_tolerance / u
+    targets = None if targets is None else to_world(targets)
+    starts = None if starts is None else to_world(starts).reshape(-1, 2)
+    if obstacles is not None:
+        obstacles = tuple(_obstacle_to_world(o, offset, u) for o in obstacles)
+        if grid is not None:
+            obstacles += (GridObstacle(grid.occupied, grid.cell / u, (0.0, 0.0), spec=_grid_spec(data["grid"], source)),)
+    formation = None if formation is None else _formation_to_world(formation, u)
+    formations = tuple(FormationTask(to_world(t.start), to_world(t.target), _formation_to_world(t.spec, u))
+                       for t in formations or ())
     _check_together(check, size, robot_radius, goal_tolerance, params, obstacles, targets)
     if check.problems:
         return None
     world = World(name, size, robot_radius, goal_tolerance, params, obstacles, targets, starts, formation, source,
-                  formations or ())
+                  formations, frame=frame)
     _check_placement(check, world)
     _check_routes(check, world)
     _check_formations(check, world)
     return world
+
+
+def _grid_spec(value: Mapping[str, Any], source: str) -> dict[str, Any]:
+    """The ``grid:`` mapping with its file names made absolute (so a world saved elsewhere still finds them)."""
+    folder = Path(source).parent if source != "<dict>" else Path.cwd()
+    return {k: (str((folder / v).resolve()) if k in ("image", "map", "movingai") else v) for k, v in value.items()}
+
+
+def _obstacle_to_world(obstacle: Obstacle, offset: np.ndarray, unit: float) -> Obstacle:
+    if unit == 1.0 and not offset.any():
+        return obstacle
+    motion = obstacle.motion
+    if motion is not None:
+        motion = Motion(np.asarray(motion.path, float) / unit, motion.speed / unit, motion.loop, motion.phase / unit)
+    if isinstance(obstacle, CircleObstacle):
+        return CircleObstacle((obstacle.center - offset) / unit, obstacle.radius / unit, motion)
+    return PolygonObstacle((obstacle.vertices - offset) / unit, motion)
+
+
+def _formation_to_world(spec: FormationSpec, unit: float) -> FormationSpec:
+    if unit == 1.0:
+        return spec
+    return replace(spec, comm_range=spec.comm_range / unit, spacing=spec.spacing / unit,
+                   offsets=tuple((a / unit, b / unit) for a, b in spec.offsets))
 
 
 def world_from_dict(data: Any, source: str = "<dict>") -> World:
@@ -851,7 +947,15 @@ def load_world(path: str | Path) -> World:
             the contract (every problem, one line each).
     """
     path = resolve_world(path)
-    return world_from_dict(read_yaml_file(path, "world", WorldError), str(path))
+    if Path(path).suffix.lower() == ".map":
+        raise WorldError(f"{path}: a MovingAI map alone has no target: evaluate its scenarios with "
+                         f"`apf-physics eval {path} --scen {path}.scen`, or write a world file with "
+                         f"'grid: {{movingai: {Path(path).name}}}' and targets")
+    data = read_yaml_file(path, "world", WorldError)
+    if isinstance(data, Mapping) and "image" in data and "resolution" in data:
+        raise WorldError(f"{path}: a ROS map alone has no target: write a world file with "
+                         f"'grid: {{map: {Path(path).name}}}', robot: {{radius, step}}, a field and targets")
+    return world_from_dict(data, str(path))
 
 
 class _WorldDumper(yaml.SafeDumper):

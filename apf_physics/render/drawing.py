@@ -318,7 +318,12 @@ class FieldImage:
     def _draw_obstacles(self, image: np.ndarray, obstacles: Sequence, min_px: float) -> None:
         edge = max(1, self.halo_width)
         for obstacle in obstacles:
-            if hasattr(obstacle, "vertices"):
+            if isinstance(obstacle, GridObstacle):   # its cells, as the boxes that tile them, filled without edges
+                boxes = obstacle.rectangles()
+                corners = np.stack([boxes[:, [0, 1]], boxes[:, [2, 1]], boxes[:, [2, 3]], boxes[:, [0, 3]]], axis=1)
+                pts = self._fixed(corners.reshape(-1, 2)).reshape(-1, 4, 2)
+                cv2.fillPoly(image, list(pts), OBSTACLE_FILL, cv2.LINE_AA, _SHIFT)
+            elif hasattr(obstacle, "vertices"):
                 pts = self._fixed(obstacle.vertices)
                 cv2.fillPoly(image, [pts], OBSTACLE_FILL, cv2.LINE_AA, _SHIFT)
                 cv2.polylines(image, [pts], True, OBSTACLE_EDGE, edge, cv2.LINE_AA, _SHIFT)
@@ -470,7 +475,12 @@ def _obstacle_mask(obstacles: Sequence, grid) -> np.ndarray:
     """
     mask = np.zeros(grid.shape, dtype=np.uint8)
     for obstacle in obstacles:
-        if hasattr(obstacle, "vertices"):
+        if isinstance(obstacle, GridObstacle):
+            boxes = obstacle.rectangles()
+            corners = np.stack([boxes[:, [0, 1]], boxes[:, [2, 1]], boxes[:, [2, 3]], boxes[:, [0, 3]]], axis=1)
+            pts = np.round(grid.to_index(corners.reshape(-1, 2)) * _ONE).astype(np.int32).reshape(-1, 4, 2)
+            cv2.fillPoly(mask, list(pts), 1, cv2.LINE_8, _SHIFT)
+        elif hasattr(obstacle, "vertices"):
             pts = np.round(grid.to_index(obstacle.vertices) * _ONE).astype(np.int32)
             cv2.fillPoly(mask, [pts], 1, cv2.LINE_8, _SHIFT)
         elif obstacle.radius > 0:

@@ -1,0 +1,120 @@
+"""Grid maps as worlds: ROS maps in metres, MovingAI maps and scenarios, any step length."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from apf_physics.errors import WorldError
+from apf_physics.evaluate import evaluate
+from apf_physics.mapfiles import write_pgm
+from apf_physics.obstacles import GridObstacle
+from apf_physics.physics import Physics
+from apf_physics.planners import make_planner
+from apf_physics.worldfile import load_world, world_from_dict
+
+MAZE = """type octile
+height 7
+width 9
+map
+@@@@@@@@@
+@...@...@
+@.@.@.@.@
+@.@...@.@
+@.@@@@@.@
+@.......@
+@@@@@@@@@
+"""
+
+
+def scaled(data: dict, k: float) -> dict:
+    """A world-file mapping with every length multiplied by ``k`` (and the robot's step with it)."""
+    def pts(v):
+        return (np.asarray(v, float) * k).tolist()
+    out = dict(data)
+    out["size"] = pts(data["size"])
+    out["robot"] = {"radius": data["robot"]["radius"] * k, "step": data["robot"]["step"] * k}
+    out["goal_tolerance"] = data["goal_tolerance"] * k
+    out["targets"], out["starts"] = pts(data["targets"]), pts(data["starts"])
+    out["obstacles"] = [{"polygon": pts(o["polygon"])} if "polygon" in o else
+                        {"circle": {"center": pts(o["circle"]["center"]), "radius": o["circle"]["radius"] * k}}
+                        for o in data["obstacles"]]
+    f = data["field"]
+    out["field"] = dict(f, katt=f["katt"] / k**2, krep=f["krep"] * k**2, kstr=f["kstr"] / k**2, p0=f["p0"] * k,
+                        ps=f["ps"] * k)
+    return out
+
+
+@pytest.mark.parametrize("k", [0.25, 0.05])
+def test_one_world_at_two_scales_gives_the_same_episodes(k):
+    unit = load_world("fixed20")
+    small = world_from_dict(scaled(unit.to_dict(), k), "<scaled>")
+    assert small.frame.unit == pytest.approx(k)
+    np.testing.assert_allclose(small.starts, unit.starts, atol=1e-9)
+    for name in ("gradient", "dqn"):
+        a = evaluate(make_planner(name), [unit]).episodes
+        b = evaluate(make_planner(name), [small]).episodes
+        assert [e.outcome for e in a] == [e.outcome for e in b]
+        assert [e.steps for e in a] == [e.steps for e in b]
+        np.testing.assert_allclose([e.path_length for e in a], [e.path_length for e in b], rtol=1e-9)
+
+
+def test_ros_map_in_metres_loads_with_its_origin_and_step(tmp_path):
+    occupied = np.zeros((40, 60), bool)          # 3 m x 2 m at 5 cm
+    occupied[:, 28:32] = True                     # a wall across the middle...
+    occupied[30:, 28:32] = False                  # ...with a gap at the top
+    write_pgm(tmp_path / "m.pgm", occupied)
+    (tmp_path / "m.yaml").write_text("image: m.pgm\nresolution: 0.05\norigin: [-1.0, -0.5, 0]\n")
+    (tmp_path / "w.yaml").write_text(
+        "grid: {map: m.yaml}\nrobot: {radius: 0.1, step: 0.1}\nfield: thesis-general\n"
+        "targets: [[1.5, 0.0]]\nstarts: [[-0.5, 0.0]]\ngoal_tolerance: 0.1\n")
+    world = load_world(tmp_path / "w.yaml")
+    assert world.size == pytest.approx((30.0, 20.0))            # in steps of 0.1 m
+    np.testing.assert_allclose(world.targets, [[25.0, 5.0]])
+    grid = world.obstacles[-1]
+    assert isinstance(grid, GridObstacle) and grid.cell == pytest.approx(0.5)
+    # the wall's face is at x = 1.4 m -> 14 steps from the map's left edge at -1 m... (cells 28..31 -> 14..16 steps)
+    assert world.static_clearance(np.array([[12.0, 5.0]]))[0] == pytest.approx(2.0)
+    episodes = evaluate(make_planner("astar"), [world]).episodes
+    assert episodes[0].outcome == "reached"
+    # the world file round-trips, in metres
+    again = world_from_dict(world.to_dict(), str(tmp_path / "w.yaml"))
+    np.testing.assert_allclose(again.targets, world.targets)
+    assert again.frame == world.frame
+
+
+def test_a_start_inside_a_grid_wall_is_reported_in_file_coordinates(tmp_path):
+    occupied = np.zeros((20, 20), bool)
+    occupied[5:15, 5:15] = True
+    write_pgm(tmp_path / "m.pgm", occupied)
+    (tmp_path / "w.yaml").write_text(
+        "grid: {image: m.pgm, resolution: 0.1, origin: [10, 20, 0]}\nrobot: {radius: 0.05, step: 0.1}\n"
+        "field: thesis-general\ntargets: [[10.15, 20.15]]\nstarts: [[11.0, 21.0], [13, 20.5]]\n")
+    with pytest.raises(WorldError) as info:
+        load_world(tmp_path / "w.yaml")
+    lines = str(info.value).splitlines()
+    assert any("starts[0]: [11.0, 21.0] is inside an obstacle" in line for line in lines)
+    assert any("starts[1]: [13.0, 20.5] is outside the map [10, 12] x [20, 22]" in line for line in lines)
+
+
+def test_movingai_map_as_a_world_and_its_physics(tmp_path):
+    (tmp_path / "maze.map").write_text(MAZE)
+    (tmp_path / "w.yaml").write_text(
+        "grid: {movingai: maze.map}\nfield: thesis-general\ntargets: [[7.5, 5.5]]\nstarts: [[1.5, 5.5]]\n")
+    world = load_world(tmp_path / "w.yaml")
+    assert world.size == (9.0, 7.0)
+    # one-cell corridors: a robot of radius 0.25 fits; the wall between (1.5, 5.5) and (3.5, 5.5) is cell (2, 5)
+    assert world.static_clearance(np.array([[1.5, 5.5]]))[0] == pytest.approx(0.5)
+    physics = Physics([world])
+    physics.place([0], np.array([[1.5, 4.5]]))
+    for _ in range(5):                          # pushed right, into the wall cell at x in [2, 3]
+        physics.step(np.array([[1.0, 0.0]]))
+    assert physics.positions[0, 0] <= 2.0 - world.robot_radius + 0.01
+    episodes = evaluate(make_planner("astar"), [world]).episodes
+    assert episodes[0].outcome == "reached"
+
+
+def test_a_map_file_alone_is_not_a_world(tmp_path):
+    (tmp_path / "maze.map").write_text(MAZE)
+    with pytest.raises(WorldError, match="--scen"):
+        load_world(tmp_path / "maze.map")
