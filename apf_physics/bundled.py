@@ -23,13 +23,14 @@ def bundled_dir() -> Path:
 def list_bundled() -> list[str]:
     """Names of the bundled worlds, sorted: ``fixed20``, ``thesis/test1``, ...
 
-    Curricula (``curricula/``) are stage lists, not worlds, and are left out.
+    Curricula (``curricula/``) are stage lists and ``maps/`` holds the map files worlds refer
+    to (a ROS map's YAML and image): neither is a world, and both are left out.
     """
     root = bundled_dir()
     names = []
     for path in root.rglob("*"):
         relative = path.relative_to(root)
-        if path.suffix in WORLD_SUFFIXES and path.is_file() and relative.parts[0] != "curricula":
+        if path.suffix in WORLD_SUFFIXES and path.is_file() and relative.parts[0] not in ("curricula", "maps"):
             names.append(relative.with_suffix("").as_posix())
     return sorted(names)
 

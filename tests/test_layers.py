@@ -31,6 +31,7 @@ LAYERS = [
     ("planners", "envs"),
     ("rollout",),
     ("evaluate", "worldsets"),
+    ("benchmark",),
     ("campaign",),
     ("rl",),
     ("commands", "cli"),

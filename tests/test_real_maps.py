@@ -118,3 +118,41 @@ def test_a_map_file_alone_is_not_a_world(tmp_path):
     (tmp_path / "maze.map").write_text(MAZE)
     with pytest.raises(WorldError, match="--scen"):
         load_world(tmp_path / "maze.map")
+
+
+SCEN = """version 1
+0\tmaze.map\t9\t7\t1\t1\t3\t1\t2.00000000
+1\tmaze.map\t9\t7\t1\t1\t7\t1\t10.00000000
+1\tmaze.map\t9\t7\t1\t5\t7\t5\t6.00000000
+"""
+
+
+def test_eval_runs_movingai_scenarios_per_bucket(tmp_path, capsys):
+    from apf_physics.cli import main
+    import json
+    (tmp_path / "maze.map").write_text(MAZE)
+    (tmp_path / "maze.map.scen").write_text(SCEN)
+    out = tmp_path / "r.json"
+    assert main(["eval", str(tmp_path / "maze.map"), "--scen", str(tmp_path / "maze.map.scen"),
+                 "--planner", "astar,gradient", "--json", str(out)]) == 0
+    table = capsys.readouterr().out
+    assert "3 scenarios" in table and "path/optimal" in table
+    data = json.loads(out.read_text())
+    astar = data[0]
+    assert astar["planner"] == "astar" and [e["bucket"] for e in astar["episodes"]] == [0, 1, 1]
+    assert all(e["success"] for e in astar["episodes"])
+    # in corridors one cell wide no path is shorter than the octile one
+    assert astar["episodes"][0]["path_over_optimal"] >= 0.99
+    assert [b["bucket"] for b in astar["buckets"]] == [0, 1, "all"]
+    # only bucket 1, at most one scenario of it
+    assert main(["eval", str(tmp_path / "maze.map"), "--scen", str(tmp_path / "maze.map.scen"),
+                 "--planner", "astar", "--buckets", "1-1", "--limit", "1"]) == 0
+    assert "1 scenarios" in capsys.readouterr().out
+
+
+def test_scenarios_for_another_map_are_refused(tmp_path):
+    from apf_physics.benchmark import scenario_trials
+    (tmp_path / "maze.map").write_text(MAZE)
+    (tmp_path / "x.scen").write_text("version 1\n0\tmaze.map\t10\t7\t1\t1\t3\t1\t4\n")
+    with pytest.raises(WorldError, match="x.scen"):
+        scenario_trials(tmp_path / "maze.map", tmp_path / "x.scen")

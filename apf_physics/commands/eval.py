@@ -1,15 +1,17 @@
-"""``apf-physics eval WORLD... --planner P [--model M] [--json OUT]``."""
+"""``apf-physics eval WORLD... --planner P [--model M] [--json OUT]``, and ``eval MAP.map --scen MAP.map.scen``."""
 
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 import numpy as np
 
+from apf_physics.benchmark import evaluate_trials, format_bucket_table, parse_buckets, scenario_trials, trials_json
 from apf_physics.campaign import evaluate_on_ray
 from apf_physics.errors import UserError
-from apf_physics.evaluate import evaluate, format_table, write_json
+from apf_physics.evaluate import evaluate, format_table, write_json, write_text_atomic
 from apf_physics.planners import make_planner
 from apf_physics.render.output import check_writable
 from apf_physics.render.page import PAGE, write_results
@@ -30,6 +32,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help="instead of the world's starts, N random free starts per world")
     p.add_argument("--seed", type=int, default=0, help="seed for --random-starts (default 0)")
     p.add_argument("--max-steps", type=int, help="step limit per episode (default: 4 x (width + height))")
+    p.add_argument("--scen", metavar="FILE.scen",
+                   help="MovingAI scenarios: WORLD is the .map, each line of FILE is a start and a goal; the table "
+                        "gives success, collisions and path length against the optimal length per bucket")
+    p.add_argument("--buckets", metavar="A-B", help="with --scen: only the buckets A to B")
+    p.add_argument("--limit", type=int, metavar="N", help="with --scen: at most the first N scenarios of each bucket")
+    p.add_argument("--cell", type=float, default=1.0,
+                   help="with --scen: world units (robot steps) per map cell (default 1)")
     p.add_argument("--json", metavar="OUT", help="write the episodes and summary as JSON")
     p.add_argument("--html", metavar="DIR",
                    help="write a results page DIR/index.html: the table, a field figure and a video per planner "
@@ -73,6 +82,11 @@ def run(args: argparse.Namespace) -> int:
     if args.random_starts is not None and not 1 <= args.random_starts <= MAX_STARTS:
         raise UserError(f"--random-starts: must be from 1 to {MAX_STARTS:,} (as a world file's starts), "
                         f"got {args.random_starts}")
+    if args.scen is not None:
+        return run_scenarios(args)
+    for flag in ("buckets", "limit"):
+        if getattr(args, flag) is not None:
+            raise UserError(f"--{flag}: only with --scen")
     worlds = load_worlds(args.worlds)
     starts = None
     if args.random_starts is not None:
@@ -105,4 +119,28 @@ def run(args: argparse.Namespace) -> int:
         page = write_results(args.html, evaluations, worlds, title=f"apf-physics eval: {', '.join(names)}",
                              progress=not getattr(args, "no_progress", False))
         print(f"wrote {page} (open it in a browser)")
+    return 0
+
+
+def run_scenarios(args: argparse.Namespace) -> int:
+    """``eval MAP.map --scen MAP.map.scen``: every scenario a start-goal pair; a table per bucket."""
+    if len(args.worlds) != 1:
+        raise UserError(f"--scen: give one MovingAI .map as WORLD, got {len(args.worlds)}")
+    for flag in ("ray", "html", "random_starts"):
+        if getattr(args, flag) not in (None, False):
+            raise UserError(f"--{flag.replace('_', '-')}: not with --scen")
+    if args.limit is not None and args.limit < 1:
+        raise UserError(f"--limit: must be at least 1, got {args.limit}")
+    if not args.cell > 0:
+        raise UserError(f"--cell: must be positive, got {args.cell:g}")
+    if args.json:
+        check_writable(args.json, create_parent=True)
+    trials = scenario_trials(args.worlds[0], args.scen, parse_buckets(args.buckets), args.limit, cell=args.cell)
+    names = [n.strip() for n in args.planner.split(",") if n.strip()]
+    evaluations = [evaluate_trials(make_planner(name, model=args.model), trials) for name in names]
+    print(f"{args.worlds[0]}: {len(trials)} scenarios")
+    print(format_bucket_table(evaluations, trials))
+    if args.json:
+        write_text_atomic(args.json, json.dumps(trials_json(evaluations, trials), indent=1))
+        print(f"wrote {args.json}")
     return 0

@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from apf_physics import field as apf
-from apf_physics.obstacles import obstacle_at
+from apf_physics.obstacles import GridObstacle, obstacle_at
 from apf_physics.world import World
 
 RGB = tuple[int, int, int]

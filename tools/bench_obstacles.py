@@ -1,0 +1,99 @@
+"""Cost against the number of obstacles: one 100 x 100 world of K small boxes on a jittered lattice.
+
+    python tools/bench_obstacles.py [--counts 25 100 400 1600 3600] [--steps 200] [--envs 256]
+
+Prints, from one process, for each K (same 8 starts and target, boxes of 0.6 x 0.6):
+
+- start-up: loading the world and building its index (seconds);
+- ``eval --planner dqn`` (the shipped map network, shielded) in seconds per robot-step, the
+  8 starts run together, start-up excluded, and its ratio to the smallest K;
+- the vector env (``NavigateVectorEnv``, random actions and random starts) in robot-steps per
+  second at N = ``--envs``, and its ratio to the smallest K.
+Aim: both ratios at K = 3,600 within 1.5 of K = 25.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from apf_physics.envs import NavigateVectorEnv
+from apf_physics.evaluate import evaluate
+from apf_physics.planners import make_planner
+from apf_physics.worldfile import world_from_dict
+
+STARTS = [[2, 2], [2, 50], [2, 98], [50, 2], [98, 2], [50, 98], [30, 70], [70, 30]]
+TARGET = [96.0, 96.0]
+
+
+def lattice_world(count: int, seed: int = 0):
+    """K boxes of 0.6 on a jittered sqrt(K) x sqrt(K) lattice over 100 x 100, kept off the starts and target."""
+    rng = np.random.default_rng(seed)
+    n = int(round(np.sqrt(count)))
+    spacing = 100.0 / n
+    keep = np.array(STARTS + [TARGET], float)
+    boxes = []
+    for i in range(n):
+        for j in range(n):
+            c = (np.array([i, j]) + 0.5 + rng.uniform(-0.25, 0.25, 2)) * spacing - 0.3
+            if np.min(np.hypot(*(keep - (c + 0.3)).T)) < 1.5:
+                c = c + 1.6 * np.sign(c + 0.3 - keep[np.argmin(np.hypot(*(keep - (c + 0.3)).T))] + 1e-9)
+            c = np.clip(c, 0.2, 99.2)
+            boxes.append({"polygon": [[c[0], c[1]], [c[0] + 0.6, c[1]], [c[0] + 0.6, c[1] + 0.6], [c[0], c[1] + 0.6]]})
+    return world_from_dict({"name": f"lattice{len(boxes)}", "size": [100, 100], "field": "thesis-general",
+                            "obstacles": boxes, "targets": [TARGET], "starts": STARTS}, f"<lattice {count}>")
+
+
+def eval_cost(world, steps: int) -> tuple[float, float]:
+    """(start-up seconds, seconds per robot-step) of the shielded map network from the 8 starts."""
+    planner = make_planner("dqn")
+    t = time.perf_counter()
+    evaluate(planner, [world], max_steps=1)          # start-up: index, rasters, the map network's values
+    startup = time.perf_counter() - t
+    t = time.perf_counter()
+    ev = evaluate(planner, [world], max_steps=steps)
+    robot_steps = sum(e.steps for e in ev.episodes)
+    return startup, (time.perf_counter() - t) / max(robot_steps, 1)
+
+
+def vector_rate(world, envs: int, steps: int) -> float:
+    env = NavigateVectorEnv(world=world, num_envs=envs, starts="random")
+    env.reset(seed=0)
+    actions = np.random.default_rng(0).integers(0, 9, (steps, envs))
+    for a in actions[:10]:
+        env.step(a)
+    t = time.perf_counter()
+    for a in actions:
+        env.step(a)
+    return steps * envs / (time.perf_counter() - t)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--counts", type=int, nargs="+", default=[25, 100, 400, 1600, 3600])
+    parser.add_argument("--steps", type=int, default=200, help="episode limit of the eval runs")
+    parser.add_argument("--env-steps", type=int, default=200, help="vector env steps per K")
+    parser.add_argument("--envs", type=int, default=256)
+    args = parser.parse_args()
+    rows = []
+    for count in args.counts:
+        t = time.perf_counter()
+        world = lattice_world(count)
+        world.shapes, world.near_shapes   # the indexes, built once
+        load = time.perf_counter() - t
+        startup, per_step = eval_cost(world, args.steps)
+        rate = vector_rate(world, args.envs, args.env_steps)
+        rows.append((len(world.obstacles), load, startup, per_step, rate))
+        print(f"K={len(world.obstacles)} done", flush=True)
+    base = rows[0]
+    print(f"{'K':>6} {'load s':>8} {'eval start-up s':>16} {'eval ms/robot-step':>19} {'ratio':>6} "
+          f"{'env robot-steps/s':>18} {'ratio':>6}")
+    for k, load, startup, per_step, rate in rows:
+        print(f"{k:>6} {load:>8.2f} {startup:>16.2f} {per_step * 1e3:>19.3f} {per_step / base[3]:>6.2f} "
+              f"{rate:>18,.0f} {base[4] / rate:>6.2f}")
+
+
+if __name__ == "__main__":
+    main()
