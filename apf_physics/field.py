@@ -130,7 +130,7 @@ def repulsive(points: np.ndarray, obstacles: Sequence[Obstacle] | ShapeSet, para
     beyond, the term is 0, so the cost does not grow with the number of obstacles.
     """
     points = np.asarray(points, dtype=float).reshape(-1, 2)
-    who, _, d, _ = _shape_set(obstacles, params).pairs(points)
+    who, _, d, _ = _shape_set(obstacles, params).pairs(points, with_nearest=False)
     return np.bincount(who, weights=repulsive_term(d, params.krep, params.p0, params.u_max), minlength=len(points))
 
 

@@ -166,8 +166,9 @@ def _polygon_is_simple_small(vertices: np.ndarray) -> bool:
 def triangulate(vertices: np.ndarray) -> list[np.ndarray]:
     """Split a simple counter-clockwise polygon into convex pieces (ear clipping; convex stays whole)."""
     n = len(vertices)
-    edges = np.roll(vertices, -1, axis=0) - vertices
-    turn = edges[:, 0] * np.roll(edges, -1, axis=0)[:, 1] - edges[:, 1] * np.roll(edges, -1, axis=0)[:, 0]
+    edges = np.concatenate([vertices[1:], vertices[:1]]) - vertices
+    following = np.concatenate([edges[1:], edges[:1]])
+    turn = edges[:, 0] * following[:, 1] - edges[:, 1] * following[:, 0]
     if np.all(turn >= -1e-12):
         return [vertices]
     idx = list(range(n))

@@ -23,6 +23,7 @@ clearance test asks about less than ``reach``.
 
 from __future__ import annotations
 
+import copy
 import math
 from typing import Sequence
 
@@ -60,8 +61,13 @@ class ShapeSet:
     def __len__(self) -> int:
         return len(self.obstacles)
 
-    def pairs(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def pairs(self, points: np.ndarray, nearest_only: bool = False,
+              with_nearest: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """Every (point, obstacle) within ``reach`` of each other (some farther ones too).
+
+        ``nearest_only``: only the pairs that may hold a point's least distance (what
+        :meth:`distance` needs): the index's pruned lists, a few per point however dense.
+        ``with_nearest`` False: the nearest points are not computed (None).
 
         Returns:
             ``(point (P,), obstacle (P,), distance (P,), nearest (P, 2))``: indices into
@@ -69,7 +75,8 @@ class ShapeSet:
             ``[−reach, reach]``) and the nearest boundary point.
         """
         points = np.asarray(points, float).reshape(-1, 2)
-        parts = [] if self._index is None else [self._index.pairs(points)]
+        index = self._index if self._index is None or not nearest_only else self._index.nearest_only()
+        parts = [] if index is None else [index.pairs(points, with_nearest)]
         xs, ys = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])
         for i in self.loose:
             obstacle = self.obstacles[i]
@@ -82,12 +89,15 @@ class ShapeSet:
                 d, nearest = obstacle.signed_distance(points[idx], self.reach)
             else:
                 d, nearest = obstacle.signed_distance(points[idx])
-            parts.append((idx, np.full(len(idx), i, np.intp), np.clip(d, -self.reach, self.reach), nearest))
+            parts.append((idx, np.full(len(idx), i, np.intp), np.clip(d, -self.reach, self.reach),
+                          nearest if with_nearest else None))
         if not parts:
-            return np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0), np.zeros((0, 2))
+            return np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0), np.zeros((0, 2)) if with_nearest else None
         if len(parts) == 1:
             return parts[0]
-        return tuple(np.concatenate(column) for column in zip(*parts))   # type: ignore[return-value]
+        who, owner, d, nearest = zip(*parts)
+        return (np.concatenate(who), np.concatenate(owner), np.concatenate(d),
+                np.concatenate(nearest) if with_nearest else None)
 
     def distance(self, points: np.ndarray) -> np.ndarray:
         """Least signed distance from each point to any obstacle: exact below ``reach``; ``reach``
@@ -96,7 +106,7 @@ class ShapeSet:
         if not self.obstacles:
             return np.full(len(points), np.inf)
         out = np.full(len(points), self.reach)
-        who, _, d, _ = self.pairs(points)
+        who, _, d, _ = self.pairs(points, nearest_only=True, with_nearest=False)
         np.minimum.at(out, who, d)
         return out
 
@@ -148,56 +158,118 @@ class _BucketIndex:
             prim = np.concatenate([prim, np.arange(first, len(a))])
         self.a, self.b, self.radius, self.owner, self.kind = a, b, radius, owner, kind
         self.normal, self.pn_a, self.pn_b = normal, pn_a, pn_b
+        self.has_markers = bool(len(marks))
+        self.ax, self.ay = a[:, 0].copy(), a[:, 1].copy()
+        self.dx, self.dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
+        length2 = self.dx**2 + self.dy**2
+        self.inverse_length2 = np.where(length2 > 0, 1.0 / np.where(length2 > 0, length2, 1.0), 0.0)
         order = np.lexsort((prim, owner[prim], bucket))       # by bucket, then obstacle
         self.members = prim[order]
         counts = np.bincount(bucket, minlength=int(self.shape[0] * self.shape[1]))
         self.start = np.concatenate([[0], np.cumsum(counts)])
+        self._pruned: _BucketIndex | None = None
 
-    def pairs(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def nearest_only(self) -> _BucketIndex:
+        """This index with each bucket's list cut to what may be nearest to one of its points (built once).
+
+        Signed distance to an obstacle changes no faster than position, so over a bucket of
+        centre ``c`` and half-diagonal ``h`` it stays within ``h`` of its value at ``c``. The
+        least at any point of the bucket is therefore held by an obstacle with
+        ``d_O(c) ≤ min_O' d_O'(c) + 2h``, and by an edge of it no farther from ``c`` than
+        ``|d_O(c)| + 2h``; the others are dropped (markers stay with their obstacle).
+        """
+        if self._pruned is not None:
+            return self._pruned
+        buckets = np.flatnonzero(np.diff(self.start) > 0)
+        cols = self.shape[0]
+        centres = self.origin + (np.column_stack([buckets % cols, buckets // cols]) + 0.5) * self.side
+        _, _, d, _ = self.pairs(centres, with_nearest=False)   # one row per (bucket, obstacle), in members' order
+        counts = np.diff(self.start)[buckets]
+        bucket_of = np.repeat(buckets, counts)
+        owner = self.owner[self.members]
+        change = np.concatenate([[True], (bucket_of[1:] != bucket_of[:-1]) | (owner[1:] != owner[:-1])])
+        group = np.cumsum(change) - 1                      # (bucket, obstacle) group of each registration
+        first_of_bucket = np.concatenate([[True], bucket_of[1:] != bucket_of[:-1]])[change]
+        least = np.minimum.reduceat(d, np.flatnonzero(first_of_bucket))
+        least = np.repeat(least, np.diff(np.append(np.flatnonzero(first_of_bucket), len(d))))
+        h2 = self.side * math.sqrt(2.0)                    # twice the half-diagonal
+        c = self.origin + (np.column_stack([bucket_of % cols, bucket_of // cols]) + 0.5) * self.side
+        a, seg = self.a[self.members], self.b[self.members] - self.a[self.members]
+        t = np.clip(np.einsum("ij,ij->i", c - a, seg) / np.maximum(np.einsum("ij,ij->i", seg, seg), 1e-300), 0.0, 1.0)
+        gap = np.hypot(*(c - a - t[:, None] * seg).T) - self.radius[self.members]
+        keep = d[group] <= least[group] + h2
+        keep &= (self.kind[self.members] == _MARKER) | (gap <= np.abs(d[group]) + h2)
+        pruned = copy.copy(self)
+        pruned.members = self.members[keep]
+        pruned.start = np.concatenate([[0], np.cumsum(np.bincount(bucket_of[keep], minlength=len(self.start) - 1))])
+        pruned._pruned = pruned
+        self._pruned = pruned
+        return pruned
+
+    def pairs(self, points: np.ndarray, with_nearest: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+        """One row per (point, obstacle) in the points' buckets: see :meth:`ShapeSet.pairs`."""
         cell = np.floor((points - self.origin) / self.side).astype(np.intp)
-        inside = np.all((cell >= 0) & (cell < self.shape), axis=1)
+        inside = (cell[:, 0] >= 0) & (cell[:, 0] < self.shape[0]) & (cell[:, 1] >= 0) & (cell[:, 1] < self.shape[1])
         bucket = np.where(inside, cell[:, 1] * self.shape[0] + cell[:, 0], 0)
         first = self.start[bucket]
         count = np.where(inside, self.start[bucket + 1] - first, 0)
         total = int(count.sum())
         if not total:
-            return np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0), np.zeros((0, 2))
+            return np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0), np.zeros((0, 2)) if with_nearest else None
         who = np.repeat(np.arange(len(points)), count)
         prim = self.members[np.repeat(first - (np.cumsum(count) - count), count) + np.arange(total)]
-        p = points[who]
-        a, b = self.a[prim], self.b[prim]
-        d = b - a
-        length2 = np.maximum(np.einsum("ij,ij->i", d, d), 1e-300)
-        t = np.clip(np.einsum("ij,ij->i", p - a, d) / length2, 0.0, 1.0)
-        q = a + t[:, None] * d
-        diff = p - q
-        gap = np.hypot(diff[:, 0], diff[:, 1])
-        kind = self.kind[prim]
-        gap = np.where(kind == _MARKER, self.reach, gap - self.radius[prim])   # a circle: to its rim
-        owner = self.owner[prim]
+        # the point's offset from its nearest point of each primitive (1-D columns: cheaper than (P, 2) rows)
+        dx, dy = self.dx[prim], self.dy[prim]
+        rx = points[who, 0] - self.ax[prim]
+        ry = points[who, 1] - self.ay[prim]
+        t = (rx * dx + ry * dy) * self.inverse_length2[prim]
+        np.clip(t, 0.0, 1.0, out=t)
+        ex = rx - t * dx
+        ey = ry - t * dy
+        gap = np.hypot(ex, ey) - self.radius[prim]          # a circle: to its rim
+        if self.has_markers:
+            gap = np.where(self.kind[prim] == _MARKER, self.reach, gap)
         # one row per (point, obstacle): the pairs come sorted by point, then obstacle
-        key = who.astype(np.int64) * (int(self.owner.max()) + 1) + owner
-        starts = np.flatnonzero(np.concatenate([[True], key[1:] != key[:-1]]))
-        group = np.cumsum(np.concatenate([[False], key[1:] != key[:-1]]))
-        least = np.minimum.reduceat(gap, starts)
-        best = np.minimum.reduceat(np.where(gap == least[group], np.arange(total), total), starts)
-        kind, t, diff, gap = kind[best], t[best], diff[best], least
-        # sign: circles carry it already; an edge's side (or its vertex's pseudonormal); a marker is inside
+        owner = self.owner[prim]
+        change = np.empty(total, bool)
+        change[0] = True
+        np.not_equal(who[1:], who[:-1], out=change[1:])
+        change[1:] |= owner[1:] != owner[:-1]
+        starts = np.flatnonzero(change)
+        if len(starts) == total:
+            best = np.arange(total)
+            least = gap
+        else:
+            group = np.cumsum(change) - 1
+            least = np.minimum.reduceat(gap, starts)
+            best = np.minimum.reduceat(np.where(gap == least[group], np.arange(total), total), starts)
         e = prim[best]
-        normal = np.where((t <= 0.0)[:, None], self.pn_a[e], np.where((t >= 1.0)[:, None], self.pn_b[e], self.normal[e]))
-        side = np.einsum("ij,ij->i", diff, normal)
-        signed = np.where(kind == _CIRCLE, gap, np.where(kind == _MARKER, -self.reach,
-                                                         np.where(side < 0, -gap, gap)))
-        signed = np.where((kind == _EDGE) & (gap > self.reach), self.reach, signed)
-        nearest = q[best]
+        kind, t, ex, ey = self.kind[e], t[best], ex[best], ey[best]
+        # sign: circles carry it already; an edge's side (or its vertex's pseudonormal); a marker is inside
+        at_a, at_b = t <= 0.0, t >= 1.0
+        side = (ex * np.where(at_a, self.pn_a[e, 0], np.where(at_b, self.pn_b[e, 0], self.normal[e, 0]))
+                + ey * np.where(at_a, self.pn_a[e, 1], np.where(at_b, self.pn_b[e, 1], self.normal[e, 1])))
+        edge = kind == _EDGE
+        signed = np.where(edge & (side < 0), -least, least)
+        signed = np.where(edge & (least > self.reach), self.reach, signed)
+        if self.has_markers:
+            signed = np.where(kind == _MARKER, -self.reach, signed)
+        np.clip(signed, -self.reach, self.reach, out=signed)
+        who, owner = who[best], owner[best]
+        if not with_nearest:
+            return who, owner, signed, None
+        p = points[who]
+        nearest = p - np.column_stack([ex, ey])
         r = self.radius[e]
         circle = (kind == _CIRCLE) & (r > 0)
         if circle.any():
-            norm = np.hypot(diff[circle, 0], diff[circle, 1])
-            unit = np.where(norm[:, None] > 0, diff[circle] / np.where(norm > 0, norm, 1.0)[:, None], [1.0, 0.0])
+            norm = np.hypot(ex[circle], ey[circle])
+            unit = np.where(norm[:, None] > 0, np.column_stack([ex[circle], ey[circle]]) / np.where(norm > 0, norm, 1.0)[:, None],
+                            [1.0, 0.0])
             nearest[circle] = nearest[circle] + unit * r[circle, None]
-        nearest = np.where((kind == _MARKER)[:, None], p[best], nearest)
-        return who[best], owner[best], np.clip(signed, -self.reach, self.reach), nearest
+        if self.has_markers:
+            nearest = np.where((kind == _MARKER)[:, None], p, nearest)
+        return who, owner, signed, nearest
 
 
 def _primitives(obstacles: list[Obstacle], numbers: np.ndarray):

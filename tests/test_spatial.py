@@ -120,3 +120,19 @@ def test_two_boxes_side_by_side_repel_as_one_wall_in_a_grid():
     u_grid = apf.repulsive(seam, [grid], params)[0]
     assert u_grid == apf.repulsive(seam, [whole], params)[0]
     assert apf.repulsive(seam, halves, params)[0] == 2 * u_grid
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), count=st.integers(LOOSE_AT_MOST + 1, 80), reach=st.sampled_from([0.5, 1.75, 3.0]))
+def test_pruned_lists_give_the_same_least_distance(seed, count, reach):
+    """The pruned bucket lists (a few candidates per point) lose no least distance, inside or out."""
+    rng = np.random.default_rng(seed)
+    shapes = random_shapes(rng, count)
+    points = rng.uniform(-4, 28, (600, 2))
+    shape_set = ShapeSet(shapes, reach)
+    who, _, d, _ = shape_set.pairs(points)
+    full = np.full(len(points), reach)
+    np.minimum.at(full, who, d)
+    np.testing.assert_allclose(shape_set.distance(points), full, atol=1e-9)
+    pruned, _, _, _ = shape_set.pairs(points, nearest_only=True)
+    assert len(pruned) <= len(who)
