@@ -350,3 +350,30 @@ def nearest_cell_distance(u: np.ndarray, left: np.ndarray, right: np.ndarray,
     distance[far] = cap
     nearest[far] = u[far]
     return distance, nearest
+
+
+def grid_boundary(occupied: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The boundary of a grid's occupied cells (cells beyond the grid are free) as maximal
+    straight segments, in cell units: ``(a (K, 2), b (K, 2))``.
+
+    Cell ``[r, c]`` is the square ``[c, c+1] × [r, r+1]``; a cell side between an occupied and
+    a free cell is on the boundary, and runs of them along one line are one segment.
+    """
+    padded = np.pad(np.asarray(occupied, bool), 1, constant_values=False)
+    ends_a, ends_b = [], []
+    for axis in (0, 1):
+        # sides across ``axis``: between padded[i] and padded[i + 1] along that axis
+        crossing = np.diff(padded.astype(np.int8), axis=axis) != 0
+        lines = crossing if axis == 0 else crossing.T          # (line, position along it)
+        lines = lines[:, 1:-1]                                   # positions of the grid's own cells
+        edge = np.diff(np.pad(lines.astype(np.int8), ((0, 0), (1, 1))), axis=1)
+        line, first = np.nonzero(edge == 1)
+        _, last = np.nonzero(edge == -1)                         # runs [first, last) along each line
+        position = line.astype(float)                            # the line's offset, in cells
+        if axis == 0:    # horizontal sides at y = line, x from first to last
+            ends_a.append(np.column_stack([first, position]))
+            ends_b.append(np.column_stack([last, position]))
+        else:            # vertical sides at x = line, y from first to last
+            ends_a.append(np.column_stack([position, first]))
+            ends_b.append(np.column_stack([position, last]))
+    return np.vstack(ends_a).astype(float), np.vstack(ends_b).astype(float)

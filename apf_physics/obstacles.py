@@ -17,6 +17,7 @@ from typing import Any, Union
 import numpy as np
 
 from apf_physics import geometry, mapfiles
+from apf_physics.buckets import SegmentIndex
 
 
 @dataclass(frozen=True, eq=False)
@@ -210,29 +211,47 @@ class GridObstacle:
     def signed_distance(self, points: np.ndarray, reach: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
         """Signed distance of ``(N, 2)`` points to the occupied cells (negative inside) and the nearest boundary point.
 
-        Exact wherever ``|d| ≤ reach``; farther points get ``±reach`` (and a nearest point
-        that is not meaningful). The search visits rows outward from each point's own, so
-        its cost grows with ``reach`` in cells, not with the size of the grid.
+        Exact wherever ``|d| ≤ reach``; farther points get ``±reach`` (and themselves as the
+        nearest point). Within a finite reach the boundary of the occupied cells, cut into
+        maximal straight runs, is looked up in a bucket index (built once per reach); without
+        one, rows are searched outward from each point's own. Either way the cost grows with
+        what is near a point, not with the size of the grid.
         """
         points = np.asarray(points, float).reshape(-1, 2)
-        u = (points - np.asarray(self.origin, float)) / self.cell + 1.0     # padded cell coordinates
+        u = (points - np.asarray(self.origin, float)) / self.cell           # cell units
         rows, cols = self.occupied.shape
         col = np.floor(u[:, 0]).astype(np.intp)
         row = np.floor(u[:, 1]).astype(np.intp)
-        within = (col >= 1) & (col <= cols) & (row >= 1) & (row <= rows)
+        within = (col >= 0) & (col < cols) & (row >= 0) & (row < rows)
         inside = np.zeros(len(points), bool)
-        inside[within] = self.occupied[row[within] - 1, col[within] - 1]
-        d = np.empty(len(points))
-        nearest = np.empty((len(points), 2))
+        inside[within] = self.occupied[row[within], col[within]]
         limit = reach / self.cell
-        for flag in (False, True):
-            mine = np.flatnonzero(inside == flag)
-            if len(mine):
-                left, right = self._search_tables(flag)
-                dist, near = geometry.nearest_cell_distance(u[mine], left, right, limit)
-                d[mine] = dist * self.cell * (-1.0 if flag else 1.0)
-                nearest[mine] = (near - 1.0) * self.cell + np.asarray(self.origin, float)
-        return d, nearest
+        if np.isfinite(limit):
+            distance, near = self._boundary_distance(u, limit)
+        else:
+            distance, near = np.empty(len(points)), np.empty((len(points), 2))
+            for flag in (False, True):
+                mine = np.flatnonzero(inside == flag)
+                if len(mine):
+                    left, right = self._search_tables(flag)
+                    distance[mine], near[mine] = geometry.nearest_cell_distance(u[mine] + 1.0, left, right, limit)
+                    near[mine] -= 1.0
+        d = np.where(inside, -distance, distance) * self.cell
+        return d, near * self.cell + np.asarray(self.origin, float)
+
+    def _boundary_distance(self, u: np.ndarray, limit: float) -> tuple[np.ndarray, np.ndarray]:
+        """Distance (cell units) from points to the boundary of the occupied cells, up to ``limit``."""
+        key = ("boundary", float(limit))
+        if key not in self._tables:
+            a, b = geometry.grid_boundary(self.occupied)
+            self._tables[key] = SegmentIndex.of_segments(a, b, limit) if len(a) else None
+        index = self._tables[key]
+        distance, near = np.full(len(u), limit), u.copy()
+        if index is not None:
+            who, _, d, nearest = index.nearest_only().pairs(u)
+            distance[who] = np.abs(d)
+            near[who] = nearest
+        return distance, near
 
     def to_dict(self) -> dict[str, Any]:
         return {"grid": dict(self.spec)}

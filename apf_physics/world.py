@@ -201,6 +201,12 @@ class World:
         return self.cached("static", lambda: tuple(o for o in self.obstacles if o.motion is None), static=True)
 
     @property
+    def static_numbers(self) -> np.ndarray:
+        """Index in :attr:`obstacles` of each of :attr:`static_obstacles` (and so of :attr:`shapes`' obstacles)."""
+        return self.cached("static_numbers", lambda: np.array([i for i, o in enumerate(self.obstacles)
+                                                               if o.motion is None], np.intp), static=True)
+
+    @property
     def moving(self) -> tuple[int, ...]:
         """Indices (in :attr:`obstacles`) of the obstacles that move."""
         return self.cached("moving", lambda: tuple(i for i, o in enumerate(self.obstacles) if o.motion is not None))

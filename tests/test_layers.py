@@ -16,7 +16,7 @@ PACKAGE = Path(__file__).resolve().parent.parent / "apf_physics"
 LAYERS = [
     ("errors", "geometry"),
     ("safefile",),
-    ("mapfiles",),
+    ("mapfiles", "buckets"),
     ("obstacles",),
     ("spatial",),
     ("field",),

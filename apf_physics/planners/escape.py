@@ -115,11 +115,19 @@ class EscapePlanner(Planner):
 
     # -- boundary following -----------------------------------------------------------------
     def _body_distances(self, points: np.ndarray) -> np.ndarray:
-        """(P, B) distance from each point to each body: every obstacle, then the map's four edges."""
-        cols = [o.signed_distance(points)[0] for o in self.world.obstacles_at(self._t)]
-        w, h = self.world.size
-        cols += [points[:, 0], w - points[:, 0], points[:, 1], h - points[:, 1]]
-        return np.column_stack(cols)
+        """(P, B) distance from each point to each body: every obstacle (and other robot), then the
+        map's four edges. Static obstacles come from the world's index: those farther than its
+        reach read the reach (none is followed from so far)."""
+        world = self.world
+        moved = world.obstacles_at(self._t)
+        out = np.full((len(points), len(moved) + 4), world.reach)
+        who, owner, d, _ = world.shapes.pairs(points, with_nearest=False)
+        out[who, world.static_numbers[owner]] = d
+        for i in list(world.moving) + list(range(len(world.obstacles), len(moved))):   # moving ones, the crowd
+            out[:, i] = moved[i].signed_distance(points)[0]
+        w, h = world.size
+        out[:, -4:] = np.column_stack([points[:, 0], w - points[:, 0], points[:, 1], h - points[:, 1]])
+        return out
 
     def _followed(self, points: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Distance to the bodies each robot follows, and its gradient direction (away from them).
