@@ -58,7 +58,8 @@ def scenario_trials(map_path: str | Path, scen_path: str | Path, buckets: tuple[
         map_path: The MovingAI ``.map``.
         scen_path: Its ``.scen`` file.
         buckets: Only scenarios of buckets in this inclusive range.
-        limit: At most this many scenarios of each bucket, the first in the file.
+        limit: At most this many scenarios, taken evenly through the file (every bucket's range of
+            lengths stays represented; a file lists its scenarios by bucket).
         field: The field's preset.
         cell: World units per cell (one step per unit).
 
@@ -69,14 +70,8 @@ def scenario_trials(map_path: str | Path, scen_path: str | Path, buckets: tuple[
     scenarios = read_movingai_scen(scen_path)
     if buckets is not None:
         scenarios = [s for s in scenarios if buckets[0] <= s.bucket <= buckets[1]]
-    if limit is not None:
-        taken: dict[int, int] = {}
-        kept = []
-        for s in scenarios:
-            if taken.get(s.bucket, 0) < limit:
-                kept.append(s)
-                taken[s.bucket] = taken.get(s.bucket, 0) + 1
-        scenarios = kept
+    if limit is not None and len(scenarios) > limit:
+        scenarios = [scenarios[i] for i in np.linspace(0, len(scenarios) - 1, limit).round().astype(int)]
     if not scenarios:
         raise UserError(f"{scen_path}: no scenario" + (f" in buckets {buckets[0]}-{buckets[1]}" if buckets else ""))
     points = [scenario_points(s, grid) for s in scenarios]

@@ -7,7 +7,7 @@ edge costs. Because the clearance is 1-Lipschitz, every point of an edge between
 nodes keeps at least ``robot_radius + margin − 0.5·√2/resolution`` from everything, which is
 more than the robot's radius for the default ``margin`` (0.2 at 4 nodes per unit).
 
-One multi-source Dijkstra run from the nodes at the targets gives, for every node, the cost
+One multi-source shortest-path search from the nodes at the targets (:func:`shortest_paths`) gives, for every node, the cost
 to go to the nearest reachable target and the next node on the way there; every start of a
 world is then served from that one search. The grid path is pulled taut by line-of-sight
 shortcuts (segments whose sampled clearance stays above ``robot_radius + los_margin``), so
@@ -20,7 +20,6 @@ through the physics; the world generator uses :func:`reachable` and
 
 from __future__ import annotations
 
-import heapq
 import math
 
 import cv2
@@ -38,6 +37,57 @@ START_REACH = 1.0     # a start connects to free nodes at most this far away [un
 
 # 8-connected neighbourhood: (row offset, column offset, cost in cells)
 _NEIGHBOURS = [(dr, dc, math.hypot(dr, dc)) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if dr or dc]
+
+
+def shortest_paths(free: np.ndarray, sources: np.ndarray, steps, dtype=np.float64) -> tuple[np.ndarray, np.ndarray]:
+    """Shortest paths over a grid's free nodes to the nearest of ``sources``, with positive edge costs.
+
+    A label-correcting search, vectorised: each round relaxes the edges into the nodes whose
+    cost just fell, so a round costs what the wavefront holds, and rounds run until no cost
+    falls (one per edge of the longest path). Costs are sums along each path in its order, as
+    Dijkstra's are.
+
+    Args:
+        free: (R, C) bool: the nodes that may be entered.
+        sources: Flat indices of the nodes of cost 0.
+        steps: ``(dr, dc, cost)`` per neighbour: the cost of the edge from ``(r, c)`` to
+            ``(r + dr, c + dc)``, a number or an (R, C) array.
+        dtype: The costs' type (float32 reproduces float32 sweeps to the bit).
+
+    Returns:
+        ``(cost (R·C,), next (R·C,))``: the cost to the nearest source (inf: none reachable) and
+        the next node on the way (−1 at sources and unreachable nodes).
+    """
+    rows, cols = free.shape
+    free_flat = np.asarray(free, bool).ravel()
+    cost = np.full(rows * cols, np.inf, dtype)
+    nxt = np.full(rows * cols, -1, np.intp)
+    sources = np.asarray(sources, np.intp).ravel()
+    cost[sources] = 0
+    edges = [(dr, dc, np.broadcast_to(np.asarray(c, dtype), (rows, cols)).ravel()) for dr, dc, c in steps]
+    frontier = np.unique(sources)
+    while len(frontier):
+        r, c = np.divmod(frontier, cols)
+        nodes, values, via = [], [], []
+        for dr, dc, edge in edges:          # x = y − (dr, dc) reaches y over its edge (dr, dc)
+            ok = (r >= dr) & (r - dr < rows) & (c >= dc) & (c - dc < cols)
+            y = frontier[ok]
+            x = y - (dr * cols + dc)
+            value = cost[y] + edge[x]
+            better = free_flat[x] & (value < cost[x])
+            nodes.append(x[better])
+            values.append(value[better])
+            via.append(y[better])
+        nodes, values, via = np.concatenate(nodes), np.concatenate(values), np.concatenate(via)
+        if not len(nodes):
+            break
+        order = np.lexsort((values, nodes))          # per node, its best offer first
+        nodes, values, via = nodes[order], values[order], via[order]
+        first = np.concatenate([[True], nodes[1:] != nodes[:-1]])
+        frontier = nodes[first]
+        cost[frontier] = values[first]
+        nxt[frontier] = via[first]
+    return cost, nxt
 
 
 class SearchGrid:
@@ -134,40 +184,9 @@ class SearchGrid:
 
     # -- shortest paths (Dijkstra from the targets) ------------------------------------------
     def _search(self) -> None:
-        """Multi-source Dijkstra from the goal nodes over the free nodes."""
-        rows, cols = self.grid.shape
-        # Pad with a ring of blocked nodes so neighbours need no bounds checks.
-        pc = cols + 2
-        padded = np.zeros((rows + 2, pc), bool)
-        padded[1:-1, 1:-1] = self.free
-        free = padded.ravel().tolist()
-        steps = [(dr * pc + dc, w / self.grid.resolution) for dr, dc, w in _NEIGHBOURS]
-        cost = [math.inf] * len(free)
-        nxt = [-1] * len(free)
-        r0, c0 = np.divmod(self.goal_nodes, cols)
-        heap = [(0.0, int(i)) for i in (r0 + 1) * pc + c0 + 1]
-        for _, i in heap:
-            cost[i] = 0.0
-        heapq.heapify(heap)
-        pop, push = heapq.heappop, heapq.heappush
-        while heap:
-            d, u = pop(heap)
-            if d > cost[u]:
-                continue
-            for off, w in steps:
-                v = u + off
-                if free[v]:
-                    nd = d + w
-                    if nd < cost[v]:
-                        cost[v] = nd
-                        nxt[v] = u
-                        push(heap, (nd, v))
-        cost_arr = np.asarray(cost).reshape(rows + 2, pc)[1:-1, 1:-1]
-        nxt_arr = np.asarray(nxt).reshape(rows + 2, pc)[1:-1, 1:-1]
-        # Back to unpadded flat indices.
-        nr, nc = np.divmod(nxt_arr, pc)
-        self._next = np.where(nxt_arr >= 0, (nr - 1) * cols + (nc - 1), -1).ravel()
-        self._cost = cost_arr.ravel()
+        """Multi-source shortest paths from the goal nodes over the free nodes."""
+        steps = [(dr, dc, w / self.grid.resolution) for dr, dc, w in _NEIGHBOURS]
+        self._cost, self._next = shortest_paths(self.free, self.goal_nodes, steps)
 
     @property
     def cost_to_go(self) -> np.ndarray:

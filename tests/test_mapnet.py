@@ -113,3 +113,27 @@ def test_a_tiny_imitation_run_writes_a_usable_model_and_resumes(tmp_path):
     assert isinstance(load_policy(tmp_path / "run" / "best.pt"), MapPolicy)
     again = train_imitation(config, phases, out_dir=tmp_path / "run", resume=True)
     assert again.already_finished
+
+
+@pytest.mark.parametrize("world_name", ["fixed20", "maze", "rooms"])
+def test_fixed_point_equals_the_sweeps_to_the_bit(world_name):
+    """The label-correcting search finds exactly what sweeping the whole grid to a fixed point does."""
+    from apf_physics.models.mapnet import UNREACHED, _neighbours, _shift, _sweep, fixed_point
+    from apf_physics.models import resolve_model
+    from apf_physics.observation import MapView
+    from apf_physics import load_world
+    world = load_world(world_name)
+    policy = load_policy(resolve_model("map"))
+    net = policy.network
+    view = MapView.of(world, net.resolution)
+    features, free, goal = (torch.from_numpy(view.features), torch.from_numpy(view.free), torch.from_numpy(view.goal))
+    with torch.no_grad():
+        kappa = net.cost(features)
+        edges = [(dr, dc, w * 0.5 * (kappa + _shift(kappa, dr, dc, float("inf")))) for dr, dc, w in _neighbours(net.resolution)]
+        v = torch.where(goal, 0.0, UNREACHED).to(kappa.dtype)
+        while True:
+            new = _sweep(v, edges, free, goal)
+            if torch.equal(new, v):
+                break
+            v = new
+        assert torch.equal(fixed_point(edges, free, goal), v)

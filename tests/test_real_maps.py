@@ -144,7 +144,7 @@ def test_eval_runs_movingai_scenarios_per_bucket(tmp_path, capsys):
     # in corridors one cell wide no path is shorter than the octile one
     assert astar["episodes"][0]["path_over_optimal"] >= 0.99
     assert [b["bucket"] for b in astar["buckets"]] == [0, 1, "all"]
-    # only bucket 1, at most one scenario of it
+    # only bucket 1, and at most one scenario
     assert main(["eval", str(tmp_path / "maze.map"), "--scen", str(tmp_path / "maze.map.scen"),
                  "--planner", "astar", "--buckets", "1-1", "--limit", "1"]) == 0
     assert "1 scenarios" in capsys.readouterr().out

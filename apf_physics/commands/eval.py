@@ -36,7 +36,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help="MovingAI scenarios: WORLD is the .map, each line of FILE is a start and a goal; the table "
                         "gives success, collisions and path length against the optimal length per bucket")
     p.add_argument("--buckets", metavar="A-B", help="with --scen: only the buckets A to B")
-    p.add_argument("--limit", type=int, metavar="N", help="with --scen: at most the first N scenarios of each bucket")
+    p.add_argument("--limit", type=int, metavar="N", help="with --scen: at most N scenarios, taken evenly through the file (all lengths represented)")
     p.add_argument("--cell", type=float, default=1.0,
                    help="with --scen: world units (robot steps) per map cell (default 1)")
     p.add_argument("--json", metavar="OUT", help="write the episodes and summary as JSON")

@@ -36,6 +36,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from apf_physics.search import shortest_paths
+
 MAP_FEATURES = 2
 """Node features of a :class:`~apf_physics.observation.MapView`: clearance margin, target."""
 MOVE_FEATURES = 5
@@ -97,21 +99,23 @@ class MapNetwork(nn.Module):
             free: (R, C) bool, nodes where the robot fits.
             goal: (R, C) bool, free nodes within reach of a target.
             grad_iterations: Iterations run with gradients after the fixed point is reached.
-            max_iterations: Cap on the iterations without gradients (default: enough for
-                any path that visits every node of a row and a column four times).
+            max_iterations: Sweeps without gradients, at most (default: none; the fixed point is
+                found by :func:`fixed_point`, however long the paths).
         """
         kappa = self.cost(features)
         edges = [(dr, dc, w * 0.5 * (kappa + _shift(kappa, dr, dc, float("inf"))))
                  for dr, dc, w in _neighbours(self.resolution)]
-        cap = max_iterations if max_iterations is not None else 4 * sum(free.shape)
         with torch.no_grad():
             plain = [(dr, dc, e.detach()) for dr, dc, e in edges]
-            v = torch.where(goal, 0.0, UNREACHED).to(kappa.dtype)
-            for k in range(cap):
-                new = _sweep(v, plain, free, goal)
-                if k % 8 == 7 and torch.equal(new, v):
-                    break
-                v = new
+            if max_iterations is None:
+                v = fixed_point(plain, free, goal).to(kappa.dtype)
+            else:
+                v = torch.where(goal, 0.0, UNREACHED).to(kappa.dtype)
+                for k in range(max_iterations):
+                    new = _sweep(v, plain, free, goal)
+                    if k % 8 == 7 and torch.equal(new, v):
+                        break
+                    v = new
         for _ in range(grad_iterations):
             v = _sweep(v, edges, free, goal)
         return v
@@ -132,6 +136,31 @@ def _shift(x: torch.Tensor, dr: int, dc: int, fill: float) -> torch.Tensor:
     padded = F.pad(x[None, None], (1, 1, 1, 1), value=fill)[0, 0]
     rows, cols = x.shape
     return padded[1 + dr:1 + dr + rows, 1 + dc:1 + dc + cols]
+
+
+def fixed_point(edges: list, free: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+    """The fixed point of :func:`_sweep`, without sweeping the whole grid again and again.
+
+    ``−V`` is a shortest-path cost to the goal nodes with positive edge costs, so it is found
+    by :func:`~apf_physics.search.shortest_paths` (relaxing outward from the nodes whose value
+    just fell): each round costs what the wavefront holds, not the whole grid, and long paths
+    (a maze's) are followed to their end. The values are the sweeps' own, to the bit: each is
+    ``V(x + n) − cost``, in float32.
+
+    Args:
+        edges: ``(dr, dc, cost)`` per neighbour: ``cost[r, c]`` of the edge ``(r, c) → (r+dr, c+dc)``.
+        free: (R, C) bool.
+        goal: (R, C) bool.
+
+    Returns:
+        (R, C) float32 V: 0 at the goal nodes, ``UNREACHED`` where no path leads (or blocked).
+    """
+    steps = [(dr, dc, cost.numpy()) for dr, dc, cost in edges]
+    cost_to_go, _ = shortest_paths(free.numpy(), np.flatnonzero(goal.numpy().ravel()), steps, np.float32)
+    reached = free.numpy().ravel() & (cost_to_go <= -UNREACHED)
+    v = np.where(reached, -cost_to_go, np.float32(UNREACHED)).astype(np.float32)
+    v[goal.numpy().ravel()] = 0.0
+    return torch.from_numpy(v.reshape(free.shape))
 
 
 def _sweep(v: torch.Tensor, edges: list, free: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
