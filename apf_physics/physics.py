@@ -16,8 +16,9 @@ with their robot while it keeps needing physics and are parked far away when it 
 Robots in open space (most of them, most of the time) therefore cost pymunk nothing, and the
 cost per robot-step does not grow with the number of robots.
 
-**Tiles.** Each world's obstacles and walls are built once as static shapes in a tile of
-the space. Robots that are alone in their slot share their world's tile: their proxies are
+**Tiles.** Each world's walls are built once as static shapes in a tile of the space, and its
+obstacles piece by piece (a grid's cells as boxes), in :data:`CHUNK` squares, when a robot that
+needs physics first comes near: a large map costs pymunk only where its robots go. Robots that are alone in their slot share their world's tile: their proxies are
 in one collision group and never touch each other. Slots of several robots (formations) get
 a tile each, so that their robots touch each other but never another slot's.
 
@@ -189,6 +190,7 @@ class Physics:
         # ids then say what a robot touched.
         self._tiles: dict[tuple[int, int], int] = {}
         self._tile_offset = np.zeros((0, 2))
+        self._tile_pieces: list[_Pieces] = []            # each tile's obstacles, built where robots come
         self._next_tile_x = 0.0
         self._static_ids = np.zeros(0, np.uintp)        # sorted body ids of obstacles, walls, moving obstacles
         self._static_label = np.zeros((0, 2), np.intp)  # (kind, index) of each, in that order
@@ -272,36 +274,70 @@ class Physics:
         self._free_twice[m * slot:m * (slot + 1)] = 2 * (world.robot_radius + CONTACT_MARGIN + 0.71 / CLEARANCE_RESOLUTION)
 
     def _build_tile(self, world: World) -> int:
-        """Add ``world``'s obstacles and walls as static shapes at a fresh offset; returns the tile index."""
+        """Add ``world``'s walls as static shapes at a fresh offset, and its obstacles to be built
+        where robots come (:meth:`_ensure_obstacles`); returns the tile index."""
         tile = len(self._tile_offset)
         ox, oy = self._next_tile_x + WALL_THICKNESS, 0.0
         w, h = world.size
         self._next_tile_x += w + 2 * WALL_THICKNESS + TILE_GAP
-        bodies: list[tuple[pymunk.Body, list[pymunk.Shape], int, int]] = []   # body, shapes, kind, index
-        for i, obstacle in enumerate(world.obstacles):
-            if obstacle.motion is not None:
-                continue   # moving obstacles are lent per step (_lend_movers)
-            body = pymunk.Body(body_type=pymunk.Body.STATIC)
-            bodies.append((body, _obstacle_shapes(body, obstacle, (ox, oy)), _OBSTACLE, i))
         # Walls are solid slabs just outside the map (a zero-thickness segment could be crossed
         # by a robot squeezed against it): bottom, right, top, left.
         t = WALL_THICKNESS
         slabs = [(ox - t, oy - t, ox + w + t, oy), (ox + w, oy - t, ox + w + t, oy + h + t),
                  (ox - t, oy + h, ox + w + t, oy + h + t), (ox - t, oy - t, ox, oy + h + t)]
+        bodies = []
         for i, (x0, y0, x1, y1) in enumerate(slabs):
             body = pymunk.Body(body_type=pymunk.Body.STATIC)
             wall = pymunk.Poly(body, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
             wall.collision_type = CollisionType.WALL
-            bodies.append((body, [wall], _WALL, i))
-        for body, shapes, _, _ in bodies:
-            for shape in shapes:
-                shape.friction = 0.0
-                shape.elasticity = 0.0
-            self.space.add(body, *shapes)
-        self._label_bodies([(b, k, i) for b, _, k, i in bodies])
+            wall.friction = wall.elasticity = 0.0
+            self.space.add(body, wall)
+            bodies.append((body, _WALL, i))
+        self._label_bodies(bodies)
         self._tile_offset = np.vstack([self._tile_offset, [ox, oy]])
+        self._tile_pieces.append(_Pieces(world))
         self._rows_dirty = True
         return tile
+
+    def _ensure_obstacles(self, robots: np.ndarray, moves: np.ndarray) -> None:
+        """Build the static obstacles near the moves of ``robots`` that are not built yet.
+
+        Each world's obstacles (a grid's cells as boxes) are cut into pieces bucketed by
+        :data:`CHUNK`; the first robot that needs physics near a chunk builds its pieces. A map
+        of any size thus costs pymunk only what its robots come near, and so does start-up.
+        """
+        tiles = self._slot_tile[robots // self.robots_per_slot]
+        p = self._positions[robots]
+        reach = self._slot_radius[robots // self.robots_per_slot] + CONTACT_MARGIN + 0.5
+        lo = np.minimum(p, p + moves[robots]) - reach[:, None]
+        hi = np.maximum(p, p + moves[robots]) + reach[:, None]
+        for tile in np.unique(tiles).tolist():
+            mine = tiles == tile
+            pieces = self._tile_pieces[tile]
+            new = pieces.take(lo[mine], hi[mine])
+            if len(new):
+                self._add_pieces(tile, pieces, new)
+
+    def _add_pieces(self, tile: int, pieces: _Pieces, new: np.ndarray) -> None:
+        """Add pieces ``new`` of ``tile``'s obstacles as static shapes (an obstacle's first piece makes its body)."""
+        offset = tuple(self._tile_offset[tile])
+        labelled = []
+        shapes = []
+        for k in new.tolist():
+            index = int(pieces.owner[k])
+            body = pieces.bodies.get(index)
+            if body is None:
+                body = pieces.bodies[index] = pymunk.Body(body_type=pymunk.Body.STATIC)
+                self.space.add(body)
+                labelled.append((body, _OBSTACLE, index))
+            shapes += _piece_shapes(body, pieces.world.obstacles[index], pieces.box(k), offset)
+        for shape in shapes:
+            shape.friction = 0.0
+            shape.elasticity = 0.0
+        self.space.add(*shapes)
+        if labelled:
+            self._label_bodies(labelled)
+            self._rows_dirty = True
 
     def _label_bodies(self, bodies: list[tuple[pymunk.Body, int, int]]) -> None:
         """Record what each body is (kind, index), for reading contacts from arbiters."""
@@ -596,6 +632,8 @@ class Physics:
         self._release(np.flatnonzero(held & ~simulate))
         self._lend(np.flatnonzero(simulate & ~held))
         robots = np.flatnonzero(simulate)
+        if len(robots):
+            self._ensure_obstacles(robots, moves)
         self._lend_movers(active)
         before = self._positions[robots].copy()
         pairs = self._simulate(robots, v) if len(robots) or self._proxy_dirty.any() else None
@@ -768,6 +806,78 @@ def _closest_approach(p: np.ndarray, dp: np.ndarray) -> np.ndarray:
     return np.sqrt(np.sum(closest * closest, axis=-1))
 
 
+CHUNK = 4.0
+"""Side of the squares [units] by which a world's static obstacles are built into pymunk as robots come near."""
+
+
+class _Pieces:
+    """A world's static obstacles cut into pieces (a polygon or circle whole, a grid box by box),
+    bucketed by :data:`CHUNK` squares, and which of them are built."""
+
+    def __init__(self, world: World):
+        self.world = world
+        owners, boxes = [], []
+        for i, obstacle in enumerate(world.obstacles):
+            if obstacle.motion is not None:
+                continue   # moving obstacles are lent per step (_lend_movers)
+            if isinstance(obstacle, GridObstacle):
+                rects = obstacle.rectangles()
+                owners.append(np.full(len(rects), i))
+                boxes.append(rects)
+            else:
+                lo, hi = obstacle.bounds
+                owners.append([i])
+                boxes.append(np.concatenate([lo, hi])[None])
+        self.owner = np.concatenate(owners).astype(np.intp) if owners else np.zeros(0, np.intp)
+        self.boxes = np.vstack(boxes) if boxes else np.zeros((0, 4))
+        self.built = np.zeros(len(self.owner), bool)
+        self.bodies: dict[int, pymunk.Body] = {}
+        self.cols = max(1, int(math.ceil(world.size[0] / CHUNK)))
+        rows = max(1, int(math.ceil(world.size[1] / CHUNK)))
+        self.chunk_done = np.zeros(self.cols * rows, bool)
+        self.rows = rows
+        c0 = np.clip(np.floor(self.boxes[:, :2] / CHUNK).astype(np.intp), 0, [self.cols - 1, rows - 1])
+        c1 = np.clip(np.floor(self.boxes[:, 2:] / CHUNK).astype(np.intp), 0, [self.cols - 1, rows - 1])
+        span = c1 - c0 + 1
+        count = span[:, 0] * span[:, 1]
+        piece = np.repeat(np.arange(len(self.owner)), count)
+        k = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+        chunk = (c0[piece, 1] + k // span[piece, 0]) * self.cols + c0[piece, 0] + k % span[piece, 0]
+        order = np.argsort(chunk, kind="stable")
+        self.members = piece[order]
+        self.start = np.concatenate([[0], np.cumsum(np.bincount(chunk, minlength=self.cols * rows))])
+
+    def box(self, k: int) -> np.ndarray | None:
+        """The box of piece ``k`` when it is one box of a grid, else None (the whole obstacle)."""
+        return self.boxes[k] if isinstance(self.world.obstacles[self.owner[k]], GridObstacle) else None
+
+    def take(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """The pieces not built yet of the chunks that the boxes ``[lo, hi]`` meet, now marked built."""
+        c0 = np.clip(np.floor(lo / CHUNK).astype(np.intp), 0, [self.cols - 1, self.rows - 1])
+        c1 = np.clip(np.floor(hi / CHUNK).astype(np.intp), 0, [self.cols - 1, self.rows - 1])
+        chunks = np.unique(np.concatenate([
+            np.ravel((r * self.cols + c)) for r0, r1, cc0, cc1 in zip(c0[:, 1], c1[:, 1], c0[:, 0], c1[:, 0])
+            for r, c in [np.meshgrid(np.arange(r0, r1 + 1), np.arange(cc0, cc1 + 1), indexing="ij")]]))
+        chunks = chunks[~self.chunk_done[chunks]]
+        if not len(chunks):
+            return np.zeros(0, np.intp)
+        self.chunk_done[chunks] = True
+        pieces = np.unique(np.concatenate([self.members[self.start[c]:self.start[c + 1]] for c in chunks.tolist()]))
+        pieces = pieces[~self.built[pieces]]
+        self.built[pieces] = True
+        return pieces
+
+
+def _piece_shapes(body: pymunk.Body, obstacle, box: np.ndarray | None, offset: tuple[float, float]) -> list[pymunk.Shape]:
+    """The shapes of one piece: one box of a grid, or a whole polygon or circle."""
+    if box is None:
+        return _obstacle_shapes(body, obstacle, offset)
+    (x0, y0, x1, y1), (ox, oy) = box.tolist(), offset
+    shape = pymunk.Poly(body, [(x0 + ox, y0 + oy), (x1 + ox, y0 + oy), (x1 + ox, y1 + oy), (x0 + ox, y1 + oy)])
+    shape.collision_type = CollisionType.OBSTACLE
+    return [shape]
+
+
 def _obstacle_shapes(body: pymunk.Body, obstacle, offset: tuple[float, float]) -> list[pymunk.Shape]:
     """The obstacle's shapes on ``body``, its written coordinates shifted by ``offset``."""
     ox, oy = offset
@@ -776,9 +886,6 @@ def _obstacle_shapes(body: pymunk.Body, obstacle, offset: tuple[float, float]) -
     elif isinstance(obstacle, CircleObstacle):
         cx, cy = obstacle.center
         shapes = [pymunk.Circle(body, obstacle.radius, offset=(cx + ox, cy + oy))]
-    elif isinstance(obstacle, GridObstacle):   # the occupied cells, as few boxes that tile them exactly
-        shapes = [pymunk.Poly(body, [(x0 + ox, y0 + oy), (x1 + ox, y0 + oy), (x1 + ox, y1 + oy), (x0 + ox, y1 + oy)])
-                  for x0, y0, x1, y1 in obstacle.rectangles().tolist()]
     else:
         raise TypeError(f"unknown obstacle {obstacle!r}")
     for shape in shapes:

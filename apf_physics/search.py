@@ -44,8 +44,9 @@ def shortest_paths(free: np.ndarray, sources: np.ndarray, steps, dtype=np.float6
 
     A label-correcting search, vectorised: each round relaxes the edges into the nodes whose
     cost just fell, so a round costs what the wavefront holds, and rounds run until no cost
-    falls (one per edge of the longest path). Costs are sums along each path in its order, as
-    Dijkstra's are.
+    falls (one per edge of the longest path). Costs are sums along each path in its order, and
+    among equal ways the next node is the one Dijkstra would settle first (lowest cost, then
+    lowest index), so the paths are Dijkstra's.
 
     Args:
         free: (R, C) bool: the nodes that may be entered.
@@ -74,19 +75,25 @@ def shortest_paths(free: np.ndarray, sources: np.ndarray, steps, dtype=np.float6
             y = frontier[ok]
             x = y - (dr * cols + dc)
             value = cost[y] + edge[x]
-            better = free_flat[x] & (value < cost[x])
-            nodes.append(x[better])
-            values.append(value[better])
-            via.append(y[better])
+            offer = free_flat[x] & (value <= cost[x])
+            nodes.append(x[offer])
+            values.append(value[offer])
+            via.append(y[offer])
         nodes, values, via = np.concatenate(nodes), np.concatenate(values), np.concatenate(via)
         if not len(nodes):
             break
-        order = np.lexsort((values, nodes))          # per node, its best offer first
+        # per node its best offer: the lowest cost, then (as Dijkstra settles them) the via node
+        # of lowest cost, then of lowest index
+        order = np.lexsort((via, cost[via], values, nodes))
         nodes, values, via = nodes[order], values[order], via[order]
         first = np.concatenate([[True], nodes[1:] != nodes[:-1]])
-        frontier = nodes[first]
-        cost[frontier] = values[first]
-        nxt[frontier] = via[first]
+        nodes, values, via = nodes[first], values[first], via[first]
+        lower = values < cost[nodes]
+        held = nxt[nodes]
+        tie = ~lower & (held >= 0) & ((cost[via] < cost[held]) | ((cost[via] == cost[held]) & (via < held)))
+        cost[nodes[lower]] = values[lower]
+        nxt[nodes[lower | tie]] = via[lower | tie]
+        frontier = nodes[lower]
     return cost, nxt
 
 

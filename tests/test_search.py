@@ -243,3 +243,41 @@ def test_curriculum_reports_a_bad_world_file_by_name(tmp_path):
         load_curriculum(tmp_path / "none.yaml")
     with pytest.raises(UserError, match="not valid YAML"):
         load_curriculum(_write(tmp_path, "stages: [", name="broken.yaml"))
+
+
+def _dijkstra(free, sources, steps):
+    """Reference: a heap Dijkstra over the free nodes (the next node: the first settled that gives the least cost)."""
+    import heapq
+    rows, cols = free.shape
+    cost = np.full(rows * cols, np.inf)
+    nxt = np.full(rows * cols, -1)
+    heap = [(0.0, int(s)) for s in sources]
+    for _, s in heap:
+        cost[s] = 0.0
+    heapq.heapify(heap)
+    while heap:
+        d, u = heapq.heappop(heap)
+        if d > cost[u]:
+            continue
+        r, c = divmod(u, cols)
+        for dr, dc, w in steps:
+            rr, cc = r - dr, c - dc
+            if 0 <= rr < rows and 0 <= cc < cols and free[rr, cc]:
+                v = rr * cols + cc
+                if d + w < cost[v]:
+                    cost[v], nxt[v] = d + w, u
+                    heapq.heappush(heap, (d + w, v))
+    return cost, nxt
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_vectorised_shortest_paths_are_dijkstras(seed):
+    from apf_physics.search import _NEIGHBOURS, shortest_paths
+    rng = np.random.default_rng(seed)
+    free = rng.random((23, 31)) > 0.3
+    sources = rng.choice(np.flatnonzero(free.ravel()), size=2, replace=False)
+    steps = [(dr, dc, w / 4) for dr, dc, w in _NEIGHBOURS]
+    cost, nxt = shortest_paths(free, sources, steps)
+    want_cost, want_next = _dijkstra(free, sources, steps)
+    np.testing.assert_array_equal(cost, want_cost)
+    np.testing.assert_array_equal(nxt, want_next)
