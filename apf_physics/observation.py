@@ -423,7 +423,8 @@ class MapView:
         def build() -> MapView:
             grid = Grid.covering((0.0, 0.0), world.size, resolution)
             points = grid.node_points()
-            clearance = world.static_clearance(points).reshape(grid.shape)
+            clearance = world.cached(("node_clearance", int(resolution)), lambda: world.static_clearance(
+                points).reshape(grid.shape), static=True)   # the same for every target
             free = clearance >= world.robot_radius + margin
             near = np.full(len(points), np.inf)
             for target in world.targets:

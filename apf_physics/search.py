@@ -20,6 +20,7 @@ through the physics; the world generator uses :func:`reachable` and
 
 from __future__ import annotations
 
+import heapq
 import math
 
 import cv2
@@ -114,7 +115,8 @@ class SearchGrid:
         self.world = world
         self.grid = Grid.covering((0.0, 0.0), world.size, resolution)
         self.margin = float(margin)
-        self.clearance = world.static_clearance(self.grid.node_points()).reshape(self.grid.shape)
+        self.clearance = world.cached(("node_clearance", int(resolution)), lambda: world.static_clearance(
+            self.grid.node_points()).reshape(self.grid.shape), static=True)   # the same for every target
         self.free = self.clearance >= world.robot_radius + self.margin
         self._labels: np.ndarray | None = None
         self._cost: np.ndarray | None = None
