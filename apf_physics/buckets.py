@@ -15,6 +15,8 @@ import numpy as np
 
 EDGE, DISC, MARKER = 0, 1, 2
 """Kinds of primitive: a polygon's edge (or a bare segment), a disc, a bucket inside an owner."""
+REGISTER_CHUNK = 2048
+"""Primitives registered in buckets at a time (their temporaries stay within about 30 MB)."""
 MAX_BUCKETS = 64_000_000
 """Most buckets of one index (larger ones are taken beyond, up to ``reach / √2``)."""
 
@@ -38,7 +40,7 @@ class SegmentIndex:
             there read ``−reach`` for it.
     """
 
-    def __init__(self, reach: float, primitives: tuple, interior: Callable | None = None):
+    def __init__(self, reach: float, primitives: tuple, interior: Callable | None = None, nearest: bool = False):
         a, b, radius, owner, kind, normal, pn_a, pn_b = primitives
         lo = np.minimum(a, b) - radius[:, None]
         hi = np.maximum(a, b) + radius[:, None]
@@ -51,23 +53,22 @@ class SegmentIndex:
             side = min(reach / math.sqrt(2.0), float(np.sqrt(np.prod(extent) / MAX_BUCKETS)) * 1.01)
         self.side = side
         self.shape = np.maximum(np.ceil(extent / side).astype(np.intp), 1)     # (cols, rows)
-        # (bucket, primitive) registrations: each edge or circle in every bucket whose centre is
-        # within reach plus half a bucket's diagonal of it (every point of the bucket within reach of it)
-        c0 = np.floor((lo - reach - self.origin) / side).astype(np.intp).clip(0, self.shape - 1)
-        c1 = np.floor((hi + reach - self.origin) / side).astype(np.intp).clip(0, self.shape - 1)
-        span = c1 - c0 + 1
-        count = span[:, 0] * span[:, 1]
-        prim = np.repeat(np.arange(len(a)), count)
-        k = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-        bx = c0[prim, 0] + k % span[prim, 0]
-        by = c0[prim, 1] + k // span[prim, 0]
-        centre = self.origin + (np.column_stack([bx, by]) + 0.5) * side
-        seg = b[prim] - a[prim]
-        t = np.clip(np.einsum("ij,ij->i", centre - a[prim], seg) / np.maximum(np.einsum("ij,ij->i", seg, seg), 1e-300),
-                    0.0, 1.0)
-        gap = np.hypot(*(centre - a[prim] - t[:, None] * seg).T) - radius[prim]
-        near = gap <= reach + side * math.sqrt(2.0) / 2
-        prim, bucket = prim[near], (by * self.shape[0] + bx)[near]
+        # (bucket, primitive) registrations, a chunk of primitives at a time (bounded memory)
+        chunks = range(0, len(a), REGISTER_CHUNK)
+        if nearest:   # one owner, least distances only: keep what may be nearest (as nearest_only does)
+            least = np.full(int(self.shape[0] * self.shape[1]), np.inf)
+            for first in chunks:
+                bucket, prim, gap = self._register(a, b, radius, first)
+                np.minimum.at(least, bucket, gap)
+            parts = []
+            for first in chunks:
+                bucket, prim, gap = self._register(a, b, radius, first)
+                keep = gap <= least[bucket] + side * math.sqrt(2.0)
+                parts.append((bucket[keep], prim[keep]))
+        else:
+            parts = [self._register(a, b, radius, first)[:2] for first in chunks]
+        bucket = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, np.intp)
+        prim = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, np.intp)
         # markers: buckets wholly inside a polygon, farther than reach from its edges
         marks = interior(self.origin, side, self.shape) if interior is not None else np.zeros((0, 3), np.intp)
         if len(marks):
@@ -91,15 +92,42 @@ class SegmentIndex:
         self.members = prim[order]
         counts = np.bincount(bucket, minlength=int(self.shape[0] * self.shape[1]))
         self.start = np.concatenate([[0], np.cumsum(counts)])
-        self._pruned: SegmentIndex | None = None
+        self._pruned: SegmentIndex | None = self if nearest else None
+
+    def _register(self, a: np.ndarray, b: np.ndarray, radius: np.ndarray,
+                  first: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(bucket, primitive, gap)`` for primitives ``first`` to ``first + REGISTER_CHUNK``: each in every
+        bucket whose centre is within reach plus half a bucket's diagonal of it (so every point of the
+        bucket within reach of it is covered), with its distance from that centre."""
+        side, reach = self.side, self.reach
+        a, b, radius = a[first:first + REGISTER_CHUNK], b[first:first + REGISTER_CHUNK], radius[first:first + REGISTER_CHUNK]
+        lo = np.minimum(a, b) - radius[:, None]
+        hi = np.maximum(a, b) + radius[:, None]
+        c0 = np.floor((lo - reach - self.origin) / side).astype(np.intp).clip(0, self.shape - 1)
+        c1 = np.floor((hi + reach - self.origin) / side).astype(np.intp).clip(0, self.shape - 1)
+        span = c1 - c0 + 1
+        count = span[:, 0] * span[:, 1]
+        prim = np.repeat(np.arange(len(a)), count)
+        k = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+        bx = c0[prim, 0] + k % span[prim, 0]
+        by = c0[prim, 1] + k // span[prim, 0]
+        cx = self.origin[0] + (bx + 0.5) * side - a[prim, 0]
+        cy = self.origin[1] + (by + 0.5) * side - a[prim, 1]
+        dx, dy = b[prim, 0] - a[prim, 0], b[prim, 1] - a[prim, 1]
+        t = np.clip((cx * dx + cy * dy) / np.maximum(dx * dx + dy * dy, 1e-300), 0.0, 1.0)
+        gap = np.hypot(cx - t * dx, cy - t * dy) - radius[prim]
+        near = gap <= reach + side * math.sqrt(2.0) / 2
+        return (by * self.shape[0] + bx)[near], prim[near] + first, gap[near]
 
     @classmethod
     def of_segments(cls, a: np.ndarray, b: np.ndarray, reach: float) -> SegmentIndex:
-        """Bare segments (one owner, no sides): e.g. the boundary of a grid's occupied cells,
-        whose inside the grid itself knows."""
+        """Bare segments (one owner, no sides), for least distances only (:meth:`nearest_only`, built
+        in one pass without the full lists): e.g. the boundary of a grid's occupied cells, whose
+        inside the grid itself knows."""
         k = len(a)
         zeros = np.zeros((k, 2))
-        return cls(reach, (a, b, np.zeros(k), np.zeros(k, np.intp), np.full(k, EDGE, np.int8), zeros, zeros, zeros))
+        return cls(reach, (a, b, np.zeros(k), np.zeros(k, np.intp), np.full(k, EDGE, np.int8), zeros, zeros, zeros),
+                   nearest=True)
 
     def nearest_only(self) -> SegmentIndex:
         """This index with each bucket's list cut to what may be nearest to one of its points (built once).

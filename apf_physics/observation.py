@@ -30,7 +30,7 @@ import numpy as np
 
 from apf_physics import field as apf
 from apf_physics.field import Atlas, Grid, Raster
-from apf_physics.world import World
+from apf_physics.world import RASTER_CHUNK, World
 
 CHANNELS = ("potential", "previous", "memory")
 """Channels an observer can build, in the order they are stacked."""
@@ -104,11 +104,13 @@ def observation_raster(world: World, margin: int, resolution: int) -> Raster:
     """
     def build() -> Raster:
         grid = Grid.covering((-margin, -margin), (world.size[0] + margin, world.size[1] + margin), resolution)
-        nodes = grid.node_points()
-        values = apf.potential(nodes, world.targets, world.shapes, world.field)
-        blocked = (world.edge_distance(nodes) < 0) | (world.obstacle_distance(nodes, static=True) <= 0)
-        values[blocked] = world.u_wall
-        return Raster(grid, values.reshape(grid.shape))
+
+        def values_at(nodes: np.ndarray) -> np.ndarray:
+            values = apf.potential(nodes, world.targets, world.shapes, world.field)
+            blocked = (world.edge_distance(nodes) < 0) | (world.obstacle_distance(nodes, static=True) <= 0)
+            values[blocked] = world.u_wall
+            return values
+        return Raster(grid, grid.map_nodes(values_at, RASTER_CHUNK))
     return world.cached(("observation", int(margin), int(resolution)), build)
 
 
@@ -423,8 +425,7 @@ class MapView:
         def build() -> MapView:
             grid = Grid.covering((0.0, 0.0), world.size, resolution)
             points = grid.node_points()
-            clearance = world.cached(("node_clearance", int(resolution)), lambda: world.static_clearance(
-                points).reshape(grid.shape), static=True)   # the same for every target
+            clearance = world.node_clearance(resolution)
             free = clearance >= world.robot_radius + margin
             near = np.full(len(points), np.inf)
             for target in world.targets:

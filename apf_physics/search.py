@@ -115,8 +115,7 @@ class SearchGrid:
         self.world = world
         self.grid = Grid.covering((0.0, 0.0), world.size, resolution)
         self.margin = float(margin)
-        self.clearance = world.cached(("node_clearance", int(resolution)), lambda: world.static_clearance(
-            self.grid.node_points()).reshape(self.grid.shape), static=True)   # the same for every target
+        self.clearance = world.node_clearance(resolution)
         self.free = self.clearance >= world.robot_radius + self.margin
         self._labels: np.ndarray | None = None
         self._cost: np.ndarray | None = None

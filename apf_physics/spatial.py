@@ -32,6 +32,8 @@ from apf_physics import geometry
 from apf_physics.buckets import DISC, EDGE, SegmentIndex
 from apf_physics.obstacles import CircleObstacle, GridObstacle, Obstacle, PolygonObstacle
 
+QUERY_CHUNK = 1 << 15
+"""Points measured at a time by :meth:`ShapeSet.distance` (a whole map's nodes would hold many pairs each)."""
 LOOSE_AT_MOST = 8
 """Up to this many polygons and circles are measured one by one: an index would cost more than it saves."""
 
@@ -102,8 +104,9 @@ class ShapeSet:
         if not self.obstacles:
             return np.full(len(points), np.inf)
         out = np.full(len(points), self.reach)
-        who, _, d, _ = self.pairs(points, nearest_only=True, with_nearest=False)
-        np.minimum.at(out, who, d)
+        for first in range(0, len(points), QUERY_CHUNK):   # a chunk at a time: the pairs' temporaries stay small
+            who, _, d, _ = self.pairs(points[first:first + QUERY_CHUNK], nearest_only=True, with_nearest=False)
+            np.minimum.at(out, who + first, d)
         return out
 
 

@@ -30,7 +30,7 @@ clearance feature saturates at 2 beyond the radius)."""
 MOVE_REACH = 1.5
 """Clearance along moves (:meth:`World.path_clearance`) is exact up to this much beyond a robot's
 radius: every test of a move asks about less (the shield's room saturates at 1 beyond its margin)."""
-RASTER_CHUNK = 1 << 18
+RASTER_CHUNK = 1 << 16
 """Raster nodes computed at a time (bounds the temporaries of a large map)."""
 
 
@@ -402,6 +402,14 @@ class World:
             values = grid.map_nodes(lambda nodes: np.minimum(self.static_clearance(nodes), cap), RASTER_CHUNK)
             return apf.Raster(grid, values)
         return self.cached(("clearance_raster", int(resolution), float(cap), float(margin)), build, static=True)
+
+    def node_clearance(self, resolution: int) -> np.ndarray:
+        """Static clearance at the nodes of the grid over the map at ``resolution`` nodes per unit
+        (``Grid.covering((0, 0), size, resolution)``), computed in chunks; shared by every target."""
+        def build() -> np.ndarray:
+            grid = apf.Grid.covering((0.0, 0.0), self.size, resolution)
+            return grid.map_nodes(self.static_clearance, RASTER_CHUNK)
+        return self.cached(("node_clearance", int(resolution)), build, static=True)
 
     @property
     def thinnest_obstacle(self) -> float:

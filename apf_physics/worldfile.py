@@ -84,10 +84,12 @@ MEMORY_BUDGET = 2 * 2**30
 MEMORY_BUDGET_VARIABLE = "APF_PHYSICS_MEMORY_BUDGET"
 RASTER_MARGIN = 16.0
 """How far beyond the map rasters reach [units] (observation windows of up to 29 × 29)."""
-RASTER_BYTES_PER_UNIT2 = 6_000
-"""Peak bytes per square unit of rasters (map plus margin) an evaluation builds: measured
-4,600–5,000 (the physics' clearance raster at 8 nodes per unit dominates; then the potential,
-observation and A* rasters at 4), rounded up."""
+RASTER_BYTES_PER_UNIT2 = 4_000
+"""Peak bytes per square unit of rasters (map plus margin) an evaluation builds, computed in
+chunks: measured 2,400–2,600 beyond the process's own (a 300 × 300 world of boxes with the
+window and map networks and A*; a 512 × 512 MovingAI map with the map network and A*), rounded
+up. The physics' clearance raster at 8 nodes per unit dominates; then the A* grid and the
+potential and observation rasters at 4."""
 RASTER_BYTES_PER_TARGET = 1_500
 """Further peak bytes per square unit per target: U is computed from a column per target
 (measured 370 at the default 4 nodes per unit; 1,500 covers a model's observer at 8)."""

@@ -241,12 +241,20 @@ def test_the_memory_budget_can_be_raised_for_big_machines(monkeypatch):
 
 RASTER_PEAK = """
 import sys
-from apf_physics.observation import observation_raster
+import numpy as np
+from apf_physics.mapfiles import write_pgm
+from apf_physics.observation import MapView, observation_raster
 from apf_physics.physics import CLEARANCE_CAP, CLEARANCE_RESOLUTION
 from apf_physics.search import SearchGrid
 from apf_physics.worldfile import raster_memory, world_from_dict
-world = world_from_dict({"size": [150, 150], "field": "thesis-general", "targets": [[75, 75], [140, 20]],
-                         "obstacles": [{"circle": {"center": [30, 30], "radius": 2}}], "starts": [[2, 2]]})
+if sys.argv[1] == "grid":   # a random occupancy grid of 150 x 150 cells, one unit each
+    occupied = np.random.default_rng(0).random((150, 150)) < 0.2
+    occupied[70:80, 70:80] = occupied[15:25, 135:145] = False
+    write_pgm(sys.argv[2] + "/m.pgm", occupied)
+    where = {"grid": {"image": sys.argv[2] + "/m.pgm", "resolution": 1.0, "origin": [0, 0, 0]}}
+else:
+    where = {"size": [150, 150], "obstacles": [{"circle": {"center": [30, 30], "radius": 2}}]}
+world = world_from_dict({**where, "field": "thesis-general", "targets": [[75, 75], [140, 20]], "starts": []})
 def status(key):   # kB figures of /proc/self/status
     return next(int(line.split()[1]) * 1024 for line in open("/proc/self/status") if line.startswith(key + ":"))
 try:   # reset the peak, so that what imports used does not count
@@ -258,19 +266,23 @@ world.clearance_raster(CLEARANCE_RESOLUTION, CLEARANCE_CAP)   # the physics'
 observation_raster(world, 7, 4)                                # the DQN planner's (and u_wall's potential raster)
 world.start_cells()                                            # --random-starts
 SearchGrid.of(world).cost_to_go                                # the A* planner's
+MapView.of(world, 2)                                           # the map network's
 peak = status("VmHWM")
 print(peak - before, raster_memory(world.size, len(world.targets)))
 """
 
 
 @pytest.mark.skipif(not Path("/proc/self/statm").exists(), reason="reads the resident set from /proc")
-def test_the_raster_memory_estimate_covers_what_an_evaluation_builds():
+@pytest.mark.parametrize("kind", ["polygons", "grid"])
+def test_the_raster_memory_estimate_covers_what_an_evaluation_builds(kind, tmp_path):
     """The peak resident memory the rasters of an evaluation of a 150 x 150 map add (every
-    planner's, and random starts'), in a fresh process, stays within the loader's estimate."""
+    planner's, and random starts'), in a fresh process, stays within the loader's estimate,
+    for a map of polygons and for an occupancy grid."""
     import subprocess
     import sys
 
-    out = subprocess.run([sys.executable, "-c", RASTER_PEAK], capture_output=True, text=True, check=True).stdout
+    out = subprocess.run([sys.executable, "-c", RASTER_PEAK, kind, str(tmp_path)], capture_output=True, text=True,
+                         check=True).stdout
     used, estimate = (int(float(v)) for v in out.split())
     assert 0 < used <= estimate
 
