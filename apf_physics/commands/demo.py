@@ -2,7 +2,8 @@
 
 Runs the fixed 20×20 world's three-robot formation with the shipped fixed-world DQN as
 leader, the thesis's general test worlds with the shipped general DQN, a world with moving
-obstacles and a world of four formations crossing each other, beside gradient descent (and
+obstacles, a world of four formations crossing each other and a ROS occupancy map in metres,
+beside gradient descent (and
 escape and A* where they apply); prints the summary table and writes a results page
 (``index.html``: the table, field figures and browser-playable videos) into a folder. The
 worlds are the bundled ones, so the demo runs from any folder.
@@ -26,6 +27,7 @@ from apf_physics.render.video import progress_bar
 GENERAL_WORLDS = tuple(f"thesis/test{i}.yaml" for i in range(1, 5))
 MOVING_WORLD = "moving_obstacles.yaml"
 FORMATIONS_WORLD = "four_formations.yaml"
+MAP_WORLD = "ros_arena.yaml"
 
 
 def add_parser(subparsers) -> None:
@@ -35,8 +37,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--out", default="apf-demo",
                    help="folder for the results page, figures and videos (default: apf-demo)")
     p.add_argument("--worlds", default=None, metavar="DIR",
-                   help=f"a worlds folder with fixed20.yaml, thesis/test1-4.yaml, {MOVING_WORLD} and "
-                        f"{FORMATIONS_WORLD} (default: the bundled worlds)")
+                   help=f"a worlds folder with fixed20.yaml, thesis/test1-4.yaml, {MOVING_WORLD}, "
+                        f"{FORMATIONS_WORLD} and {MAP_WORLD} (default: the bundled worlds)")
     p.add_argument("--no-video", action="store_true", help="skip the videos (the page keeps the table and figures)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -49,16 +51,17 @@ def run(args: argparse.Namespace) -> int:
     fixed_path = worlds_dir / "fixed20.yaml"
     general_paths = [worlds_dir / name for name in GENERAL_WORLDS]
     moving_path, formations_path = worlds_dir / MOVING_WORLD, worlds_dir / FORMATIONS_WORLD
-    for path in [fixed_path, *general_paths, moving_path, formations_path]:
+    map_path = worlds_dir / MAP_WORLD
+    for path in [fixed_path, *general_paths, moving_path, formations_path, map_path]:
         if not path.is_file():
             raise UserError(f"{path}: demo world missing (--worlds needs fixed20.yaml, thesis/test1-4.yaml, "
-                            f"{MOVING_WORLD} and {FORMATIONS_WORLD})")
+                            f"{MOVING_WORLD}, {FORMATIONS_WORLD} and {MAP_WORLD})")
     out = Path(args.out)
     check_writable(out / PAGE, create_parent=True)
 
     fixed = load_world(fixed_path)
     general = [load_world(p) for p in general_paths]
-    moving, crowd = load_world(moving_path), load_world(formations_path)
+    moving, crowd, ros_map = load_world(moving_path), load_world(formations_path), load_world(map_path)
     runs = [
         ("gradient", lambda: evaluate(make_planner("gradient"), [fixed])),
         ("dqn", lambda: evaluate(make_planner("dqn"), [fixed])),
@@ -73,8 +76,11 @@ def run(args: argparse.Namespace) -> int:
         ("dqn, moving", lambda: evaluate(make_planner("dqn"), [moving])),
         ("astar, moving", lambda: evaluate(make_planner("astar"), [moving])),
         ("dqn, four formations", lambda: evaluate(make_planner("dqn"), [crowd], formation=True)),
+        # a ROS map in metres, a robot that moves a quarter of a metre a step
+        ("gradient, ROS map", lambda: evaluate(make_planner("gradient"), [ros_map])),
+        ("dqn, ROS map", lambda: evaluate(make_planner("dqn"), [ros_map])),
     ]
-    media = 2 * (1 + len(general)) + (0 if args.no_video else 1) + 2 + 1
+    media = 2 * (1 + len(general)) + (0 if args.no_video else 1) + 2 + 1 + 2
     with progress_bar(len(runs) + media, "demo", "step", not args.no_progress) as bar:
         evaluations = []
         for name, run_planner in runs:
@@ -136,11 +142,21 @@ def run(args: argparse.Namespace) -> int:
         if clip is not None:
             section.videos.append(clip)
         sections.append(section)
+        gradient_map, dqn_map = evaluations[11:13]
+        section = Section(f"{ros_map.name}: a ROS map (PGM + YAML) in metres, a 0.2 m robot moving 0.25 m a step")
+        section.figures.append(media_for(ros_map, gradient_map, f"{ros_map.name}_gradient", "gradient descent",
+                                         False)[0])
+        figure, clip = media_for(ros_map, dqn_map, f"{ros_map.name}_dqn", "dqn (shipped)", not args.no_video)
+        section.figures.append(figure)
+        if clip is not None:
+            section.videos.append(clip)
+        sections.append(section)
         page = write_page(out, "apf-physics demo: the shipped models", evaluations, sections,
                           notes=["Gradient descent beside the shipped DQN planners, on the fixed 20×20 world "
                                  "(single robot and three-robot formation), the thesis's four general test "
                                  "worlds, a world with moving obstacles (drawn where they are in each frame, "
-                                 "their routes as faint lines) and four formations crossing each other; yellow "
+                                 "their routes as faint lines), four formations crossing each other and a ROS "
+                                 "occupancy map in metres (drawn in steps of 0.25 m); yellow "
                                  "paths, blue starts, blue rings where a robot stopped short."],
                           files=["summary.txt", "summary.json"])
     print(table)
