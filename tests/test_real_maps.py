@@ -156,3 +156,20 @@ def test_scenarios_for_another_map_are_refused(tmp_path):
     (tmp_path / "x.scen").write_text("version 1\n0\tmaze.map\t10\t7\t1\t1\t3\t1\t4\n")
     with pytest.raises(WorldError, match="x.scen"):
         scenario_trials(tmp_path / "maze.map", tmp_path / "x.scen")
+
+
+def test_a_building_floor_at_5cm_loads_within_the_default_budget(tmp_path, monkeypatch):
+    """A SLAM map of one floor: 2000 x 2000 pixels at 5 cm, a robot of 0.2 m moving 0.25 m a step."""
+    from apf_physics.worldfile import MEMORY_BUDGET_VARIABLE, memory_budget, raster_memory
+    monkeypatch.delenv(MEMORY_BUDGET_VARIABLE, raising=False)
+    occupied = np.zeros((2000, 2000), bool)
+    occupied[:, :4] = occupied[:, -4:] = occupied[:4] = occupied[-4:] = True
+    occupied[1000:1004, :1800] = True                      # a corridor wall, with a door at the end
+    write_pgm(tmp_path / "floor.pgm", occupied)
+    (tmp_path / "floor.yaml").write_text("image: floor.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n")
+    (tmp_path / "w.yaml").write_text("grid: {map: floor.yaml}\nrobot: {radius: 0.2, step: 0.25}\n"
+                                     "field: thesis-general\ntargets: [[10, 90]]\nstarts: [[10, 10]]\n")
+    world = load_world(tmp_path / "w.yaml")
+    assert world.size == pytest.approx((400.0, 400.0))
+    assert raster_memory(world.size, 1) <= memory_budget()
+    assert world.static_clearance(np.array([[40.0, 40.0]]))[0] > 1.0

@@ -1,8 +1,10 @@
 """Cost against the number of obstacles: one 100 x 100 world of K small boxes on a jittered lattice.
 
-    python tools/bench_obstacles.py [--counts 25 100 400 1600 3600] [--steps 200] [--envs 256]
+    python tools/bench_obstacles.py [--counts 25 100 400 1600 3600] [--steps 200] [--envs 256] [--spacing S]
 
-Prints, from one process, for each K (same 8 starts and target, boxes of 0.6 x 0.6):
+Prints, from one process, for each K (same 8 starts and target, boxes of 0.6 x 0.6; with
+``--spacing S`` the map grows instead, K boxes S apart, so that the density stays the same and
+only the count grows; the starts and target scale with the map):
 
 - start-up: loading the world and building its index (seconds);
 - ``eval --planner dqn`` (the shipped map network, shielded) in seconds per robot-step, the
@@ -28,22 +30,26 @@ STARTS = [[2, 2], [2, 50], [2, 98], [50, 2], [98, 2], [50, 98], [30, 70], [70, 3
 TARGET = [96.0, 96.0]
 
 
-def lattice_world(count: int, seed: int = 0):
-    """K boxes of 0.6 on a jittered sqrt(K) x sqrt(K) lattice over 100 x 100, kept off the starts and target."""
+def lattice_world(count: int, seed: int = 0, spacing: float | None = None):
+    """K boxes of 0.6 on a jittered sqrt(K) x sqrt(K) lattice over 100 x 100 (or ``spacing`` apart on
+    a map of ``sqrt(K) * spacing``), kept off the starts and target."""
     rng = np.random.default_rng(seed)
     n = int(round(np.sqrt(count)))
-    spacing = 100.0 / n
-    keep = np.array(STARTS + [TARGET], float)
+    side = 100.0 if spacing is None else n * spacing
+    spacing = side / n
+    scale = side / 100.0
+    keep = np.array(STARTS + [TARGET], float) * scale
     boxes = []
     for i in range(n):
         for j in range(n):
             c = (np.array([i, j]) + 0.5 + rng.uniform(-0.25, 0.25, 2)) * spacing - 0.3
             if np.min(np.hypot(*(keep - (c + 0.3)).T)) < 1.5:
                 c = c + 1.6 * np.sign(c + 0.3 - keep[np.argmin(np.hypot(*(keep - (c + 0.3)).T))] + 1e-9)
-            c = np.clip(c, 0.2, 99.2)
+            c = np.clip(c, 0.2, side - 0.8)
             boxes.append({"polygon": [[c[0], c[1]], [c[0] + 0.6, c[1]], [c[0] + 0.6, c[1] + 0.6], [c[0], c[1] + 0.6]]})
-    return world_from_dict({"name": f"lattice{len(boxes)}", "size": [100, 100], "field": "thesis-general",
-                            "obstacles": boxes, "targets": [TARGET], "starts": STARTS}, f"<lattice {count}>")
+    return world_from_dict({"name": f"lattice{len(boxes)}", "size": [side, side], "field": "thesis-general",
+                            "obstacles": boxes, "targets": [keep[-1].tolist()], "starts": keep[:-1].tolist()},
+                           f"<lattice {count}>")
 
 
 def eval_cost(world, steps: int) -> tuple[float, float]:
@@ -76,23 +82,24 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=200, help="episode limit of the eval runs")
     parser.add_argument("--env-steps", type=int, default=200, help="vector env steps per K")
     parser.add_argument("--envs", type=int, default=256)
+    parser.add_argument("--spacing", type=float, help="boxes this far apart on a map that grows with K (fixed density)")
     args = parser.parse_args()
     rows = []
     for count in args.counts:
         t = time.perf_counter()
-        world = lattice_world(count)
+        world = lattice_world(count, spacing=args.spacing)
         world.shapes, world.near_shapes   # the indexes, built once
         load = time.perf_counter() - t
         startup, per_step = eval_cost(world, args.steps)
         rate = vector_rate(world, args.envs, args.env_steps)
-        rows.append((len(world.obstacles), load, startup, per_step, rate))
+        rows.append((len(world.obstacles), world.size[0], load, startup, per_step, rate))
         print(f"K={len(world.obstacles)} done", flush=True)
     base = rows[0]
-    print(f"{'K':>6} {'load s':>8} {'eval start-up s':>16} {'eval ms/robot-step':>19} {'ratio':>6} "
+    print(f"{'K':>6} {'map':>9} {'load s':>8} {'eval start-up s':>16} {'eval ms/robot-step':>19} {'ratio':>6} "
           f"{'env robot-steps/s':>18} {'ratio':>6}")
-    for k, load, startup, per_step, rate in rows:
-        print(f"{k:>6} {load:>8.2f} {startup:>16.2f} {per_step * 1e3:>19.3f} {per_step / base[3]:>6.2f} "
-              f"{rate:>18,.0f} {base[4] / rate:>6.2f}")
+    for k, side, load, startup, per_step, rate in rows:
+        print(f"{k:>6} {side:>9.0f} {load:>8.2f} {startup:>16.2f} {per_step * 1e3:>19.3f} {per_step / base[4]:>6.2f} "
+              f"{rate:>18,.0f} {base[5] / rate:>6.2f}")
 
 
 if __name__ == "__main__":
