@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings, strategies as st
 
 from apf_physics.errors import WorldError
 from apf_physics.evaluate import evaluate
@@ -173,3 +174,33 @@ def test_a_building_floor_at_5cm_loads_within_the_default_budget(tmp_path, monke
     assert world.size == pytest.approx((400.0, 400.0))
     assert raster_memory(world.size, 1) <= memory_budget()
     assert world.static_clearance(np.array([[40.0, 40.0]]))[0] > 1.0
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10_000), density=st.floats(0.05, 0.45), cell=st.sampled_from([1.0, 0.5, 0.25]),
+       heading=st.floats(0, 2 * np.pi), radius=st.floats(0.05, 0.45))
+def test_no_tunnelling_through_grid_cells_at_full_speed(tmp_path_factory, seed, density, cell, heading, radius):
+    """Robots driven at full speed into a random occupancy grid never put their centre in an occupied cell,
+    with the grid's boxes built piece by piece as they come (the same property as for polygons)."""
+    rng = np.random.default_rng(seed)
+    occupied = rng.random((16, 16)) < density
+    folder = tmp_path_factory.mktemp("grid")
+    write_pgm(folder / "m.pgm", occupied)
+    (folder / "w.yaml").write_text(f"grid: {{image: m.pgm, resolution: {cell}, origin: [0, 0, 0]}}\n"
+                                   f"robot: {{radius: {radius * cell}, step: {cell}}}\n"
+                                   f"field: thesis-general\ntargets: [[{0.01 * cell}, {0.01 * cell}]]\n")
+    try:
+        world = load_world(folder / "w.yaml")
+    except WorldError:
+        world = None   # the target fell in a wall: not a world
+    assume(world is not None and len(world.free_cells()) > 0)
+    starts = world.random_free_positions(rng, 8)
+    physics = Physics([world] * 8)
+    physics.place(np.arange(8), starts)
+    velocity = np.column_stack([np.cos(heading + np.arange(8)), np.sin(heading + np.arange(8))]) * physics.max_speed
+    grid = world.obstacles[-1]
+    for _ in range(25):
+        physics.step(velocity)
+        p = physics.positions
+        assert np.all(grid.signed_distance(p)[0] > 0), "robot centre inside an occupied cell"
+        assert np.all(world.edge_distance(p) > 0), "robot centre outside the map"
