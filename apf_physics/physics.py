@@ -295,7 +295,9 @@ class Physics:
             bodies.append((body, _WALL, i))
         self._label_bodies(bodies)
         self._tile_offset = np.vstack([self._tile_offset, [ox, oy]])
-        self._tile_pieces.append(_Pieces(world))
+        # a chunk holds any robot's box of one step (its move, its radius and the margin around)
+        reach = world.robot_radius + CONTACT_MARGIN + 0.5
+        self._tile_pieces.append(_Pieces(world, max(CHUNK, 2 * reach + self.max_speed * self.control_dt)))
         self._rows_dirty = True
         return tile
 
@@ -807,15 +809,17 @@ def _closest_approach(p: np.ndarray, dp: np.ndarray) -> np.ndarray:
 
 
 CHUNK = 4.0
-"""Side of the squares [units] by which a world's static obstacles are built into pymunk as robots come near."""
+"""Least side of the squares [units] by which a world's static obstacles are built into pymunk as
+robots come near (larger where a robot's box of one step would not fit in one)."""
 
 
 class _Pieces:
     """A world's static obstacles cut into pieces (a polygon or circle whole, a grid box by box),
-    bucketed by :data:`CHUNK` squares, and which of them are built."""
+    bucketed by squares of ``side`` (at least :data:`CHUNK`), and which of them are built."""
 
-    def __init__(self, world: World):
+    def __init__(self, world: World, side: float):
         self.world = world
+        self.side = float(side)
         owners, boxes = [], []
         for i, obstacle in enumerate(world.obstacles):
             if obstacle.motion is not None:
@@ -832,12 +836,12 @@ class _Pieces:
         self.boxes = np.vstack(boxes) if boxes else np.zeros((0, 4))
         self.built = np.zeros(len(self.owner), bool)
         self.bodies: dict[int, pymunk.Body] = {}
-        self.cols = max(1, int(math.ceil(world.size[0] / CHUNK)))
-        rows = max(1, int(math.ceil(world.size[1] / CHUNK)))
+        self.cols = max(1, int(math.ceil(world.size[0] / self.side)))
+        rows = max(1, int(math.ceil(world.size[1] / self.side)))
         self.chunk_done = np.zeros(self.cols * rows, bool)
         self.rows = rows
-        c0 = np.clip(np.floor(self.boxes[:, :2] / CHUNK).astype(np.intp), 0, [self.cols - 1, rows - 1])
-        c1 = np.clip(np.floor(self.boxes[:, 2:] / CHUNK).astype(np.intp), 0, [self.cols - 1, rows - 1])
+        c0 = np.clip(np.floor(self.boxes[:, :2] / self.side).astype(np.intp), 0, [self.cols - 1, rows - 1])
+        c1 = np.clip(np.floor(self.boxes[:, 2:] / self.side).astype(np.intp), 0, [self.cols - 1, rows - 1])
         span = c1 - c0 + 1
         count = span[:, 0] * span[:, 1]
         piece = np.repeat(np.arange(len(self.owner)), count)
@@ -852,15 +856,17 @@ class _Pieces:
         return self.boxes[k] if isinstance(self.world.obstacles[self.owner[k]], GridObstacle) else None
 
     def take(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        """The pieces not built yet of the chunks that the boxes ``[lo, hi]`` meet, now marked built."""
-        c0 = np.clip(np.floor(lo / CHUNK).astype(np.intp), 0, [self.cols - 1, self.rows - 1])
-        c1 = np.clip(np.floor(hi / CHUNK).astype(np.intp), 0, [self.cols - 1, self.rows - 1])
-        chunks = np.unique(np.concatenate([
-            np.ravel((r * self.cols + c)) for r0, r1, cc0, cc1 in zip(c0[:, 1], c1[:, 1], c0[:, 0], c1[:, 0])
-            for r, c in [np.meshgrid(np.arange(r0, r1 + 1), np.arange(cc0, cc1 + 1), indexing="ij")]]))
-        chunks = chunks[~self.chunk_done[chunks]]
+        """The pieces not built yet of the chunks that the boxes ``[lo, hi]`` (each smaller than a
+        chunk) meet, now marked built."""
+        top = [self.cols - 1, self.rows - 1]
+        c0 = np.clip(np.floor(lo / self.side).astype(np.intp), 0, top)
+        c1 = np.clip(np.floor(hi / self.side).astype(np.intp), 0, top)
+        corners = np.concatenate([c0[:, 1] * self.cols + c0[:, 0], c0[:, 1] * self.cols + c1[:, 0],
+                                  c1[:, 1] * self.cols + c0[:, 0], c1[:, 1] * self.cols + c1[:, 0]])
+        chunks = corners[~self.chunk_done[corners]]
         if not len(chunks):
             return np.zeros(0, np.intp)
+        chunks = np.unique(chunks)
         self.chunk_done[chunks] = True
         pieces = np.unique(np.concatenate([self.members[self.start[c]:self.start[c + 1]] for c in chunks.tolist()]))
         pieces = pieces[~self.built[pieces]]
