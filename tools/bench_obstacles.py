@@ -38,13 +38,13 @@ def lattice_world(count: int, seed: int = 0, spacing: float | None = None):
     side = 100.0 if spacing is None else n * spacing
     spacing = side / n
     scale = side / 100.0
-    keep = np.array(STARTS + [TARGET], float) * scale
+    keep = np.clip(np.array(STARTS + [TARGET], float) * scale, 1.0, side - 1.0)
     boxes = []
     for i in range(n):
         for j in range(n):
             c = (np.array([i, j]) + 0.5 + rng.uniform(-0.25, 0.25, 2)) * spacing - 0.3
             if np.min(np.hypot(*(keep - (c + 0.3)).T)) < 1.5:
-                c = c + 1.6 * np.sign(c + 0.3 - keep[np.argmin(np.hypot(*(keep - (c + 0.3)).T))] + 1e-9)
+                continue   # kept off the starts and the target
             c = np.clip(c, 0.2, side - 0.8)
             boxes.append({"polygon": [[c[0], c[1]], [c[0] + 0.6, c[1]], [c[0] + 0.6, c[1] + 0.6], [c[0], c[1] + 0.6]]})
     return world_from_dict({"name": f"lattice{len(boxes)}", "size": [side, side], "field": "thesis-general",
