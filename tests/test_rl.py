@@ -549,3 +549,11 @@ def test_lattice_reachable_and_validation_starts(worlds_dir):
     assert not np.isin(val, reachable).any()  # a stream of its own
     (phase,) = phases_for_world(world, preset("fast", eval_random_starts=20))
     assert phase.random_validation.starts == 20 and phase.validation.starts == 40
+
+
+def test_a_list_of_whole_numbers_sets_a_tuple_of_floats():
+    from apf_physics.rl.config import preset, replace
+    config = replace(preset("map"), map_sizes=[50, 100, 250])
+    assert config.map_sizes == (50.0, 100.0, 250.0)
+    with pytest.raises(UserError, match="map_sizes must be a list of float"):
+        replace(preset("map"), map_sizes=["big"])

@@ -390,8 +390,11 @@ def _coerce(name: str, value: Any) -> Any:
         (item,) = {a for a in typing.get_args(base) if a is not Ellipsis}
         if isinstance(value, str):
             value = [value]
-        if isinstance(value, (list, tuple)) and all(isinstance(v, item) and not isinstance(v, bool) for v in value):
-            return tuple(value)
+        numbers = (int, float) if item is float else item        # a whole number is a float too
+        if isinstance(value, (list, tuple)) and all(isinstance(v, numbers) and not isinstance(v, bool) for v in value):
+            return tuple(float(v) if item is float else v for v in value)
+        kind = f"a list of {getattr(item, '__name__', item)}" + (" or null" if optional else "")
+        raise UserError(f"training option {name} must be {kind}, got {value!r}")
     elif base is bool:
         if isinstance(value, bool):
             return value
