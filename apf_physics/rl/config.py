@@ -353,7 +353,7 @@ PRESETS["moving"] = {**PRESETS["general-revisit"], "obs_transform": "relative-lo
                      "families": FAMILIES + MOVING_FAMILIES * len(FAMILIES), "time_limit": 2400.0}
 PRESETS["map"] = {
     "method": "imitation", "reward": "thesis-general", "families": FAMILIES + STRUCTURE_FAMILIES,
-    "map_sizes": (50.0, 50.0, 100.0), "pool_size": 48, "refresh_every": 600, "learning_rate": 3e-3,
+    "map_sizes": (50.0, 100.0, 250.0), "pool_size": 48, "refresh_every": 600, "learning_rate": 3e-3,
     "total_episodes": None, "total_steps": 1_000, "time_limit": 1_800.0, "eval_every": 125, "eval_shield": False,
     "select": ("-collisions", "success", "spl"), "validation_worlds": 24, "validation_starts": 2, "validation_seed": 1,
     "log_every": 50, "checkpoint_every": 250, "hidden": (32, 32), "negative_slope": 0.01,
