@@ -124,7 +124,7 @@ def _shape_set(obstacles: Sequence[Obstacle] | ShapeSet, params: FieldParams) ->
 
 
 def repulsive(points: np.ndarray, obstacles: Sequence[Obstacle] | ShapeSet, params: FieldParams) -> np.ndarray:
-    """``Σ_O U_rep,O`` (docs/model.md eq. 4–7), each term capped at ``u_max``.
+    """``Σ_O U_rep,O`` (SPEC eq. 4–7), each term capped at ``u_max``.
 
     Only the (point, obstacle) pairs within ``p0`` are measured (:class:`~apf_physics.spatial.ShapeSet`):
     beyond, the term is 0, so the cost does not grow with the number of obstacles.

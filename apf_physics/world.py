@@ -36,7 +36,7 @@ RASTER_CHUNK = 1 << 16
 
 @dataclass(frozen=True)
 class Frame:
-    """How a world file's coordinates become the world's (docs/model.md, "Units").
+    """How a world file's coordinates become the world's (README, "Real maps": units).
 
     The world is laid out in **steps**: one unit is the robot's travel per control step, and
     the map's lower-left corner is the origin. A world file in metres with ``robot: {step:
@@ -264,7 +264,7 @@ class World:
                 + tuple(CircleObstacle(c, self.robot_radius) for c in self.crowd))
 
     def potential(self, points: np.ndarray, t: float = 0.0) -> np.ndarray:
-        """Total potential U at ``(N, 2)`` points at control step ``t`` (docs/model.md §1)."""
+        """Total potential U at ``(N, 2)`` points at control step ``t`` (SPEC §1)."""
         points = np.asarray(points, float).reshape(-1, 2)
         u = apf.potential(points, self.targets, self.shapes, self.field)
         others = self._moving_shapes(t)

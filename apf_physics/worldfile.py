@@ -698,7 +698,7 @@ def _build(check: _Checker, data: Any, source: str) -> World | None:
             targets = np.array([task.target for task in formations])
         if not data.get("starts"):
             starts = np.array([task.start for task in formations])
-    # everything in steps, from the map's lower-left corner (docs/model.md, "Units")
+    # everything in steps, from the map's lower-left corner (README, "Real maps": units)
     u = frame.unit
     to_world = (lambda pts: (np.asarray(pts, float) - offset) / u)
     size = None if size is None else (size[0] / u, size[1] / u)
