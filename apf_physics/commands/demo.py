@@ -99,6 +99,17 @@ def run(args: argparse.Namespace) -> int:
             bar.update(1)
             return figure, clip
 
+        def beside(title, world, gradient_run, dqn_run):
+            """A section: gradient descent's figure, then the shipped DQN's figure and video."""
+            section = Section(title)
+            section.figures.append(media_for(world, gradient_run, f"{world.name}_gradient", "gradient descent",
+                                             False)[0])
+            figure, clip = media_for(world, dqn_run, f"{world.name}_dqn", "dqn (shipped)", not args.no_video)
+            section.figures.append(figure)
+            if clip is not None:
+                section.videos.append(clip)
+            return section
+
         sections = []
         gradient, dqn, formation, gradient_general, dqn_general = evaluations[:5]
         section = Section("fixed20: thesis §6.2's fixed world, 40 starts")
@@ -116,22 +127,10 @@ def run(args: argparse.Namespace) -> int:
             section.videos.append(clip)
         sections.append(section)
         for world in general:
-            section = Section(f"{world.name}: a thesis general test world")
-            section.figures.append(media_for(world, gradient_general, f"{world.name}_gradient",
-                                             "gradient descent", False)[0])
-            figure, clip = media_for(world, dqn_general, f"{world.name}_dqn", "dqn (shipped)", not args.no_video)
-            section.figures.append(figure)
-            if clip is not None:
-                section.videos.append(clip)
-            sections.append(section)
+            sections.append(beside(f"{world.name}: a thesis general test world", world, gradient_general, dqn_general))
         gradient_moving, dqn_moving, astar_moving, formations = evaluations[7:11]
-        section = Section(f"{moving.name}: a cup before the target, five obstacles moving across the way")
-        section.figures.append(media_for(moving, gradient_moving, f"{moving.name}_gradient", "gradient descent",
-                                         False)[0])
-        figure, clip = media_for(moving, dqn_moving, f"{moving.name}_dqn", "dqn (shipped)", not args.no_video)
-        section.figures.append(figure)
-        if clip is not None:
-            section.videos.append(clip)
+        section = beside(f"{moving.name}: a cup before the target, five obstacles moving across the way", moving,
+                         gradient_moving, dqn_moving)
         section.figures.append(media_for(moving, astar_moving, f"{moving.name}_astar", "A*, replanning every step",
                                          False)[0])
         sections.append(section)
@@ -143,14 +142,8 @@ def run(args: argparse.Namespace) -> int:
             section.videos.append(clip)
         sections.append(section)
         gradient_map, dqn_map = evaluations[11:13]
-        section = Section(f"{ros_map.name}: a ROS map (PGM + YAML) in metres, a 0.2 m robot moving 0.25 m a step")
-        section.figures.append(media_for(ros_map, gradient_map, f"{ros_map.name}_gradient", "gradient descent",
-                                         False)[0])
-        figure, clip = media_for(ros_map, dqn_map, f"{ros_map.name}_dqn", "dqn (shipped)", not args.no_video)
-        section.figures.append(figure)
-        if clip is not None:
-            section.videos.append(clip)
-        sections.append(section)
+        sections.append(beside(f"{ros_map.name}: a ROS map (PGM + YAML) in metres, a 0.2 m robot moving 0.25 m a step",
+                               ros_map, gradient_map, dqn_map))
         page = write_page(out, "apf-physics demo: the shipped models", evaluations, sections,
                           notes=["Gradient descent beside the shipped DQN planners, on the fixed 20×20 world "
                                  "(single robot and three-robot formation), the thesis's four general test "
