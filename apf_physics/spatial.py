@@ -5,16 +5,17 @@ obstacle within a ``reach`` (README, "Real maps"). The field sums a repulsive te
 over those pairs, and the world takes their least as the clearance.
 
 Polygons and circles, when there are more than :data:`LOOSE_AT_MOST` of them, go into a
-bucket index: the plane is cut into square buckets (of at most ``reach / √2``), and each
-bucket lists the edges and circles within ``reach`` of it, sorted by obstacle. A point is measured
-only against its bucket's list, in one vectorised pass over all (point, edge) pairs, so the
-work per point depends on how many obstacles are near it, not on how many there are.
+bucket index (:class:`~apf_physics.buckets.SegmentIndex`): the plane is cut into square
+buckets (of at most ``reach / √2``), and each bucket lists the edges and circles within
+``reach`` of it, sorted by obstacle. A point is measured only against its bucket's list, in one
+vectorised pass over all (point, edge) pairs, so the work per point depends on how many
+obstacles are near it, not on how many there are.
 Inside a polygon, the side of the nearest edge (or the pseudonormal at the nearest vertex)
 gives the sign; a bucket wholly inside a polygon, farther than ``reach`` from its boundary,
 carries a marker so that points there read ``−reach``.
 
-Grids, and polygons or circles when there are few, are measured one obstacle at a time
-(a grid's own search is already local: :meth:`~apf_physics.obstacles.GridObstacle.signed_distance`).
+Grids, and polygons or circles when there are few, are measured one obstacle at a time (a
+grid indexes its own boundary the same way: :meth:`~apf_physics.obstacles.GridObstacle.signed_distance`).
 
 Either way a distance is exact wherever ``|d| ≤ reach``; beyond, ``±reach`` is reported,
 which no caller can tell apart: the field's repulsion ends at ``p0 ≤ reach`` and every
