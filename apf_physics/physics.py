@@ -308,6 +308,8 @@ class Physics:
         :data:`CHUNK`; the first robot that needs physics near a chunk builds its pieces. A map
         of any size thus costs pymunk only what its robots come near, and so does start-up.
         """
+        if all(pieces.complete for pieces in self._tile_pieces):
+            return   # every obstacle of every tile is built (small maps soon are)
         tiles = self._slot_tile[robots // self.robots_per_slot]
         p = self._positions[robots]
         reach = self._slot_radius[robots // self.robots_per_slot] + CONTACT_MARGIN + 0.5
@@ -839,6 +841,8 @@ class _Pieces:
         self.cols = max(1, int(math.ceil(world.size[0] / self.side)))
         rows = max(1, int(math.ceil(world.size[1] / self.side)))
         self.chunk_done = np.zeros(self.cols * rows, bool)
+        self.complete = False
+        """Every chunk is built."""
         self.rows = rows
         c0 = np.clip(np.floor(self.boxes[:, :2] / self.side).astype(np.intp), 0, [self.cols - 1, rows - 1])
         c1 = np.clip(np.floor(self.boxes[:, 2:] / self.side).astype(np.intp), 0, [self.cols - 1, rows - 1])
@@ -868,6 +872,7 @@ class _Pieces:
             return np.zeros(0, np.intp)
         chunks = np.unique(chunks)
         self.chunk_done[chunks] = True
+        self.complete = bool(self.chunk_done.all())
         pieces = np.unique(np.concatenate([self.members[self.start[c]:self.start[c + 1]] for c in chunks.tolist()]))
         pieces = pieces[~self.built[pieces]]
         self.built[pieces] = True
