@@ -1,4 +1,4 @@
-"""The nine moves of SPEC §2 (thesis Table 1), in the thesis's order, and a finer set with half-length moves."""
+"""The nine moves of Model §2 (thesis Table 1), in the thesis's order, and a finer set with half-length moves."""
 
 from __future__ import annotations
 

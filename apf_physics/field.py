@@ -1,4 +1,4 @@
-"""The artificial potential field of SPEC §1, over arrays of points, and its cached raster.
+"""The artificial potential field of Model §1, over arrays of points, and its cached raster.
 
 One small function per term, each over ``(N, 2)`` arrays of points:
 
@@ -27,7 +27,7 @@ from apf_physics.obstacles import Obstacle
 from apf_physics.spatial import ShapeSet
 
 FIELD_PRESETS: dict[str, dict[str, float]] = {
-    # SPEC §1, thesis Tables 2–4. u_max is the cap used in place of infinity (thesis Fig. 11).
+    # Model §1, thesis Tables 2–4. u_max is the cap used in place of infinity (thesis Fig. 11).
     "thesis-demo": {"katt": 1, "krep": 20, "kstr": 8, "p0": 3, "ps": 8, "u_max": 100},
     "thesis-fixed": {"katt": 2, "krep": 20, "kstr": 8, "p0": 0.5, "ps": 8, "u_max": 100},
     "thesis-general": {"katt": 1, "krep": 20, "kstr": 8, "p0": 3, "ps": 8, "u_max": 100},
@@ -37,7 +37,7 @@ FIELD_PRESETS: dict[str, dict[str, float]] = {
 
 @dataclass(frozen=True)
 class FieldParams:
-    """Parameters of the artificial potential field (SPEC §1)."""
+    """Parameters of the artificial potential field (Model §1)."""
 
     katt: float   # attraction gain
     krep: float   # repulsion gain
@@ -71,7 +71,7 @@ def _target_distances(points: np.ndarray, targets: np.ndarray) -> np.ndarray:
 
 
 def attractive(points: np.ndarray, targets: np.ndarray, katt: float) -> np.ndarray:
-    """``Σ_T katt/2 · d_T²`` (SPEC eq. 1–3)."""
+    """``Σ_T katt/2 · d_T²`` (Model eq. 1–3)."""
     _, d = _target_offsets(points, targets)
     return 0.5 * katt * np.sum(d * d, axis=1)
 
@@ -83,7 +83,7 @@ def attractive_gradient(points: np.ndarray, targets: np.ndarray, katt: float) ->
 
 
 def black_hole(points: np.ndarray, targets: np.ndarray, kstr: float, ps: float) -> np.ndarray:
-    """``Σ_T −kstr/2 · (ps − d_T)²`` where ``d_T ≤ ps`` (SPEC eq. 8–10)."""
+    """``Σ_T −kstr/2 · (ps − d_T)²`` where ``d_T ≤ ps`` (Model eq. 8–10)."""
     _, d = _target_offsets(points, targets)
     well = np.clip(ps - d, 0.0, None)
     return -0.5 * kstr * np.sum(well * well, axis=1)
@@ -124,7 +124,7 @@ def _shape_set(obstacles: Sequence[Obstacle] | ShapeSet, params: FieldParams) ->
 
 
 def repulsive(points: np.ndarray, obstacles: Sequence[Obstacle] | ShapeSet, params: FieldParams) -> np.ndarray:
-    """``Σ_O U_rep,O`` (SPEC eq. 4–7), each term capped at ``u_max``.
+    """``Σ_O U_rep,O`` (Model eq. 4–7), each term capped at ``u_max``.
 
     Only the (point, obstacle) pairs within ``p0`` are measured (:class:`~apf_physics.spatial.ShapeSet`):
     beyond, the term is 0, so the cost does not grow with the number of obstacles.
@@ -161,7 +161,7 @@ def discs_repulsive_gradient(points: np.ndarray, centres: np.ndarray, radius: fl
 
 def potential(points: np.ndarray, targets: np.ndarray, obstacles: Sequence[Obstacle] | ShapeSet,
               params: FieldParams) -> np.ndarray:
-    """Total ``U = U_att + U_rep + U_bh`` (SPEC eq. 11) at each point."""
+    """Total ``U = U_att + U_rep + U_bh`` (Model eq. 11) at each point."""
     points = np.asarray(points, dtype=float).reshape(-1, 2)
     d = _target_distances(points, targets)
     well = np.clip(params.ps - d, 0.0, None)
@@ -172,7 +172,7 @@ def potential(points: np.ndarray, targets: np.ndarray, obstacles: Sequence[Obsta
 
 def gradient(points: np.ndarray, targets: np.ndarray, obstacles: Sequence[Obstacle] | ShapeSet,
              params: FieldParams) -> np.ndarray:
-    """``∇U`` at each point; the force is ``F = −∇U`` (SPEC eq. 12)."""
+    """``∇U`` at each point; the force is ``F = −∇U`` (Model eq. 12)."""
     points = np.asarray(points, dtype=float).reshape(-1, 2)
     return (attractive_gradient(points, targets, params.katt)
             + repulsive_gradient(points, obstacles, params)

@@ -1,4 +1,4 @@
-"""Formations (SPEC §3): where followers start, and the rule by which each follower moves.
+"""Formations (Model §3): where followers start, and the rule by which each follower moves.
 
 Follower i moves by its own potential field: attraction to its anchor (in a line, the point ``spacing`` back along the
 path of the robot it follows, so that the chain retraces a path known to be free; for other

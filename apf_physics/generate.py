@@ -97,7 +97,7 @@ ALL_FAMILIES = FAMILIES + MOVING_FAMILIES + FORMATION_FAMILIES + STRUCTURE_FAMIL
 """Every family :func:`generate_world` draws."""
 
 ROBOT_RADIUS = 0.25
-# ≥ √2/2: a robot moving in unit steps (SPEC Table 1) from any start passes within √2/2 of
+# ≥ √2/2: a robot moving in unit steps (Model Table 1) from any start passes within √2/2 of
 # every point, so every target is reachable within this tolerance (0.5 is only from aligned starts).
 GOAL_TOLERANCE = 0.75
 START_CLEARANCE = 0.75   # starts keep this clearance from obstacles and the map's edge [units]

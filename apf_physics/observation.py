@@ -1,4 +1,4 @@
-"""What a robot sees (SPEC §2): windows of the potential around it, and optionally its memory.
+"""What a robot sees (Model §2): windows of the potential around it, and optionally its memory.
 
 One :class:`Observer` builds every observation in the project: the environments'
 (``Navigate-v0``, its vector version, ``Formation-v0``) and the DQN planner's, from one

@@ -3,7 +3,7 @@
 A :class:`World` is an immutable, validated description; build one from a world file
 with :func:`apf_physics.worldfile.load_world` or from a mapping with
 :func:`apf_physics.worldfile.world_from_dict`. It answers the questions every layer above
-asks of the map: the potential and its gradient at points (SPEC §1), clearance from
+asks of the map: the potential and its gradient at points (Model §1), clearance from
 obstacles and the map's edge, free positions, and a cache of what is derived from it
 (rasters, free cells, search grids) through :meth:`World.cached`.
 """
@@ -69,7 +69,7 @@ class Frame:
 
 @dataclass(frozen=True)
 class FormationSpec:
-    """A leader and followers in a chain (SPEC §3).
+    """A leader and followers in a chain (Model §3).
 
     Attributes:
         followers: Number of followers.
@@ -264,7 +264,7 @@ class World:
                 + tuple(CircleObstacle(c, self.robot_radius) for c in self.crowd))
 
     def potential(self, points: np.ndarray, t: float = 0.0) -> np.ndarray:
-        """Total potential U at ``(N, 2)`` points at control step ``t`` (SPEC §1)."""
+        """Total potential U at ``(N, 2)`` points at control step ``t`` (Model §1)."""
         points = np.asarray(points, float).reshape(-1, 2)
         u = apf.potential(points, self.targets, self.shapes, self.field)
         others = self._moving_shapes(t)

@@ -1,4 +1,4 @@
-"""The field against SPEC §1's formulas, the gradient against finite differences, the raster against potential()."""
+"""The field against Model §1's formulas, the gradient against finite differences, the raster against potential()."""
 
 import numpy as np
 import pytest
@@ -20,7 +20,7 @@ WORLD = world_from_dict(simple_world_dict(
 
 
 def reference_potential(world, p):
-    """SPEC §1 written out term by term for one point, with brute-force boundary distances."""
+    """Model §1 written out term by term for one point, with brute-force boundary distances."""
     f = world.field
     u = 0.0
     for t in world.targets:

@@ -18,7 +18,7 @@ from apf_physics.world import FormationSpec
 
 
 class FormationEnv(gym.Env):
-    """A leader and its followers (SPEC §3); the agent controls the leader.
+    """A leader and its followers (Model §3); the agent controls the leader.
 
     ## Description
 
@@ -29,7 +29,7 @@ class FormationEnv(gym.Env):
 
     ## Action Space
 
-    ``Discrete(9)``: the leader's move, SPEC Table 1 order (see ``Navigate-v0``).
+    ``Discrete(9)``: the leader's move, Model Table 1 order (see ``Navigate-v0``).
 
     ## Observation Space
 

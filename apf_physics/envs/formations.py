@@ -38,7 +38,7 @@ class FormationsParallelEnv(ParallelEnv):
 
     ## Action Space
 
-    ``Discrete(9)`` per agent, SPEC Table 1 order (see ``Navigate-v0``).
+    ``Discrete(9)`` per agent, Model Table 1 order (see ``Navigate-v0``).
 
     ## Observation Space
 

@@ -1,4 +1,4 @@
-"""``apf_physics/Navigate-v0``: one robot, one world, the thesis's learning problem (SPEC §2)."""
+"""``apf_physics/Navigate-v0``: one robot, one world, the thesis's learning problem (Model §2)."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ class NavigateEnv(gym.Env):
 
     ## Description
 
-    The thesis's learning problem (SPEC §2): the robot sees a window of the potential field
+    The thesis's learning problem (Model §2): the robot sees a window of the potential field
     around itself and picks one of nine unit moves. Obstacles and the map's edge are solid
     (pymunk); touching them ends the episode. Planning by gradient descent gets trapped in the
     field's local minima; a learner can escape them.
@@ -60,7 +60,7 @@ class NavigateEnv(gym.Env):
 
     ## Rewards
 
-    ``R = W1 + W2 + W3 + W4 (+ W5 + W6)`` (SPEC eq. 15–16), returned by name in
+    ``R = W1 + W2 + W3 + W4 (+ W5 + W6)`` (Model eq. 15–16), returned by name in
     ``info["reward_terms"]``: ``collision`` W1 when touching an obstacle or the edge,
     ``target`` W2 on reaching the target, ``step`` W3 every step, ``potential``
     W4 = β·(U(P_{n+1}) − U(P_n)), and the project's ``revisit`` W5 and ``length`` W6

@@ -1,4 +1,4 @@
-"""The step reward of SPEC §2 (eq. 15–16) as named terms, and the thesis's weight sets."""
+"""The step reward of Model §2 (eq. 15–16) as named terms, and the thesis's weight sets."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 
 @dataclass(frozen=True)
 class RewardWeights:
-    """Weights of ``R = W1 + W2 + W3 + W4`` (SPEC eq. 15–16), and of two terms of ours, ``W5``, ``W6``.
+    """Weights of ``R = W1 + W2 + W3 + W4`` (Model eq. 15–16), and of two terms of ours, ``W5``, ``W6``.
 
     Attributes:
         w1: On hitting an obstacle or the map's edge (negative).

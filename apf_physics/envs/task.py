@@ -1,6 +1,6 @@
 """The navigation task for a batch of episodes: what every environment of the package steps.
 
-One step: actions → unit moves (SPEC Table 1) → followers' moves (formations) → one
+One step: actions → unit moves (Model Table 1) → followers' moves (formations) → one
 :class:`~apf_physics.engine.Stepper` step for the whole batch → observations (one
 :class:`~apf_physics.observation.Observer` call) and the reward's named terms. ``Navigate-v0``
 is a batch of one, :class:`~apf_physics.envs.vector.NavigateVectorEnv` a batch of N, and

@@ -46,7 +46,7 @@ MAGIC = b"APF-PHYSICS-DQN\n"
 FORMAT_VERSION = 1
 """Version of the file layout and metadata written by this code."""
 FIELD_KEYS = ("katt", "krep", "kstr", "p0", "ps", "u_max")
-"""Field parameters recorded with a model (SPEC §1)."""
+"""Field parameters recorded with a model (Model §1)."""
 
 # Limits on what a file may describe, checked before anything is built from it.
 MAX_HEADER_BYTES = 4096

@@ -1,4 +1,4 @@
-"""The thesis's Q-network (SPEC §2, Fig. 13) and the observation transform that feeds it.
+"""The thesis's Q-network (Model §2, Fig. 13) and the observation transform that feeds it.
 
 The network maps a ``(N, C, k, k)`` potential window to nine action values:
 2×2 convolutions, each of the first two followed by a 2×2 max-pool with stride 1, then
@@ -108,7 +108,7 @@ class QNetwork(nn.Module):
         filters: Output channels of each 2×2 convolution, e.g. (10, 10, 20) (Table 3)
             or (4, 4) (Table 4).
         hidden: Widths of the hidden fully connected layers (the thesis: (32, 32)).
-        n_actions: Number of actions (9, SPEC Table 1).
+        n_actions: Number of actions (9, Model Table 1).
         negative_slope: Leaky ReLU slope λ.
         pooled_convs: How many of the leading convolutions are followed by a max-pool
             (the thesis: 2).

@@ -78,7 +78,7 @@ class DQNPolicy:
             obs: (N, C, k, k) float32 observations.
 
         Returns:
-            (N,) int64 action indices (SPEC Table 1 order, 0-based).
+            (N,) int64 action indices (Model Table 1 order, 0-based).
         """
         obs = np.asarray(obs, np.float32)
         if obs.shape[1:] != self.obs_shape:

@@ -1,4 +1,4 @@
-"""Gradient descent in the potential field (SPEC eq. 13–14), the classic baseline."""
+"""Gradient descent in the potential field (Model eq. 13–14), the classic baseline."""
 
 from __future__ import annotations
 

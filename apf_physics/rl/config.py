@@ -18,7 +18,7 @@ preset                    trains on   what it is
                                       rewards ÷ 1000, signed-log relative observations, lattice starts),
                                       stopped when every start of the world succeeds.
 ``thesis-general``        curriculum  Table 4 through the curriculum's stages, 150 searches each, with
-                                      rehearsal (SPEC §2), ε restarting every stage.
+                                      rehearsal (Model §2), ε restarting every stage.
 ``general``               curriculum  ``fast``'s learner on a randomised pool of generated worlds plus
                                       the curriculum's worlds, 25 min.
 ``general-memory``        curriculum  ``general`` with the visit-memory channel, half the envs at the
@@ -47,7 +47,7 @@ from apf_physics.models.network import OBS_TRANSFORMS, QNetwork
 from apf_physics.observation import SCALES, ObserverConfig
 
 N_ACTIONS = 9
-"""Actions of SPEC Table 1."""
+"""Actions of Model Table 1."""
 TRAIN_STARTS = ("world", "random", "reachable", "lattice")
 """Values of :attr:`TrainConfig.train_starts`."""
 EVAL_FIGURES = ("success", "trap_success", "collisions", "length_ratio", "spl", "random_success")
@@ -97,7 +97,7 @@ class TrainConfig:
     # --- environment ---
     reward: Union[str, dict] = "thesis-fixed"
     """Reward preset name (:data:`~apf_physics.envs.reward.REWARD_PRESETS`) or a dict of
-    :class:`~apf_physics.envs.reward.RewardWeights` fields (W1–W6, β of SPEC §2)."""
+    :class:`~apf_physics.envs.reward.RewardWeights` fields (W1–W6, β of Model §2)."""
     max_episode_steps: int = 100
     """tt: moves per search before it is cut off [control steps]."""
     train_starts: str = "world"
@@ -111,7 +111,7 @@ class TrainConfig:
     num_envs: int = 1
     """Environments stepped in parallel (one vector step adds up to this many transitions)."""
 
-    # --- learning (SPEC eq. 32–35) ---
+    # --- learning (Model eq. 32–35) ---
     gamma: float = 0.95
     """γ: discount rate."""
     learning_rate: float = 1e-3
@@ -142,7 +142,7 @@ class TrainConfig:
     reward_scale: float = 1.0
     """Rewards are multiplied by this before learning (logged returns are unscaled)."""
 
-    # --- exploration (SPEC eq. 34: ε_s = max(ε_i·(ts − s)/ts, ε_f) over searches s) ---
+    # --- exploration (Model eq. 34: ε_s = max(ε_i·(ts − s)/ts, ε_f) over searches s) ---
     epsilon_initial: float = 0.95
     """ε_i."""
     epsilon_final: float = 0.05
@@ -442,7 +442,7 @@ def preset(name: str, **overrides: Any) -> TrainConfig:
 
 
 def epsilon_schedule(config: TrainConfig, episodes: int) -> float:
-    """ε after ``episodes`` finished searches: ``max(ε_i·(ts − s)/ts, ε_f)`` (SPEC eq. 34)."""
+    """ε after ``episodes`` finished searches: ``max(ε_i·(ts − s)/ts, ε_f)`` (Model eq. 34)."""
     ts = config.exploration_episodes
     return max(config.epsilon_initial * (ts - episodes) / ts, config.epsilon_final)
 

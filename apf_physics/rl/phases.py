@@ -7,11 +7,11 @@ turn with one loop (:func:`apf_physics.rl.trainer.train`):
 
 - one world (:func:`phases_for_world`) is one phase, validated on the world's own starts;
 - a curriculum (:func:`phases_for_curriculum`) is one phase per stage, stage ``i`` training its
-  worlds with every earlier stage's (rehearsal, SPEC §2), then, with
+  worlds with every earlier stage's (rehearsal, Model §2), then, with
   :attr:`~apf_physics.rl.config.TrainConfig.families`, a phase of generated worlds plus all the
   curriculum's; all validated on one set of generated worlds.
 
-Every action moves the robot by an integer vector (SPEC Table 1), so from a start ``p`` it
+Every action moves the robot by an integer vector (Model Table 1), so from a start ``p`` it
 only ever stands at ``p + (i, j)`` until a collision ends the search: with a goal tolerance
 below √2/2 some starts can never succeed (:func:`reachable_mask`). ``train_starts="lattice"``
 (the free points at integer offsets from the target) and ``"reachable"`` (random starts that

@@ -1,4 +1,4 @@
-"""Deep Q-learning (SPEC §2, thesis §4): one loop over a list of phases.
+"""Deep Q-learning (Model §2, thesis §4): one loop over a list of phases.
 
 :func:`train` takes a :class:`~apf_physics.rl.config.TrainConfig` and the phases to train
 (:mod:`apf_physics.rl.phases`: one world is one phase, a curriculum several) and returns a
@@ -66,7 +66,7 @@ def epsilon_greedy(q_network: torch.nn.Module, obs: np.ndarray, epsilon: float,
 
 
 class Learner:
-    """The Q-network, its target network, optimiser and experience pool, and the TD update (SPEC eq. 32).
+    """The Q-network, its target network, optimiser and experience pool, and the TD update (Model eq. 32).
 
     Args:
         config: Network, pool and learning-rule fields are used.
