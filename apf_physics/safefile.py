@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import os
 import stat
+import tempfile
 from pathlib import Path
 from typing import Iterator
 
@@ -67,3 +68,49 @@ def read_regular_file(path: str | Path, kind: str, error: type[UserError], limit
         if total > limit:
             raise error(f"{path}: the {kind} file grew over the limit of {limit:,} bytes while being read")
         return b"".join(chunks)
+
+
+def read_text_file(path: str | Path, kind: str, error: type[UserError] = UserError, limit: int = MAX_FILE_BYTES) -> str:
+    """The text (UTF-8) of a regular file of at most ``limit`` bytes; one clear error otherwise."""
+    data = read_regular_file(path, kind, error, limit)
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise error(f"{path}: the {kind} file is not UTF-8 text (byte {e.start})") from None
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """A temporary path beside ``path`` to write; renamed over ``path`` when the block ends without error.
+
+    Readers never see a half-written file: the temporary (mode 0666 less the umask, like a plain
+    ``open``) is flushed to disk, then renamed in one step, and the folder is synced so the rename
+    survives a crash. On any error, or an interrupt, the temporary is removed and ``path`` is untouched.
+
+    Raises:
+        UserError: The folder does not exist or cannot be written.
+    """
+    path = Path(path)
+    try:
+        fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    except OSError as e:
+        raise UserError(f"{path}: cannot write there ({e.strerror})") from None
+    tmp = Path(name)
+    try:
+        umask = os.umask(0)
+        os.umask(umask)
+        os.fchmod(fd, 0o666 & ~umask)  # mkstemp's 0600 would make shared files unreadable
+        os.close(fd)
+        yield tmp
+        with open(tmp, "rb+") as f:
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    with contextlib.suppress(OSError):  # make the rename itself durable
+        dir_fd = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(dir_fd)
+        finally:
+            os.close(dir_fd)
