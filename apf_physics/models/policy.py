@@ -8,7 +8,7 @@ from typing import Any, Sequence
 import numpy as np
 import torch
 
-from apf_physics.actions import MOVE_SETS
+from apf_physics.actions import MOVE_SETS, SAFETY, move_clearance
 from apf_physics.models.files import SavedModel, load_model, observer_of
 from apf_physics.models.mapnet import MapNetwork, move_features, sample_values
 from apf_physics.models.network import QNetwork
@@ -151,6 +151,19 @@ class MapPolicy:
         positions = np.asarray(positions, float).reshape(-1, 2)
         with _threads_for(1), torch.inference_mode():
             return map_scores(self.network, view, v, positions, self.moves, room, du).numpy()
+
+
+def move_inputs(world: World, positions: np.ndarray, moves: np.ndarray, t: float | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """The map network's per-move inputs, the same when it acts and when it is trained.
+
+    Returns:
+        ``room`` (N, M): the clearance along each move (:func:`~apf_physics.actions.move_clearance`)
+        beyond the robot's radius and the safety margin (negative: the move is unsafe); and ``du``
+        (N, M): the signed-log change of U over each move (:func:`potential_change`).
+    """
+    room = move_clearance(world, positions, moves, t=t) - (world.robot_radius + SAFETY)
+    return room, potential_change(world, positions, moves, 0.0 if t is None else t)
 
 
 def potential_change(world: World, positions: np.ndarray, moves: np.ndarray, t: float = 0.0) -> np.ndarray:

@@ -14,7 +14,7 @@ import numpy as np
 
 from apf_physics.actions import ACTIONS, SAFETY, move_clearance
 from apf_physics.models import DQNPolicy, MapPolicy, load_policy, resolve_model, shipped_model_for
-from apf_physics.models.policy import potential_change
+from apf_physics.models.policy import move_inputs
 from apf_physics.observation import Observer
 from apf_physics.planners.base import Planner
 from apf_physics.world import World
@@ -87,8 +87,8 @@ class DQNPlanner(Planner):
         """A map network's move: its best-valued one (with the shield: among the safe ones)."""
         policy = self._policy
         moves = policy.moves
-        room = move_clearance(self.world, positions, moves, t=t) - (self.world.robot_radius + SAFETY)
-        q = policy.q_values(self.world, positions, room, potential_change(self.world, positions, moves, t))
+        room, du = move_inputs(self.world, positions, moves, t)
+        q = policy.q_values(self.world, positions, room, du)
         chosen = shielded_argmax(q, room) if self.shield else q.argmax(axis=1)
         return moves[chosen] * active[:, None]
 
