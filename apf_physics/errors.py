@@ -1,6 +1,12 @@
-"""Errors that the command line reports as one message, without a traceback."""
+"""Errors that the command line reports as one message, without a traceback; and the hint they share."""
+
+from __future__ import annotations
 
 import difflib
+from typing import Any, Iterable
+
+MAX_HINT_WORD = 100
+"""Longest word a hint is looked for (difflib's matching is quadratic in its length)."""
 
 
 class UserError(Exception):
@@ -15,7 +21,22 @@ class ModelError(UserError):
     """A model file that is missing, corrupt, or made for another observation or field."""
 
 
-def did_you_mean(word: object, choices) -> str:
-    """``" (did you mean 'x'?)"`` naming the choice nearest to ``word``, or ``""`` when none is near."""
-    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1)
-    return f" (did you mean {close[0]!r}?)" if close else ""
+def closest_match(word: Any, choices: Iterable[str]) -> str | None:
+    """The choice most like ``word`` (:func:`difflib.get_close_matches`, cutoff 0.6), or None.
+
+    None, too, for a ``word`` that is not a string or is longer than :data:`MAX_HINT_WORD`
+    characters (what a file holds is not always a name).
+    """
+    if not isinstance(word, str) or len(word) > MAX_HINT_WORD:
+        return None
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
+    return close[0] if close else None
+
+
+def did_you_mean(word: Any, choices: Iterable[str]) -> str:
+    """``" (did you mean 'x'?)"`` for the choice most like ``word`` (:func:`closest_match`), else ``""``.
+
+    Written straight after the unknown word: ``f"unknown preset {name!r}{did_you_mean(name, PRESETS)}"``.
+    """
+    close = closest_match(word, choices)
+    return f" (did you mean {close!r}?)" if close is not None else ""

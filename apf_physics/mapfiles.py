@@ -19,7 +19,6 @@ key or line: ``<file>: <key>: <what is wrong>``.
 
 from __future__ import annotations
 
-import difflib
 import math
 import numbers
 import os
@@ -33,7 +32,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from apf_physics.errors import WorldError
+from apf_physics.errors import WorldError, did_you_mean
 from apf_physics.safefile import read_regular_file
 
 MAX_MAP_CELLS = 16_000_000
@@ -108,13 +107,6 @@ def _short(value: Any, limit: int = 60) -> str:
 def _kind(value: Any) -> str:
     """``list [1, 2, ...]``: the type and the shortened value (``null`` for an empty YAML value)."""
     return "null" if value is None else f"{type(value).__name__} {_short(value)}"
-
-
-def _did_you_mean(word: Any, choices: tuple[str, ...]) -> str:
-    if not isinstance(word, str) or len(word) > 100:
-        return ""
-    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
-    return f" (did you mean {close[0]!r}?)" if close else ""
 
 
 def _check_cells(source: str, rows: int, cols: int, what: str) -> None:
@@ -339,7 +331,7 @@ def ros_map_from_dict(spec: dict, source: str, folder: str | Path) -> OccupancyM
     for key in spec:
         if key not in ROS_KEYS:
             name = key if isinstance(key, str) and key.isprintable() and len(key) <= 40 else _short(key, 40)
-            bad(name, f"unknown key{_did_you_mean(key, ROS_KEYS)}; a ROS map has {', '.join(ROS_KEYS)}")
+            bad(name, f"unknown key{did_you_mean(key, ROS_KEYS)}; a ROS map has {', '.join(ROS_KEYS)}")
     for key in ("image", "resolution", "origin"):
         if key not in spec:
             bad(key, "missing")
@@ -397,7 +389,7 @@ def ros_map_from_dict(spec: dict, source: str, folder: str | Path) -> OccupancyM
 
     mode = spec.get("mode", "trinary")
     if mode not in ROS_MODES:
-        bad("mode", f"expected one of {', '.join(ROS_MODES)}, got {_kind(mode)}{_did_you_mean(mode, ROS_MODES)}")
+        bad("mode", f"expected one of {', '.join(ROS_MODES)}, got {_kind(mode)}{did_you_mean(mode, ROS_MODES)}")
 
     if problems:
         raise WorldError("\n".join(problems))
