@@ -4,6 +4,7 @@ resume, and the shipped general model on the thesis's four test worlds."""
 from __future__ import annotations
 
 import csv
+import functools
 import itertools
 from pathlib import Path
 
@@ -117,33 +118,43 @@ def test_smoke_run_writes_best_and_csv_and_resumes(tmp_path):
         train(other, phases, out_dir=tmp_path, resume=True)
 
 
+@functools.lru_cache(maxsize=1)
 def _shipped_on_test_worlds():
+    """The shipped general model itself (not the ``dqn`` default for this field, the map network), shielded,
+    from the starts of the thesis's four test worlds."""
     from apf_physics.evaluate import evaluate
     from apf_physics.planners import make_planner
     from apf_physics.worldfile import load_world
 
     worlds = [load_world(ROOT / "worlds" / "thesis" / f"test{i}.yaml") for i in range(1, 5)]
-    episodes = evaluate(make_planner("dqn"), worlds).episodes
+    planner = make_planner("dqn", model=str(SHIPPED))
+    episodes = evaluate(planner, worlds).episodes
     per_world = {w.name: [e.success for e in episodes if e.world == w.name] for w in worlds}
-    return episodes, per_world
+    return planner, episodes, per_world
 
 
 @pytest.mark.skipif(not SHIPPED.is_file(), reason="no shipped general model")
 def test_shipped_general_model_loads_and_runs_the_test_worlds_without_collisions():
     from apf_physics.field import FIELD_PRESETS
+    from apf_physics.models import DQNPolicy
     from apf_physics.models.files import load_model
 
     model = load_model(SHIPPED, expect_obs_shape=(2, 11, 11), expect_field=FIELD_PRESETS["thesis-general"])
     assert model.meta["config"]["dqn"]["reward"]["revisit"] < 0        # the general-revisit recipe
-    episodes, per_world = _shipped_on_test_worlds()
-    assert len(episodes) == 20
-    # measured: no collision from any of the 20 starts
+    planner, episodes, per_world = _shipped_on_test_worlds()
+    # the episodes are the window network's (potential + visit memory), with its long trap window
+    assert isinstance(planner._policy, DQNPolicy) and planner._policy.obs_shape == (2, 11, 11)
+    assert planner.shield and planner.trap_window == planner.MEMORY_TRAP_WINDOW
+    assert len(episodes) == 20 and [len(v) for v in per_world.values()] == [5, 5, 5, 5]
+    # documented (models/README.md): no collision from any of the 20 starts
     assert not any(e.outcome == "collision" for e in episodes)
 
 
 @pytest.mark.skipif(not SHIPPED.is_file(), reason="no shipped general model")
 def test_shipped_general_model_reaches_targets_of_the_four_test_worlds():
-    episodes, per_world = _shipped_on_test_worlds()
-    # the thesis's measure: the target reached in each of its four test worlds (measured: 17 of 20 starts)
+    _, episodes, per_world = _shipped_on_test_worlds()
+    # the thesis's measure: the target reached in each of its four test worlds; documented and measured:
+    # 17 of 20 starts (test1 2/5, the others 5/5; the failures declared trapped, not collisions)
     assert all(any(v) for v in per_world.values()), per_world
     assert sum(e.success for e in episodes) >= 15
+    assert all(sum(per_world[f"test{i}"]) >= 4 for i in (2, 3, 4)), per_world

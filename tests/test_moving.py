@@ -126,15 +126,43 @@ def test_no_robot_passes_through_a_sweeping_bar(x, y, length, thickness, heading
 
 # -- planners ----------------------------------------------------------------------------------
 
+def _rim_distance(world, path):
+    """(len(path),) the distance of each position of an episode's path (one per step) from the moving obstacles."""
+    return np.array([world.obstacle_distance(p[None], float(t))[0] for t, p in enumerate(path)])
+
+
 def test_planners_run_on_the_field_at_step_t():
     base = world_from_dict(simple_world_dict(obstacles=[], field="thesis-general", targets=[[18.0, 10.0]],
                                              starts=[[2.0, 10.0], [2.0, 4.0], [2.0, 16.0]]))
-    world = with_moving(base, CircleObstacle(np.array([10.0, 3.0]), 1.0, Motion(np.array([[0.0, 14.0]]), 0.5)))
-    for name in ("gradient", "escape", "astar"):
-        episodes = rollout(world, make_planner(name), world.starts, max_steps=80)
-        assert len(episodes) == 3 and all(e.steps > 0 for e in episodes)
-    replanning = rollout(world, make_planner("astar"), world.starts, max_steps=80)
-    assert sum(e.success for e in replanning) >= 2
+    # a disc rising along x = 10 from y = 3 to y = 17 (0.5 per step) across the way of the start (2, 4)
+    disc = CircleObstacle(np.array([10.0, 3.0]), 1.0, Motion(np.array([[0.0, 14.0]]), 0.5))
+    world = with_moving(base, disc)
+    centre = lambda t: np.array([10.0, 3.0]) + disc.motion.offset(float(t))
+    runs = {name: rollout(world, make_planner(name), world.starts, max_steps=80) for name in ("gradient", "escape", "astar")}
+    for name in ("gradient", "escape"):
+        for e in runs[name]:
+            assert e.outcome != "collision"
+            # the robot never overlaps the disc where it is at each step
+            assert _rim_distance(world, e.path).min() > world.robot_radius, (name, e.start)
+            assert len(e.path) == e.steps + 1 and e.steps < 80
+    # gradient descent (measured): the starts the disc does not cross reach the target; from (2, 4) the robot
+    # runs into the rising disc's repulsion and is declared trapped within 10 steps, just before the disc where
+    # it is *then* (1.15 from its rim at step 9), far from where it was at step 0
+    gradient = runs["gradient"]
+    assert [e.outcome for e in gradient] == ["reached", "trapped", "reached"]
+    trapped = gradient[1]
+    assert trapped.steps <= 12
+    end = trapped.path[-1]
+    assert end[0] < 10.0 - 1.0 and np.hypot(*(end - centre(trapped.steps))) - 1.0 < 1.5
+    assert np.hypot(*(end - centre(0))) - 1.0 > 3.0
+    # the escape planner follows the gradient up to the trap, then gets past the disc: it crosses x = 10 below it
+    escape = runs["escape"]
+    assert [e.outcome for e in escape] == ["reached"] * 3
+    np.testing.assert_allclose(escape[1].path[:trapped.steps + 1], trapped.path)
+    cross = int(np.argmax(escape[1].path[:, 0] >= 10.0))
+    assert cross > trapped.steps and escape[1].path[cross, 1] < centre(cross)[1] - 1.0
+    # replanning A* reaches from the starts away from the disc's sweep
+    assert [e.success for e in runs["astar"]][::2] == [True, True]
 
 
 # -- the world-file contract -------------------------------------------------------------------

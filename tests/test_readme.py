@@ -1,17 +1,77 @@
-"""The README's Python snippets run as written (in order, sharing names, from the project folder)."""
+"""The README's Python snippets run as written (in order, sharing names, from the project folder) and print
+what their comments say they print."""
 
 from __future__ import annotations
 
+import ast
+import contextlib
+import io
 import re
 from pathlib import Path
+
+import numpy as np
+import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def test_readme_python_snippets_run(monkeypatch):
+def _run_snippets(monkeypatch) -> tuple[list[str], list[list[str]], dict]:
+    """Each snippet's source and printed lines, and the names they leave."""
     blocks = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), re.S)
-    assert len(blocks) >= 2
     monkeypatch.chdir(ROOT)
     names: dict = {}
+    printed = []
     for block in blocks:
-        exec(compile(block, "README.md", "exec"), names)
+        out = io.StringIO()
+        with contextlib.redirect_stdout(out):
+            exec(compile(block, "README.md", "exec"), names)
+        printed.append(out.getvalue().splitlines())
+    return blocks, printed, names
+
+
+def _snippet(blocks: list[str], printed: list[list[str]], needle: str) -> tuple[str, list[str]]:
+    (i,) = [i for i, b in enumerate(blocks) if needle in b]
+    return blocks[i], printed[i]
+
+
+def test_readme_python_snippets_run_and_print_what_they_say(monkeypatch):
+    from apf_physics import load_world
+
+    blocks, printed, names = _run_snippets(monkeypatch)
+    assert len(blocks) >= 3
+
+    # -- the environment: a step's reward terms, then world, position, distance, success, collision
+    source, lines = _snippet(blocks, printed, 'gym.make("apf_physics/Navigate-v0"')
+    assert len(lines) == 2, lines
+    terms = ast.literal_eval(lines[0])
+    documented = re.search(r"print\(info\[\"reward_terms\"\]\)\s+# \{(.*?)\}", source).group(1)
+    assert set(terms) == {k.strip(" '") for k in documented.split(",")}
+    world = load_world("fixed20")
+    assert terms["step"] == -1.0 and terms["collision"] == 0.0 and terms["target"] == 0.0
+    name, *rest = lines[1].split(" ")
+    match = re.fullmatch(r"\[\s*(\S+)\s+(\S+)\s*\] (\S+) (False|True) (False|True)", " ".join(rest))
+    assert name == "fixed20" and match, lines[1]
+    position = np.array([float(match.group(1)), float(match.group(2))])
+    distance = float(match.group(3))
+    assert match.group(4, 5) == ("False", "False")          # one step from a start: neither there nor crashed
+    assert distance == pytest.approx(np.hypot(*(world.targets[0] - position)))
+    # the step was "right-up" (action 6): the potential term is Table 3's β = −4 times the change of U over it
+    before, after = world.potential(np.array([position - (1.0, 1.0), position]))
+    assert terms["potential"] == pytest.approx(-4.0 * (after - before)) and terms["potential"] > 0
+    assert names["bounded"].observation_space.low.min() == -1.0 and names["bounded"].observation_space.high.max() == 1.0
+    assert names["obs"].shape == (64, 1, 11, 11)          # the vector env's last observation
+
+    # -- the field: prints nothing, and its expressions give what the comments say
+    source, lines = _snippet(blocks, printed, "world.potential(points)")
+    assert lines == []
+    points = names["points"]
+    assert names["world"].potential(points).shape == (2,)
+    assert names["world"].gradient(points).shape == (2, 2)
+    raster = names["world"].raster(resolution=10)
+    np.testing.assert_allclose(raster.sample(points), names["world"].potential(points), rtol=0.05)
+
+    # -- the ROS map: its size in steps and the step in metres, the target back in metres, five starts reached
+    source, lines = _snippet(blocks, printed, 'load_world("ros_arena")')
+    assert lines == ["(21.6, 21.6) 0.25", "[[1.65 0.55]]", str(["reached"] * 5)]
+    assert "# (21.6, 21.6) in steps; 0.25 m per step" in source and "# [[1.65 0.55]]" in source
+    assert "# 5 x 'reached'" in source

@@ -76,12 +76,25 @@ def test_shield_keeps_a_wall_seeking_policy_from_colliding(world):
     starts = np.array([[6.5, 3.2], [2.0, 1.5], [12.0, 2.5]])   # below the polygon, near the edge, below the circle
     wants_up_then_down = np.array([9, 8, 0, 0, 0, 0, 0, 0, 0], float)   # "up" first, "down" second
     raw = rollout(world, DQNPlanner(shield=False, policy=ConstantPolicy(wants_up_then_down)), starts, max_steps=30)
-    assert raw[0].outcome == "collision" and raw[2].outcome == "collision"
+    # unshielded, each robot runs up into what is above it: the polygon, the map's top edge, the circle
+    assert [e.outcome for e in raw] == ["collision"] * 3
     shielded = DQNPlanner(policy=ConstantPolicy(wants_up_then_down))
     episodes = rollout(world, shielded, starts, max_steps=30)
-    assert all(e.outcome != "collision" for e in episodes)
-    for e in episodes:   # every position it passed through keeps the robot clear
-        assert world.clearance(e.path).min() >= world.robot_radius + SAFETY - 1e-6
+    up, down = ACTIONS[0], ACTIONS[1]
+    need = world.robot_radius + SAFETY
+    t = np.linspace(0.0, 1.0, 101)[:, None]
+    for e, stop_below in zip(episodes, (5.0, 20.0, 3.5)):
+        # not kept still: it pushes up to the last place from which "up" keeps SAFETY clear, then paces there
+        assert e.outcome == "trapped" and e.steps >= 10
+        for here, there in zip(e.path[:-1], e.path[1:]):
+            up_is_safe = move_clearance(world, here[None])[0, 0] >= need
+            # the policy's own choice whenever it is safe, its second choice otherwise
+            np.testing.assert_allclose(there - here, up if up_is_safe else down, atol=1e-6)
+            # and the whole move, not only where it ends, keeps the robot SAFETY clear
+            assert world.clearance(here + t * (there - here)).min() >= need - 1e-6
+        top = e.path[:, 1].max()
+        assert stop_below - 1.0 - need <= top < stop_below - need     # within one move of what is above
+        assert not move_clearance(world, e.path[e.path[:, 1].argmax()][None])[0, 0] >= need
 
 
 def test_planner_names_for_the_shield():
