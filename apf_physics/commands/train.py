@@ -1,4 +1,4 @@
-"""``apf-physics train (--world W | --curriculum FILE) --out DIR [--preset P] [--seed S] [--set KEY=VALUE ...] [--resume]``."""
+"""``apf-physics train (--world W | --curriculum FILE) --out DIR [--preset P | --config FILE] [--seed S] [--set KEY=VALUE ...] [--resume]``."""
 
 from __future__ import annotations
 
@@ -11,8 +11,7 @@ import yaml
 
 from apf_physics.curriculum import load_curriculum
 from apf_physics.errors import UserError
-from apf_physics.rl.config import CURRICULUM_DEFAULT, PRESETS, WORLD_DEFAULT, preset, replace
-from apf_physics.rl.imitation import train_imitation
+from apf_physics.rl.config import CURRICULUM_DEFAULT, PRESETS, WORLD_DEFAULT, load_config, preset, replace
 from apf_physics.rl.phases import phases_for_curriculum, phases_for_world
 from apf_physics.rl.rundir import RunDir
 from apf_physics.rl.trainer import CSV_COLUMNS, load_checkpoint_config, train
@@ -23,8 +22,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
     p = subparsers.add_parser(
         "train", help="train a DQN planner on a world or a curriculum; write best.pt, last.pt, train.csv",
-        description="Train the thesis's Q-network with deep Q-learning, on one world or through a curriculum. "
-                    "Writes OUT/best.pt (the network with the best greedy evaluation, run through the physics as "
+        description="Train a planner's network, on one world or through a curriculum: the thesis's Q-network "
+                    "with deep Q-learning, or (preset map) the map network by imitation of A*. "
+                    "Writes OUT/config.yaml (the configuration, for --config), OUT/best.pt (the network with the "
+                    "best greedy evaluation, run through the physics as "
                     "`apf-physics eval` runs it: the one to use), OUT/last.pt (the full training state, for "
                     "--resume), OUT/train.csv and OUT/train.png (the training curve), and OUT/tensorboard/ when "
                     "the tensorboard package is installed. OUT is locked while a run trains into it.")
@@ -35,20 +36,24 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                             "worlds with every earlier stage's (rehearsal), then generated worlds; evaluated on "
                             "generated validation worlds")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
-    p.add_argument("--preset", default=None, choices=list(PRESETS), metavar="PRESET",
+    recipe = p.add_mutually_exclusive_group()
+    recipe.add_argument("--config", metavar="FILE", help="a configuration file (YAML), e.g. the config.yaml of an "
+                                                         "earlier run, instead of a preset")
+    recipe.add_argument("--preset", default=None, choices=list(PRESETS), metavar="PRESET",
                    help=f"one of {', '.join(PRESETS)}. Default: {WORLD_DEFAULT} with --world (learns a world "
                         f"fastest), {CURRICULUM_DEFAULT} with --curriculum (the shipped general model's recipe). "
                         "thesis-fixed is Table 3 on a world, thesis-general-world Table 4 on a world, "
                         "thesis-general Table 4 through the curriculum")
     p.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="change one training option, e.g. --set total_steps=500000 --set double_dqn=false "
-                        "(values in YAML syntax; the options are the fields of apf_physics.rl.TrainConfig)")
+                   help="change one training option, e.g. --set total_steps=500000 --set dqn.double_dqn=false "
+                        "(values in YAML syntax; an option by its name or section.name, the fields of "
+                        "apf_physics.rl.TrainConfig's sections)")
     p.add_argument("--resume", action="store_true",
                    help="continue the run in --out from its last.pt (its preset and options; --set may change "
                         "how long it runs and how often it reports)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar (it is off anyway when stderr "
-                                                                 "is not a terminal)")
+    p.add_argument("--no-progress", action="store_true", help="show no progress (default: a bar when stderr is a "
+                                                                 "terminal, else a line per log row)")
     p.set_defaults(func=run)
 
 
@@ -98,11 +103,14 @@ def run(args: argparse.Namespace) -> int:
             if out.last.exists():
                 raise UserError(f"{out.path} already holds a training run; continue it with --resume "
                                 "or train into another --out")
-            config = preset(args.preset or (WORLD_DEFAULT if args.world else CURRICULUM_DEFAULT), **overrides)
+            if args.config is not None:
+                config = replace(load_config(args.config), **overrides)
+            else:
+                config = preset(args.preset or (WORLD_DEFAULT if args.world else CURRICULUM_DEFAULT), **overrides)
         phases = phases_for_world(world, config) if world is not None else phases_for_curriculum(stages, config)
+        config.to_yaml(out.path / "config.yaml")
         try:
-            fit = train_imitation if config.method == "imitation" else train
-            result = fit(config, phases, out_dir=out, resume=args.resume, progress=not args.no_progress)
+            result = train(config, phases, out_dir=out, resume=args.resume, progress=not args.no_progress)
         except KeyboardInterrupt:
             if out.last.is_file():
                 print(f"interrupted: the training state is in {out.last}; continue with\n  {resume_command(args)}",
@@ -113,9 +121,10 @@ def run(args: argparse.Namespace) -> int:
     c = result.counters
     if result.already_finished:
         print(f"{out.path}: this run has already finished ({result.stop_reason}, after {c.global_step} steps and "
-              f"{c.episodes} episodes); nothing more to train. To train on, resume with a larger limit, "
-              "e.g. --set total_steps=N")
+              f"{c.episodes} episodes); nothing more to train. {_train_on_hint(result, args)}")
         return 0
+    if result.diverged:
+        print(f"training stopped: {result.stop_reason}", file=sys.stderr)
     best = result.best
     summary = "never evaluated" if best is None else (
         f"{best['success']:.1%} of the validation starts, {best['collisions']} collisions"
@@ -129,4 +138,19 @@ def run(args: argparse.Namespace) -> int:
     names = [Path(p).name for p in result.written]
     use = " (best.pt is the network to use)" if "best.pt" in names else ""
     print(f"wrote {', '.join(names)} in {out.path}{use}")
-    return 0
+    return 1 if result.diverged else 0
+
+
+def _train_on_hint(result, args: argparse.Namespace) -> str:
+    """How to continue a run that stopped by its rules: lift the rule that stopped it."""
+    reason, c = result.stop_reason or "", result.counters
+    if reason.startswith("diverged"):
+        return "It diverged: train anew into another --out with other settings (see the reason)."
+    if reason.startswith("every phase"):
+        return "Every phase of its curriculum is done; train anew to train more."
+    lift = {"total_steps": f"total_steps={2 * c.global_step}", "total_episodes": f"total_episodes={2 * c.episodes}",
+            "time_limit": f"time_limit={2 * max(c.wall_time, 1):.0f}", "target_success": "target_success=null"}
+    name = reason.split(" ")[0]
+    if name not in lift:
+        return ""
+    return f"To train on, resume with the limit lifted:\n  {resume_command(args)} --set {lift[name]}"

@@ -1,9 +1,13 @@
-"""Training the thesis's Q-network with deep Q-learning: one configuration, phases, one loop.
+"""Training the planners' networks: one typed configuration, phases, one loop, two learners.
 
-- :mod:`~apf_physics.rl.config`: :class:`TrainConfig` and its named presets.
+- :mod:`~apf_physics.rl.config`: :class:`TrainConfig` (a section per concern) and its named presets.
 - :mod:`~apf_physics.rl.phases`: what is trained, in order (a world is one phase; a curriculum
   one per stage, then generated worlds).
-- :mod:`~apf_physics.rl.trainer`: the loop, :func:`train`.
+- :mod:`~apf_physics.rl.trainer`: the loop, :func:`train`, for every learner.
+- :mod:`~apf_physics.rl.learner`: what the loop asks of a learner; :mod:`~apf_physics.rl.dqn`
+  (deep Q-learning of the thesis's window network) and :mod:`~apf_physics.rl.imitation` (the
+  map network taught by A*) are the two.
+- :mod:`~apf_physics.rl.progress`: a bar on a terminal, plain lines elsewhere.
 - :mod:`~apf_physics.rl.evaluation`: greedy evaluation through the physics, as ``eval`` runs it.
 - :mod:`~apf_physics.rl.buffer`, :mod:`~apf_physics.rl.plot`, :mod:`~apf_physics.rl.rundir`: the
   experience pool, the training curve, the locked output folder.
@@ -26,16 +30,26 @@ from apf_physics.rl.config import (
     CURRICULUM_DEFAULT,
     PRESETS,
     WORLD_DEFAULT,
+    DQNConfig,
+    EnvConfig,
+    EvalConfig,
+    ImitationConfig,
+    NetworkConfig,
+    RunConfig,
+    ScheduleConfig,
     TrainConfig,
     epsilon_schedule,
+    load_config,
     preset,
 )
 from apf_physics.rl.phases import Phase, phases_for_curriculum, phases_for_world
 from apf_physics.rl.plot import plot_training_curve
+from apf_physics.rl.learner import Counters, Learner
 from apf_physics.rl.trainer import TrainResult, load_checkpoint_config, train
 
 __all__ = [
-    "CURRICULUM_DEFAULT", "PRESETS", "Phase", "ReplayBuffer", "ReplayBufferSamples", "TrainConfig", "TrainResult",
-    "WORLD_DEFAULT", "epsilon_schedule", "load_checkpoint_config", "phases_for_curriculum", "phases_for_world",
-    "plot_training_curve", "preset", "train",
+    "CURRICULUM_DEFAULT", "Counters", "DQNConfig", "EnvConfig", "EvalConfig", "ImitationConfig", "Learner",
+    "NetworkConfig", "PRESETS", "Phase", "ReplayBuffer", "ReplayBufferSamples", "RunConfig", "ScheduleConfig",
+    "TrainConfig", "TrainResult", "WORLD_DEFAULT", "epsilon_schedule", "load_checkpoint_config", "load_config",
+    "phases_for_curriculum", "phases_for_world", "plot_training_curve", "preset", "train",
 ]

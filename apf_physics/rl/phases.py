@@ -77,17 +77,18 @@ def phases_for_world(world: World, config: TrainConfig) -> list[Phase]:
     Raises:
         UserError: The world has no starts, or the configuration trains on generated worlds.
     """
-    if config.families or config.stage_episodes is not None or config.stage_steps is not None:
+    schedule = config.schedule
+    if schedule.families or schedule.stage_episodes is not None or schedule.stage_steps is not None:
         raise UserError(f"preset {config.preset!r} trains a curriculum (stages or generated worlds); "
                         "give it a curriculum file, or choose a preset for one world")
     if not len(world.starts):
         raise UserError(f"{world.label}: the world has no starts to evaluate from")
     extra = None
-    if config.eval_random_starts:
-        points = validation_starts(world, config.eval_random_starts, config.seed)
+    if config.evaluation.eval_random_starts:
+        points = validation_starts(world, config.evaluation.eval_random_starts, config.run.seed)
         extra = EvalSet.of([world_from_dict({**world.to_dict(), "name": f"{world.name}-random",
                                              "starts": points.tolist()}, source=world.label)])
-    return [Phase(world.name, (world,), training_starts(world, config.train_starts, config.seed), None, None,
+    return [Phase(world.name, (world,), training_starts(world, config.env.train_starts, config.run.seed), None, None,
                   EvalSet.of([world]), random_validation=extra)]
 
 
@@ -102,22 +103,23 @@ def phases_for_curriculum(stages: Sequence[Stage], config: TrainConfig) -> list[
     Raises:
         UserError: Nothing to train, or starts that need a single world.
     """
-    if config.train_starts not in ("world", "random"):
-        raise UserError(f"train_starts {config.train_starts!r} needs a single world; "
+    if config.env.train_starts not in ("world", "random"):
+        raise UserError(f"train_starts {config.env.train_starts!r} needs a single world; "
                         "a curriculum trains with 'world' or 'random'")
-    staged = config.stage_episodes is not None or config.stage_steps is not None
-    if not (staged and stages) and not config.families:
+    staged = config.schedule.stage_episodes is not None or config.schedule.stage_steps is not None
+    if not (staged and stages) and not config.schedule.families:
         raise UserError(f"preset {config.preset!r} trains one world: give it --world, or set stage_episodes, "
                         "stage_steps or families for a curriculum")
     validation = validation_set(config)
     phases = []
     if staged:
-        phases = [Phase(s.name, tuple(s.training_worlds), config.train_starts, config.stage_episodes,
-                        config.stage_steps, validation) for s in stages]
-    if config.families:
+        phases = [Phase(s.name, tuple(s.training_worlds), config.env.train_starts, config.schedule.stage_episodes,
+                        config.schedule.stage_steps, validation) for s in stages]
+    if config.schedule.families:
         everything = tuple(stages[-1].training_worlds) if stages else ()
-        phases.append(Phase("randomised", everything, config.train_starts, None, None, validation, pool=True))
-    elif any(v is not None for v in (config.total_steps, config.total_episodes, config.time_limit)):
+        phases.append(Phase("randomised", everything, config.env.train_starts, None, None, validation, pool=True))
+    elif any(v is not None for v in (config.schedule.total_steps, config.schedule.total_episodes,
+                                     config.schedule.time_limit)):
         last = phases[-1]
         phases[-1] = Phase(last.name, last.worlds, last.starts, None, None, validation)
     return phases
@@ -130,19 +132,21 @@ def draw_pool(config: TrainConfig, draw: int) -> list[World]:
     seeded with ``[POOL_STREAM, seed, draw]``, a sequence, so it never coincides with a set
     generated from an integer seed (the held-out or validation set).
     """
-    rng = np.random.default_rng([POOL_STREAM, config.seed, draw])
-    fams, sizes = config.families, config.map_sizes
-    return [generate_world(fams[k % len(fams)], rng, size=sizes[k % len(sizes)], n_starts=config.pool_starts,
-                           name=f"pool{draw}_{fams[k % len(fams)]}_{k}") for k in range(config.pool_size)]
+    rng = np.random.default_rng([POOL_STREAM, config.run.seed, draw])
+    fams, sizes = config.schedule.families, config.schedule.map_sizes
+    return [generate_world(fams[k % len(fams)], rng, size=sizes[k % len(sizes)], n_starts=config.schedule.pool_starts,
+                           name=f"pool{draw}_{fams[k % len(fams)]}_{k}")
+            for k in range(config.schedule.pool_size)]
 
 
 def validation_set(config: TrainConfig) -> EvalSet:
     """The generated validation worlds (the pool's families and map sizes in turn, or all static
     families without a pool, from ``validation_seed``), labelled."""
-    rng = np.random.default_rng(config.validation_seed)
-    fams, sizes = config.families or FAMILIES, config.map_sizes
-    worlds = [generate_world(fams[k % len(fams)], rng, size=sizes[k % len(sizes)], n_starts=config.validation_starts,
-                             name=f"val_{fams[k % len(fams)]}_{k}") for k in range(config.validation_worlds)]
+    rng = np.random.default_rng(config.evaluation.validation_seed)
+    fams, sizes = config.schedule.families or FAMILIES, config.schedule.map_sizes
+    ev = config.evaluation
+    worlds = [generate_world(fams[k % len(fams)], rng, size=sizes[k % len(sizes)], n_starts=ev.validation_starts,
+                             name=f"val_{fams[k % len(fams)]}_{k}") for k in range(ev.validation_worlds)]
     return EvalSet.of(worlds)
 
 

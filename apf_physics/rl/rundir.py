@@ -3,8 +3,9 @@
 The folder is locked while a run writes to it: ``train.lock`` holds the writer's PID and host
 and an exclusive ``fcntl.flock``, which the operating system releases when the process ends
 however it ends (even ``kill -9``), so a lock is never stale. Model files are written
-atomically through ``.NAME.*.tmp`` files (:func:`~apf_physics.models.files.write_file`);
-those left by a killed process are removed when the next run takes the lock.
+atomically through hidden temporary files (:func:`~apf_physics.models.files.write_file`,
+:func:`~apf_physics.safefile.atomic_path`); those left by a killed process
+(:func:`~apf_physics.safefile.stale_temporaries`) are removed when the next run takes the lock.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from pathlib import Path
 from typing import Optional, Sequence
 
 from apf_physics.errors import UserError
+from apf_physics.safefile import stale_temporaries
 
 LOCK_NAME = "train.lock"
 
@@ -88,8 +90,8 @@ class RunDir:
         self._lock_fd = fd
 
     def _remove_temporaries(self) -> list[Path]:
-        """Delete ``.*.tmp`` files of writes that a killed process left half done (we hold the lock)."""
-        stale = sorted(self.path.glob(".*.tmp"))
+        """Delete the temporary files of writes that a killed process left half done (we hold the lock)."""
+        stale = stale_temporaries(self.path)
         for p in stale:
             p.unlink(missing_ok=True)
         return stale
