@@ -2,8 +2,8 @@
 
 The robots of many episodes ("slots") advance together: every control step takes one
 velocity command per robot and returns a :class:`ContactLog` of what touched what, read
-from pymunk's arbiters after every substep. The physics knows nothing of planners,
-observations or rewards.
+from pymunk's arbiters after every substep (:mod:`apf_physics.contacts`). The physics
+knows nothing of planners, observations or rewards.
 
 **Where pymunk does the work.** A robot whose move this step provably cannot touch anything
 moves exactly as pymunk would move a free disc (``p + v·dt``), without pymunk: the test is
@@ -16,11 +16,13 @@ with their robot while it keeps needing physics and are parked far away when it 
 Robots in open space (most of them, most of the time) therefore cost pymunk nothing, and the
 cost per robot-step does not grow with the number of robots.
 
-**Tiles.** Each world's walls are built once as static shapes in a tile of the space, and its
-obstacles piece by piece (a grid's cells as boxes), in :data:`CHUNK` squares, when a robot that
-needs physics first comes near: a large map costs pymunk only where its robots go. Robots that are alone in their slot share their world's tile: their proxies are
-in one collision group and never touch each other. Slots of several robots (formations) get
-a tile each, so that their robots touch each other but never another slot's.
+**Tiles** (:mod:`apf_physics.tiles`). Each world's walls are built once as static shapes in a
+tile of the space, and its obstacles piece by piece (a grid's cells as boxes), in
+:data:`~apf_physics.tiles.CHUNK` squares, when a robot that needs physics first comes near: a
+large map costs pymunk only where its robots go. Robots that are alone in their slot share
+their world's tile: their proxies are in one collision group and never touch each other. Slots
+of several robots (formations) get a tile each, so that their robots touch each other but never
+another slot's.
 
 **Tunnelling.** Chipmunk detects overlaps, not swept contacts, so a disc moving ``δ`` per
 substep can sink at most ``δ`` into an obstacle before the solver pushes it out. The
@@ -35,89 +37,28 @@ position and velocity in one call) is marked experimental by pymunk, hence ``pym
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from enum import IntEnum
 from typing import Sequence
 
 import numpy as np
 import pymunk
 import pymunk.batch
 
+from apf_physics.contacts import (FEW_PAIRS, MOVING, BodyLabels, CollisionType, ContactLog, contact_log, contact_rows,
+                                  contact_rows_few, count_touching, touching_pairs)
+from apf_physics.contacts import KINDS, Contact  # noqa: F401 (public here too)
 from apf_physics.errors import UserError
 from apf_physics.field import Atlas
-from apf_physics.obstacles import CircleObstacle, GridObstacle, PolygonObstacle
+from apf_physics.tiles import Tiles, obstacle_shapes
+from apf_physics.tiles import CHUNK, TILE_GAP, WALL_THICKNESS  # noqa: F401 (public here too)
 from apf_physics.world import World
 
-WALL_THICKNESS = 1.0  # of the slabs around each map [units]
 MAX_SPEED = math.sqrt(2.0)  # a diagonal unit move (±1, ±1) per control step [units per control step]
-TILE_GAP = 4.0  # free space between neighbouring tiles, beyond their walls [units]
 CONTACT_MARGIN = 0.01  # a move that keeps this much more than touching distance needs no physics [units]
 CLEARANCE_RESOLUTION = 8  # nodes per unit of the clearance rasters that decide who needs physics
 CLEARANCE_CAP = 4.0  # clearance beyond this is not measured (it exceeds any move plus a radius)
-_FEW_PAIRS = 64  # up to this many touching pairs, contacts are read with dicts rather than arrays
 _FEW = 4  # up to this many proxies, per-body attribute access beats pymunk.batch's fixed cost
 _PROXY_GROUP = 1  # collision group of proxies of single-robot slots: they never touch each other
 _THIRDS = np.array([0.0, 0.5, 1.0])[None, :, None]  # where a move's clearance is sampled
-KINDS = ("obstacle", "wall", "robot", "moving_obstacle")
-"""What a robot can touch; :attr:`ContactLog.pairs` holds indices into this."""
-_OBSTACLE, _WALL, _ROBOT, _MOVING = range(4)
-
-
-class CollisionType(IntEnum):
-    ROBOT = 1
-    OBSTACLE = 2
-    WALL = 3
-
-
-@dataclass(frozen=True)
-class Contact:
-    """One touch seen during a control step.
-
-    Attributes:
-        robot: Global index of the robot.
-        kind: ``"obstacle"``, ``"wall"`` or ``"robot"``.
-        other: Obstacle index in the robot's world, wall index (0 bottom, 1 right, 2 top, 3 left),
-            or the other robot's global index.
-    """
-
-    robot: int
-    kind: str
-    other: int
-
-
-@dataclass(frozen=True)
-class ContactLog:
-    """What touched what during the last control step.
-
-    Attributes:
-        obstacle: (N,) bool: the robot touched a static obstacle.
-        wall: (N,) bool: the robot touched the map's edge.
-        robot: (N,) bool: the robot touched another robot.
-        moving: (N,) bool: the robot touched a moving obstacle (or one touched it).
-        pairs: (K, 3) int: one row ``(robot, kind, other)`` per touching pair (:data:`KINDS`;
-            a robot–robot touch appears once per robot), sorted.
-    """
-
-    obstacle: np.ndarray
-    wall: np.ndarray
-    robot: np.ndarray
-    moving: np.ndarray
-    pairs: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.intp))
-
-    @property
-    def any(self) -> np.ndarray:
-        """(N,) bool: touched anything."""
-        return self.obstacle | self.wall | self.robot | self.moving
-
-    @property
-    def touched(self) -> bool:
-        """Whether anything touched anything."""
-        return len(self.pairs) > 0
-
-    @property
-    def contacts(self) -> list[Contact]:
-        """The pairs as :class:`Contact` records."""
-        return [Contact(int(r), KINDS[k], int(o)) for r, k, o in self.pairs.tolist()]
 
 
 def substeps_for(radius: float, max_speed: float = MAX_SPEED) -> int:
@@ -186,15 +127,10 @@ class Physics:
         self.space.collision_persistence = 1
 
         # Static geometry: one tile per (world, lane); lane 0 is shared by single-robot slots.
-        # Each obstacle and each wall of a tile has a static body of its own: an arbiter's body
-        # ids then say what a robot touched.
-        self._tiles: dict[tuple[int, int], int] = {}
-        self._tile_offset = np.zeros((0, 2))
-        self._tile_pieces: list[_Pieces] = []            # each tile's obstacles, built where robots come
-        self._next_tile_x = 0.0
-        self._static_ids = np.zeros(0, np.uintp)        # sorted body ids of obstacles, walls, moving obstacles
-        self._static_label = np.zeros((0, 2), np.intp)  # (kind, index) of each, in that order
-        self._label_of_id: dict[int, tuple[int, int]] = {}   # the same as a dict (few contacts are read by it)
+        # Each obstacle, wall and moving obstacle has a body of its own, labelled: an arbiter's
+        # body ids then say what a robot touched.
+        self._labels = BodyLabels()
+        self._tiles = Tiles(self.space, self._labels)
         # Moving obstacles: kinematic bodies, each built for one (world, obstacle), lent per step.
         self._mover_body: list[pymunk.Body] = []
         self._mover_key: list[tuple[int, int]] = []
@@ -231,21 +167,9 @@ class Physics:
         self._proxy_held = False                     # some robot holds a proxy
         self._buffer = pymunk.batch.Buffer()
         self._arbiters = pymunk.batch.Buffer()
-        # pairs of shapes touching now, counted by pymunk's begin/separate callbacks (each called
-        # once per contact, not per substep): a substep after which none touch has no arbiters to read
-        touching = self._touching = [0]
-
-        def begin(arbiter, space, data):
-            touching[0] += 1
-
-        def separate(arbiter, space, data):
-            touching[0] -= 1
-
-        self.space.on_collision(begin=begin, separate=separate)
+        self._touching = count_touching(self.space)   # pairs of shapes touching now
         self._rows_dirty = True
-        nothing = np.zeros(self.num_robots, bool)
-        nothing.flags.writeable = False
-        self._touch_free = ContactLog(nothing, nothing, nothing, nothing)   # the log of a step without contacts
+        self._touch_free = ContactLog.nothing(self.num_robots)   # the log of a step without contacts
         self._movers_needed: list = []
 
     # -- worlds and tiles ------------------------------------------------------------------
@@ -257,8 +181,11 @@ class Physics:
     def _assign(self, slot: int, world: World) -> None:
         # a tile is the world's geometry: worlds that differ only in targets (several formations) share it
         key = (id(world.obstacles), self._lane(slot, world))
-        if key not in self._tiles:
-            self._tiles[key] = self._build_tile(world)
+        if key not in self._tiles.index:
+            # a chunk holds any robot's box of one step (its move, its radius and the margin around)
+            reach = world.robot_radius + CONTACT_MARGIN + 0.5
+            self._tiles.build(key, world, 2 * reach + self.max_speed * self.control_dt)
+            self._rows_dirty = True
         raster = world.clearance_raster(CLEARANCE_RESOLUTION, CLEARANCE_CAP)   # shared by worlds of one map
         if id(raster) not in self._atlas_ids:
             self._atlas_ids[id(raster)] = self._atlas.add(raster)
@@ -266,95 +193,30 @@ class Physics:
         self._any_moving = self._any_moving or bool(world.moving)   # stays set: moving obstacles were met
         self._moving_slots = None
         self._slot_moving[slot] = bool(world.moving)
-        self._slot_tile[slot] = self._tiles[key]
+        self._slot_tile[slot] = self._tiles.index[key]
         self._slot_radius[slot] = world.robot_radius
         m = self.robots_per_slot
         self._sample_atlas[3 * m * slot:3 * m * (slot + 1)] = self._atlas_ids[id(raster)]
         # the raster is within 0.71 / resolution of the clearance (see World.clearance_raster)
         self._free_twice[m * slot:m * (slot + 1)] = 2 * (world.robot_radius + CONTACT_MARGIN + 0.71 / CLEARANCE_RESOLUTION)
 
-    def _build_tile(self, world: World) -> int:
-        """Add ``world``'s walls as static shapes at a fresh offset, and its obstacles to be built
-        where robots come (:meth:`_ensure_obstacles`); returns the tile index."""
-        tile = len(self._tile_offset)
-        ox, oy = self._next_tile_x + WALL_THICKNESS, 0.0
-        w, h = world.size
-        self._next_tile_x += w + 2 * WALL_THICKNESS + TILE_GAP
-        # Walls are solid slabs just outside the map (a zero-thickness segment could be crossed
-        # by a robot squeezed against it): bottom, right, top, left.
-        t = WALL_THICKNESS
-        slabs = [(ox - t, oy - t, ox + w + t, oy), (ox + w, oy - t, ox + w + t, oy + h + t),
-                 (ox - t, oy + h, ox + w + t, oy + h + t), (ox - t, oy - t, ox, oy + h + t)]
-        bodies = []
-        for i, (x0, y0, x1, y1) in enumerate(slabs):
-            body = pymunk.Body(body_type=pymunk.Body.STATIC)
-            wall = pymunk.Poly(body, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
-            wall.collision_type = CollisionType.WALL
-            wall.friction = wall.elasticity = 0.0
-            self.space.add(body, wall)
-            bodies.append((body, _WALL, i))
-        self._label_bodies(bodies)
-        self._tile_offset = np.vstack([self._tile_offset, [ox, oy]])
-        # a chunk holds any robot's box of one step (its move, its radius and the margin around)
-        reach = world.robot_radius + CONTACT_MARGIN + 0.5
-        self._tile_pieces.append(_Pieces(world, max(CHUNK, 2 * reach + self.max_speed * self.control_dt)))
-        self._rows_dirty = True
-        return tile
-
     def _ensure_obstacles(self, robots: np.ndarray, moves: np.ndarray) -> None:
-        """Build the static obstacles near the moves of ``robots`` that are not built yet.
-
-        Each world's obstacles (a grid's cells as boxes) are cut into pieces bucketed by
-        :data:`CHUNK`; the first robot that needs physics near a chunk builds its pieces. A map
-        of any size thus costs pymunk only what its robots come near, and so does start-up.
-        """
-        if all(pieces.complete for pieces in self._tile_pieces):
+        """Build the static obstacles near the moves of ``robots`` that are not built yet
+        (:meth:`~apf_physics.tiles.Tiles.build_near`)."""
+        if self._tiles.complete:
             return   # every obstacle of every tile is built (small maps soon are)
         tiles = self._slot_tile[robots // self.robots_per_slot]
         p = self._positions[robots]
         reach = self._slot_radius[robots // self.robots_per_slot] + CONTACT_MARGIN + 0.5
         lo = np.minimum(p, p + moves[robots]) - reach[:, None]
         hi = np.maximum(p, p + moves[robots]) + reach[:, None]
-        for tile in np.unique(tiles).tolist():
-            mine = tiles == tile
-            pieces = self._tile_pieces[tile]
-            new = pieces.take(lo[mine], hi[mine])
-            if len(new):
-                self._add_pieces(tile, pieces, new)
-
-    def _add_pieces(self, tile: int, pieces: _Pieces, new: np.ndarray) -> None:
-        """Add pieces ``new`` of ``tile``'s obstacles as static shapes (an obstacle's first piece makes its body)."""
-        offset = tuple(self._tile_offset[tile])
-        labelled = []
-        shapes = []
-        for k in new.tolist():
-            index = int(pieces.owner[k])
-            body = pieces.bodies.get(index)
-            if body is None:
-                body = pieces.bodies[index] = pymunk.Body(body_type=pymunk.Body.STATIC)
-                self.space.add(body)
-                labelled.append((body, _OBSTACLE, index))
-            shapes += _piece_shapes(body, pieces.world.obstacles[index], pieces.box(k), offset)
-        for shape in shapes:
-            shape.friction = 0.0
-            shape.elasticity = 0.0
-        self.space.add(*shapes)
-        if labelled:
-            self._label_bodies(labelled)
+        if self._tiles.build_near(tiles, lo, hi):
             self._rows_dirty = True
-
-    def _label_bodies(self, bodies: list[tuple[pymunk.Body, int, int]]) -> None:
-        """Record what each body is (kind, index), for reading contacts from arbiters."""
-        ids = np.concatenate([self._static_ids, np.array([b.id for b, _, _ in bodies], np.uintp)])
-        labels = np.concatenate([self._static_label, np.array([(k, i) for _, k, i in bodies], np.intp).reshape(-1, 2)])
-        order = np.argsort(ids)
-        self._static_ids, self._static_label = ids[order], labels[order]
-        self._label_of_id.update((b.id, (k, i)) for b, k, i in bodies)
 
     def _new_mover(self, world: World, index: int) -> int:
         """A kinematic body shaped like moving obstacle ``index`` of ``world``, parked."""
         body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
-        shapes = _obstacle_shapes(body, world.obstacles[index], (0.0, 0.0))
+        shapes = obstacle_shapes(body, world.obstacles[index], (0.0, 0.0))
         for shape in shapes:
             shape.friction = 0.0
             shape.elasticity = 0.0
@@ -364,7 +226,7 @@ class Physics:
         self._mover_body.append(body)
         self._mover_key.append((id(world), index))
         self._mover_target = np.vstack([self._mover_target, [4.0 * k, -2000.0, 0.0, 0.0]])
-        self._label_bodies([(body, _MOVING, index)])
+        self._labels.add([(body, MOVING, index)])
         self._rows_dirty = True
         return k
 
@@ -433,7 +295,7 @@ class Physics:
             proxies = free[:len(mine)]
             self._proxy_robot[proxies] = mine
             self._robot_proxy[mine] = proxies
-            self._proxy_target[proxies] = self._positions[mine] + self._tile_offset[self._slot_tile[mine // self.robots_per_slot]]
+            self._proxy_target[proxies] = self._positions[mine] + self._tiles.offset[self._slot_tile[mine // self.robots_per_slot]]
             self._proxy_moved[proxies] = True
 
     def _index_rows(self) -> None:
@@ -670,7 +532,7 @@ class Physics:
                 continue
             self._positions[robots[crossed]] = before[crossed]
             proxies = self._robot_proxy[robots[crossed]]
-            self._proxy_target[proxies] = before[crossed] + self._tile_offset[self._slot_tile[slots[crossed]]]
+            self._proxy_target[proxies] = before[crossed] + self._tiles.offset[self._slot_tile[slots[crossed]]]
             self._proxy_moved[proxies] = True
 
     def _lend_movers(self, active: np.ndarray | None) -> None:
@@ -695,7 +557,7 @@ class Physics:
             motion = world.obstacles[index].motion
             t = self._slot_time[slots]
             start = motion.offset(t)
-            self._mover_target[movers, :2] = start + self._tile_offset[self._slot_tile[slots]]
+            self._mover_target[movers, :2] = start + self._tiles.offset[self._slot_tile[slots]]
             self._mover_target[movers, 2:] = (motion.offset(t + 1.0) - start) / self.control_dt
 
     def _simulate(self, robots: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -731,19 +593,16 @@ class Physics:
             pymunk.batch.set_space_bodies(self.space, fields, write)
         self._proxy_moved[:] = False
         touched = []
-        arbiter_fields = pymunk.batch.ArbiterFields.BODY_A_ID | pymunk.batch.ArbiterFields.BODY_B_ID
         touching = self._touching
         for _ in range(self.substeps):
             self.space.step(self.dt)
             if not touching[0]:
-                continue
-            self._arbiters.clear()
-            pymunk.batch.get_space_arbiters(self.space, arbiter_fields, self._arbiters)
-            ids = np.frombuffer(self._arbiters.int_buf(), dtype=np.uintp)
+                continue   # no shapes touch: no arbiters to read
+            ids = touching_pairs(self.space, self._arbiters)
             if len(ids):
-                touched.append(ids.reshape(-1, 2).copy())
+                touched.append(ids)
         self._proxy_dirty[:] = False
-        offsets = self._tile_offset[self._slot_tile[robots // self.robots_per_slot]]
+        offsets = self._tiles.offset[self._slot_tile[robots // self.robots_per_slot]]
         if len(self._proxy_body) <= _FEW and not self._mover_body:
             after = np.array([tuple(self._proxy_body[k].position) for k in proxies.tolist()]).reshape(-1, 2)
         else:
@@ -756,48 +615,16 @@ class Physics:
 
     def _log(self, pairs: np.ndarray) -> ContactLog:
         """The contact log of the touching body-id pairs (a pair may come several times)."""
-        table = self._contact_rows_few(pairs) if len(pairs) <= _FEW_PAIRS else self._contact_rows(pairs)
-        flags = np.zeros((len(KINDS), self.num_robots), bool)
-        flags[table[:, 1], table[:, 0]] = True
-        return ContactLog(flags[_OBSTACLE], flags[_WALL], flags[_ROBOT], flags[_MOVING], table)
+        return contact_log(self._contact_rows_few(pairs) if len(pairs) <= FEW_PAIRS else self._contact_rows(pairs),
+                           self.num_robots)
 
     def _contact_rows_few(self, pairs: np.ndarray) -> np.ndarray:
-        """:meth:`_contact_rows` for a few pairs: dict look-ups beat the arrays' fixed costs."""
-        rows = set()
-        proxy_of, label_of, robot_of = self._proxy_of_id, self._label_of_id, self._proxy_robot
-        for ids in pairs.tolist():
-            for a, b in ((ids[0], ids[1]), (ids[1], ids[0])):   # an arbiter's bodies come in either order
-                k = proxy_of.get(a)
-                if k is None or robot_of[k] < 0:
-                    continue
-                j = proxy_of.get(b)
-                if j is None:
-                    rows.add((int(robot_of[k]), *label_of[b]))
-                elif robot_of[j] >= 0:
-                    rows.add((int(robot_of[k]), _ROBOT, int(robot_of[j])))
-        return np.array(sorted(rows), np.intp).reshape(-1, 3)
+        """:func:`~apf_physics.contacts.contact_rows_few` of the touching body-id pairs."""
+        return contact_rows_few(pairs, self._labels, self._proxy_of_id, self._proxy_robot)
 
     def _contact_rows(self, pairs: np.ndarray) -> np.ndarray:
         """(K, 3) sorted distinct rows ``(robot, kind, other)`` of the touching body-id pairs."""
-        proxy_index = self._proxy_order[np.clip(np.searchsorted(self._proxy_ids[self._proxy_order], pairs), 0,
-                                                len(self._proxy_ids) - 1)]
-        is_proxy = self._proxy_ids[proxy_index] == pairs
-        robot_of = np.where(is_proxy, self._proxy_robot[proxy_index], -1)
-        static = np.clip(np.searchsorted(self._static_ids, pairs), 0, max(len(self._static_ids) - 1, 0))
-        robots, kinds, others = [], [], []
-        for a, b in ((0, 1), (1, 0)):   # an arbiter's bodies come in either order
-            robot = robot_of[:, a]
-            with_static = (robot >= 0) & ~is_proxy[:, b]
-            label = self._static_label[static[with_static, b]]
-            with_robot = (robot >= 0) & (robot_of[:, b] >= 0)
-            robots += [robot[with_static], robot[with_robot]]
-            kinds += [label[:, 0], np.full(int(with_robot.sum()), _ROBOT)]
-            others += [label[:, 1], robot_of[with_robot, b]]
-        robot, kind, other = (np.concatenate(c).astype(np.int64) for c in (robots, kinds, others))
-        # rows (robot, kind, other) as one sortable key: one 1-D unique instead of a row-wise one
-        span = int(other.max(initial=0)) + 1
-        key = np.unique((robot * len(KINDS) + kind) * span + other)
-        return np.column_stack([key // (len(KINDS) * span), key // span % len(KINDS), key % span]).astype(np.intp)
+        return contact_rows(pairs, self._labels, self._proxy_ids, self._proxy_order, self._proxy_robot)
 
 
 def _closest_approach(p: np.ndarray, dp: np.ndarray) -> np.ndarray:
@@ -808,97 +635,3 @@ def _closest_approach(p: np.ndarray, dp: np.ndarray) -> np.ndarray:
     t = np.clip(np.where(a > 0, -np.sum(r0 * dr, axis=-1) / np.where(a > 0, a, 1.0), 0.0), 0.0, 1.0)
     closest = r0 + t[..., None] * dr
     return np.sqrt(np.sum(closest * closest, axis=-1))
-
-
-CHUNK = 4.0
-"""Least side of the squares [units] by which a world's static obstacles are built into pymunk as
-robots come near (larger where a robot's box of one step would not fit in one)."""
-
-
-class _Pieces:
-    """A world's static obstacles cut into pieces (a polygon or circle whole, a grid box by box),
-    bucketed by squares of ``side`` (at least :data:`CHUNK`), and which of them are built."""
-
-    def __init__(self, world: World, side: float):
-        self.world = world
-        self.side = float(side)
-        owners, boxes = [], []
-        for i, obstacle in enumerate(world.obstacles):
-            if obstacle.motion is not None:
-                continue   # moving obstacles are lent per step (_lend_movers)
-            if isinstance(obstacle, GridObstacle):
-                rects = obstacle.rectangles()
-                owners.append(np.full(len(rects), i))
-                boxes.append(rects)
-            else:
-                lo, hi = obstacle.bounds
-                owners.append([i])
-                boxes.append(np.concatenate([lo, hi])[None])
-        self.owner = np.concatenate(owners).astype(np.intp) if owners else np.zeros(0, np.intp)
-        self.boxes = np.vstack(boxes) if boxes else np.zeros((0, 4))
-        self.built = np.zeros(len(self.owner), bool)
-        self.bodies: dict[int, pymunk.Body] = {}
-        self.cols = max(1, int(math.ceil(world.size[0] / self.side)))
-        rows = max(1, int(math.ceil(world.size[1] / self.side)))
-        self.chunk_done = np.zeros(self.cols * rows, bool)
-        self.complete = False
-        """Every chunk is built."""
-        self.rows = rows
-        c0 = np.clip(np.floor(self.boxes[:, :2] / self.side).astype(np.intp), 0, [self.cols - 1, rows - 1])
-        c1 = np.clip(np.floor(self.boxes[:, 2:] / self.side).astype(np.intp), 0, [self.cols - 1, rows - 1])
-        span = c1 - c0 + 1
-        count = span[:, 0] * span[:, 1]
-        piece = np.repeat(np.arange(len(self.owner)), count)
-        k = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-        chunk = (c0[piece, 1] + k // span[piece, 0]) * self.cols + c0[piece, 0] + k % span[piece, 0]
-        order = np.argsort(chunk, kind="stable")
-        self.members = piece[order]
-        self.start = np.concatenate([[0], np.cumsum(np.bincount(chunk, minlength=self.cols * rows))])
-
-    def box(self, k: int) -> np.ndarray | None:
-        """The box of piece ``k`` when it is one box of a grid, else None (the whole obstacle)."""
-        return self.boxes[k] if isinstance(self.world.obstacles[self.owner[k]], GridObstacle) else None
-
-    def take(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        """The pieces not built yet of the chunks that the boxes ``[lo, hi]`` (each smaller than a
-        chunk) meet, now marked built."""
-        top = [self.cols - 1, self.rows - 1]
-        c0 = np.clip(np.floor(lo / self.side).astype(np.intp), 0, top)
-        c1 = np.clip(np.floor(hi / self.side).astype(np.intp), 0, top)
-        corners = np.concatenate([c0[:, 1] * self.cols + c0[:, 0], c0[:, 1] * self.cols + c1[:, 0],
-                                  c1[:, 1] * self.cols + c0[:, 0], c1[:, 1] * self.cols + c1[:, 0]])
-        chunks = corners[~self.chunk_done[corners]]
-        if not len(chunks):
-            return np.zeros(0, np.intp)
-        chunks = np.unique(chunks)
-        self.chunk_done[chunks] = True
-        self.complete = bool(self.chunk_done.all())
-        pieces = np.unique(np.concatenate([self.members[self.start[c]:self.start[c + 1]] for c in chunks.tolist()]))
-        pieces = pieces[~self.built[pieces]]
-        self.built[pieces] = True
-        return pieces
-
-
-def _piece_shapes(body: pymunk.Body, obstacle, box: np.ndarray | None, offset: tuple[float, float]) -> list[pymunk.Shape]:
-    """The shapes of one piece: one box of a grid, or a whole polygon or circle."""
-    if box is None:
-        return _obstacle_shapes(body, obstacle, offset)
-    (x0, y0, x1, y1), (ox, oy) = box.tolist(), offset
-    shape = pymunk.Poly(body, [(x0 + ox, y0 + oy), (x1 + ox, y0 + oy), (x1 + ox, y1 + oy), (x0 + ox, y1 + oy)])
-    shape.collision_type = CollisionType.OBSTACLE
-    return [shape]
-
-
-def _obstacle_shapes(body: pymunk.Body, obstacle, offset: tuple[float, float]) -> list[pymunk.Shape]:
-    """The obstacle's shapes on ``body``, its written coordinates shifted by ``offset``."""
-    ox, oy = offset
-    if isinstance(obstacle, PolygonObstacle):
-        shapes = [pymunk.Poly(body, [(x + ox, y + oy) for x, y in piece]) for piece in obstacle.convex_pieces()]
-    elif isinstance(obstacle, CircleObstacle):
-        cx, cy = obstacle.center
-        shapes = [pymunk.Circle(body, obstacle.radius, offset=(cx + ox, cy + oy))]
-    else:
-        raise TypeError(f"unknown obstacle {obstacle!r}")
-    for shape in shapes:
-        shape.collision_type = CollisionType.OBSTACLE
-    return shapes

@@ -1,0 +1,201 @@
+"""Contacts: what touched what during a control step, read from pymunk's arbiters.
+
+Every static body the physics builds (an obstacle, a wall slab, a moving obstacle) is
+labelled with what it is (:class:`BodyLabels`), and every robot's proxy is known by its body
+id. Pymunk's begin/separate callbacks count the pairs of shapes touching now
+(:func:`count_touching`); after a substep in which some touch, the arbiters' body-id pairs are
+read (:func:`touching_pairs`), and at the end of the step they become the rows
+``(robot, kind, other)`` of a :class:`ContactLog` (:func:`contact_rows`, or
+:func:`contact_rows_few` for a few pairs; :func:`contact_log`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+import numpy as np
+import pymunk
+import pymunk.batch
+
+KINDS = ("obstacle", "wall", "robot", "moving_obstacle")
+"""What a robot can touch; :attr:`ContactLog.pairs` holds indices into this."""
+OBSTACLE, WALL, ROBOT, MOVING = range(4)
+"""Indices into :data:`KINDS`."""
+FEW_PAIRS = 64
+"""Up to this many touching pairs, contacts are read with dicts (:func:`contact_rows_few`) rather than arrays."""
+
+
+class CollisionType(IntEnum):
+    ROBOT = 1
+    OBSTACLE = 2
+    WALL = 3
+
+
+@dataclass(frozen=True)
+class Contact:
+    """One touch seen during a control step.
+
+    Attributes:
+        robot: Global index of the robot.
+        kind: ``"obstacle"``, ``"wall"`` or ``"robot"``.
+        other: Obstacle index in the robot's world, wall index (0 bottom, 1 right, 2 top, 3 left),
+            or the other robot's global index.
+    """
+
+    robot: int
+    kind: str
+    other: int
+
+
+@dataclass(frozen=True)
+class ContactLog:
+    """What touched what during the last control step.
+
+    Attributes:
+        obstacle: (N,) bool: the robot touched a static obstacle.
+        wall: (N,) bool: the robot touched the map's edge.
+        robot: (N,) bool: the robot touched another robot.
+        moving: (N,) bool: the robot touched a moving obstacle (or one touched it).
+        pairs: (K, 3) int: one row ``(robot, kind, other)`` per touching pair (:data:`KINDS`;
+            a robot–robot touch appears once per robot), sorted.
+    """
+
+    obstacle: np.ndarray
+    wall: np.ndarray
+    robot: np.ndarray
+    moving: np.ndarray
+    pairs: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.intp))
+
+    @classmethod
+    def nothing(cls, num_robots: int) -> ContactLog:
+        """The (read-only) log of a step in which nothing touched."""
+        none = np.zeros(num_robots, bool)
+        none.flags.writeable = False
+        return cls(none, none, none, none)
+
+    @property
+    def any(self) -> np.ndarray:
+        """(N,) bool: touched anything."""
+        return self.obstacle | self.wall | self.robot | self.moving
+
+    @property
+    def touched(self) -> bool:
+        """Whether anything touched anything."""
+        return len(self.pairs) > 0
+
+    @property
+    def contacts(self) -> list[Contact]:
+        """The pairs as :class:`Contact` records."""
+        return [Contact(int(r), KINDS[k], int(o)) for r, k, o in self.pairs.tolist()]
+
+
+class BodyLabels:
+    """What each static body is: ``(kind, index)`` by body id (:data:`KINDS`; the obstacle's index
+    in its world, or the wall's: 0 bottom, 1 right, 2 top, 3 left).
+
+    Attributes:
+        ids: Sorted body ids.
+        label: (B, 2) ``(kind, index)`` of each, in that order.
+        of_id: The same as a dict (a few contacts are read by it).
+    """
+
+    def __init__(self):
+        self.ids = np.zeros(0, np.uintp)
+        self.label = np.zeros((0, 2), np.intp)
+        self.of_id: dict[int, tuple[int, int]] = {}
+
+    def add(self, bodies: list[tuple[pymunk.Body, int, int]]) -> None:
+        """Record ``(body, kind, index)`` of each of ``bodies``."""
+        ids = np.concatenate([self.ids, np.array([b.id for b, _, _ in bodies], np.uintp)])
+        labels = np.concatenate([self.label, np.array([(k, i) for _, k, i in bodies], np.intp).reshape(-1, 2)])
+        order = np.argsort(ids)
+        self.ids, self.label = ids[order], labels[order]
+        self.of_id.update((b.id, (k, i)) for b, k, i in bodies)
+
+
+def count_touching(space: pymunk.Space) -> list[int]:
+    """A one-element list that ``space``'s collision callbacks keep at the number of pairs of
+    shapes touching now (begin and separate are called once per contact, not per substep): a
+    substep after which it is 0 has no arbiters to read."""
+    touching = [0]
+
+    def begin(arbiter, space, data):
+        touching[0] += 1
+
+    def separate(arbiter, space, data):
+        touching[0] -= 1
+
+    space.on_collision(begin=begin, separate=separate)
+    return touching
+
+
+def touching_pairs(space: pymunk.Space, buffer: pymunk.batch.Buffer) -> np.ndarray:
+    """(K, 2) body ids of the pairs of bodies whose shapes touch now (read through ``buffer``)."""
+    buffer.clear()
+    pymunk.batch.get_space_arbiters(space, pymunk.batch.ArbiterFields.BODY_A_ID | pymunk.batch.ArbiterFields.BODY_B_ID,
+                                    buffer)
+    return np.frombuffer(buffer.int_buf(), dtype=np.uintp).reshape(-1, 2).copy()
+
+
+def contact_log(rows: np.ndarray, num_robots: int) -> ContactLog:
+    """The contact log of the rows ``(robot, kind, other)`` (:func:`contact_rows`)."""
+    flags = np.zeros((len(KINDS), num_robots), bool)
+    flags[rows[:, 1], rows[:, 0]] = True
+    return ContactLog(flags[OBSTACLE], flags[WALL], flags[ROBOT], flags[MOVING], rows)
+
+
+def contact_rows_few(pairs: np.ndarray, labels: BodyLabels, proxy_of_id: dict[int, int],
+                     proxy_robot: np.ndarray) -> np.ndarray:
+    """:func:`contact_rows` for a few pairs: dict look-ups beat the arrays' fixed costs.
+
+    Args:
+        pairs: (K, 2) touching body ids (a pair may come several times).
+        labels: What the static bodies are.
+        proxy_of_id: The proxy of each proxy body id.
+        proxy_robot: The robot each proxy simulates (-1: parked).
+    """
+    rows = set()
+    label_of = labels.of_id
+    for ids in pairs.tolist():
+        for a, b in ((ids[0], ids[1]), (ids[1], ids[0])):   # an arbiter's bodies come in either order
+            k = proxy_of_id.get(a)
+            if k is None or proxy_robot[k] < 0:
+                continue
+            j = proxy_of_id.get(b)
+            if j is None:
+                rows.add((int(proxy_robot[k]), *label_of[b]))
+            elif proxy_robot[j] >= 0:
+                rows.add((int(proxy_robot[k]), ROBOT, int(proxy_robot[j])))
+    return np.array(sorted(rows), np.intp).reshape(-1, 3)
+
+
+def contact_rows(pairs: np.ndarray, labels: BodyLabels, proxy_ids: np.ndarray, proxy_order: np.ndarray,
+                 proxy_robot: np.ndarray) -> np.ndarray:
+    """(K, 3) sorted distinct rows ``(robot, kind, other)`` of the touching body-id pairs.
+
+    Args:
+        pairs: (K, 2) touching body ids (a pair may come several times).
+        labels: What the static bodies are.
+        proxy_ids: The proxies' body ids.
+        proxy_order: ``argsort(proxy_ids)``.
+        proxy_robot: The robot each proxy simulates (-1: parked).
+    """
+    proxy_index = proxy_order[np.clip(np.searchsorted(proxy_ids[proxy_order], pairs), 0, len(proxy_ids) - 1)]
+    is_proxy = proxy_ids[proxy_index] == pairs
+    robot_of = np.where(is_proxy, proxy_robot[proxy_index], -1)
+    static = np.clip(np.searchsorted(labels.ids, pairs), 0, max(len(labels.ids) - 1, 0))
+    robots, kinds, others = [], [], []
+    for a, b in ((0, 1), (1, 0)):   # an arbiter's bodies come in either order
+        robot = robot_of[:, a]
+        with_static = (robot >= 0) & ~is_proxy[:, b]
+        label = labels.label[static[with_static, b]]
+        with_robot = (robot >= 0) & (robot_of[:, b] >= 0)
+        robots += [robot[with_static], robot[with_robot]]
+        kinds += [label[:, 0], np.full(int(with_robot.sum()), ROBOT)]
+        others += [label[:, 1], robot_of[with_robot, b]]
+    robot, kind, other = (np.concatenate(c).astype(np.int64) for c in (robots, kinds, others))
+    # rows (robot, kind, other) as one sortable key: one 1-D unique instead of a row-wise one
+    span = int(other.max(initial=0)) + 1
+    key = np.unique((robot * len(KINDS) + kind) * span + other)
+    return np.column_stack([key // (len(KINDS) * span), key // span % len(KINDS), key % span]).astype(np.intp)
