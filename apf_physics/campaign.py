@@ -40,6 +40,7 @@ from apf_physics.errors import UserError
 from apf_physics.evaluate import Evaluation, evaluate
 from apf_physics.planners import LEARNED, make_planner
 from apf_physics.rollout import Episode
+from apf_physics.safefile import write_bytes
 from apf_physics.world import World
 
 TASKS_PER_CPU = 4
@@ -172,10 +173,7 @@ def _model_copy(data: bytes, name: str) -> Path:
     path = folder / name
     if not path.is_file() or path.stat().st_size != len(data):
         folder.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{name}.", suffix=".tmp")
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
+        write_bytes(path, data)
     return path
 
 

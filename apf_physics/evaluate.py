@@ -10,7 +10,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from apf_physics.planners.base import Planner
-from apf_physics.render.output import check_writable, write_text
+from apf_physics.safefile import check_writable, write_text
 from apf_physics.rollout import Episode, rollout, rollout_formations
 from apf_physics.world import World
 
@@ -137,6 +137,6 @@ def write_text_atomic(path: str | Path, text: str) -> None:
 
     A missing folder is created; anything at ``path`` that is not a regular file (a
     directory, a link, a device, a FIFO) is refused and left alone
-    (:func:`~apf_physics.render.output.check_writable`).
+    (:func:`~apf_physics.safefile.check_writable`).
     """
     write_text(check_writable(path, create_parent=True), text)

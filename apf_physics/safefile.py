@@ -1,17 +1,30 @@
-"""Reading files users give: regular files only, opened without blocking, within a size limit.
+"""Files users give and files we write: regular files only, read within a limit, written whole.
 
-World files, map images, MovingAI maps and model files are all read through here, so that a
-FIFO, a directory or a huge file gets one clear refusal naming the file, never a hang.
+Reading: world files, map images, MovingAI maps, configurations and model files are all read
+through here, so that a FIFO, a directory or a huge file gets one clear refusal naming the
+file, never a hang.
+
+Writing: every file the package writes (model files, configurations, videos, figures, pages,
+JSON, world sets) goes through :class:`Replacement` (:func:`atomic_path`, :func:`write_bytes`,
+:func:`write_text`): it is written to a temporary file beside it, flushed to the disk and
+renamed over it, and the folder is flushed, so that a write killed or failing half-way (or
+a crash of the machine) leaves the old file (or none) in place, never a truncated one. The
+temporary file sits in the target's folder (a rename within one file system is atomic) under
+a hidden name that keeps the target's suffix (video encoders pick the container by it), with
+the permissions of a plain ``open`` (``0o666`` less the umask), and is removed on any error.
+:func:`check_writable` fails early, before any work, when a file could not be written;
+:func:`stale_temporaries` finds what a killed process left behind.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import re
+import secrets
 import stat
-import tempfile
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, Sequence
 
 from apf_physics.errors import UserError
 
@@ -79,38 +92,192 @@ def read_text_file(path: str | Path, kind: str, error: type[UserError] = UserErr
         raise error(f"{path}: the {kind} file is not UTF-8 text (byte {e.start})") from None
 
 
+# -- writing ---------------------------------------------------------------------------------
+_TEMPORARY = re.compile(r"\..+\.[0-9a-f]{8}\.partial(\.[^.]*)?")
+"""Names of the temporary files of :class:`Replacement`: ``.STEM.XXXXXXXX.partial.SUFFIX``."""
+_OLD_TEMPORARY = re.compile(r"\..+\.tmp")
+"""Names of the temporary files of earlier versions' model files: ``.NAME.XXXXXXXX.tmp``."""
+
+
+def check_writable(path: str | Path, extensions: Sequence[str] | None = None, *, create_parent: bool = False) -> Path:
+    """Fail early, before any work, if an output file cannot be written.
+
+    Args:
+        path: The output file.
+        extensions: Allowed suffixes (lower case, with the dot); ``None`` for any.
+        create_parent: Create a missing parent folder (and its parents).
+
+    Returns:
+        ``path`` as a :class:`~pathlib.Path`.
+
+    Raises:
+        UserError: naming the path, when the suffix is not allowed, the path exists and is
+            not a regular file (a directory, a symbolic link, a device, a FIFO), or its folder
+            is missing (and not to be created) or cannot take a new file.
+    """
+    path = Path(path)
+    if extensions is not None and path.suffix.lower() not in extensions:
+        raise UserError(f"cannot write {path}: unsupported extension {path.suffix or '(none)'!r} "
+                        f"(use {', '.join(extensions)})")
+    kind = _not_a_regular_file(path)
+    if kind:
+        raise UserError(f"cannot write {path}: it is {kind}, not a regular file")
+    parent = path.parent
+    if not parent.is_dir() and not parent.exists() and create_parent:
+        try:
+            parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise UserError(f"cannot write {path}: cannot create directory {parent} ({exc.strerror or exc})") from None
+    # Create and remove a file where the output will go: the only test that a folder takes a
+    # new file (root passes os.access on read-only mounts and on /proc).
+    _create_temporary(path).unlink()
+    return path
+
+
+def _not_a_regular_file(path: Path) -> str | None:
+    """What ``path`` is if it exists and is not a regular file (``"a directory"``, ...), else ``None``."""
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        raise UserError(f"cannot write {path}: {exc.strerror or exc}") from None
+    if stat.S_ISREG(mode):
+        return None
+    if stat.S_ISLNK(mode):
+        return "a symbolic link"
+    if stat.S_ISDIR(mode):
+        return "a directory"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    return "a special file"
+
+
+def _create_temporary(path: Path) -> Path:
+    """A new empty file beside ``path`` with a hidden name and the same suffix (encoders pick
+    the container by it); ordinary permissions (``0o666`` less the umask).
+
+    Raises:
+        UserError: naming ``path``, when its folder is missing, is not a folder, or takes no new file.
+    """
+    while True:
+        candidate = path.with_name(f".{path.stem}.{secrets.token_hex(4)}.partial{path.suffix}")
+        try:
+            os.close(os.open(candidate, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            parent = path.parent
+            if not parent.is_dir():
+                if parent.exists() or parent.is_symlink():
+                    raise UserError(f"cannot write {path}: {parent} is not a directory") from None
+                raise UserError(f"cannot write {path}: directory {parent} does not exist") from None
+            raise UserError(f"cannot write {path}: directory {parent} does not take new files "
+                            f"({exc.strerror or exc})") from None
+        return candidate
+
+
+def stale_temporaries(folder: str | Path) -> list[Path]:
+    """The temporary files in ``folder`` (sorted) of writes that never finished.
+
+    Those of :class:`Replacement`, and those of earlier versions' model files
+    (``.NAME.XXXXXXXX.tmp``). Only a process that alone writes to the folder (a training run
+    holding its lock) may remove them: another's may be in progress.
+    """
+    return sorted(p for p in Path(folder).iterdir()
+                  if (_TEMPORARY.fullmatch(p.name) or _OLD_TEMPORARY.fullmatch(p.name)) and not p.is_dir())
+
+
+def _fsync(path: Path) -> None:
+    """Flush ``path`` (a file or a folder) to the disk."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+class Replacement:
+    """A new version of ``path`` being written to a temporary file beside it.
+
+    :meth:`commit` flushes the temporary file and renames it over ``path``; :meth:`discard`
+    removes it and leaves ``path`` as it was. Exactly one of them ends the replacement. For a
+    file written in one block, :func:`atomic_path`.
+
+    Attributes:
+        path: The file to replace (or create).
+        temporary: The file to write instead: hidden, in the same folder, same suffix.
+
+    Raises:
+        UserError: the temporary file cannot be created (the message names ``path`` and why:
+            its folder is missing, is not a folder, or takes no new file).
+    """
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self.temporary = _create_temporary(self.path)
+
+    def commit(self) -> None:
+        """Flush the temporary file to the disk and move it into place (then flush the folder).
+
+        Raises:
+            UserError: ``path`` has meanwhile become something other than a regular file, or
+                the rename fails (the temporary file is removed either way).
+        """
+        try:
+            kind = _not_a_regular_file(self.path)
+            if kind:
+                raise UserError(f"cannot write {self.path}: it is {kind}, not a regular file")
+            try:
+                _fsync(self.temporary)
+                os.replace(self.temporary, self.path)
+            except OSError as exc:
+                raise UserError(f"cannot write {self.path}: {exc.strerror or exc}") from None
+        finally:
+            self.discard()
+        with contextlib.suppress(OSError):   # the rename itself; not every file system can
+            _fsync(self.path.parent)
+
+    def discard(self) -> None:
+        """Remove the temporary file (if it is still there); ``path`` stays as it was."""
+        self.temporary.unlink(missing_ok=True)
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """A temporary path beside ``path`` to write; renamed over ``path`` when the block ends without error.
 
-    Readers never see a half-written file: the temporary (mode 0666 less the umask, like a plain
-    ``open``) is flushed to disk, then renamed in one step, and the folder is synced so the rename
-    survives a crash. On any error, or an interrupt, the temporary is removed and ``path`` is untouched.
+    Readers never see a half-written file (see :class:`Replacement`). On any error, or an
+    interrupt, the temporary file is removed and ``path`` is untouched.
 
     Raises:
-        UserError: The folder does not exist or cannot be written.
+        UserError: naming ``path``, when its folder does not exist or takes no new file, or
+            the file cannot be moved into place.
     """
-    path = Path(path)
+    replacement = Replacement(path)
     try:
-        fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    except OSError as e:
-        raise UserError(f"{path}: cannot write there ({e.strerror})") from None
-    tmp = Path(name)
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.fchmod(fd, 0o666 & ~umask)  # mkstemp's 0600 would make shared files unreadable
-        os.close(fd)
-        yield tmp
-        with open(tmp, "rb+") as f:
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
+        yield replacement.temporary
     except BaseException:
-        tmp.unlink(missing_ok=True)
+        replacement.discard()
         raise
-    with contextlib.suppress(OSError):  # make the rename itself durable
-        dir_fd = os.open(path.parent, os.O_RDONLY)
+    replacement.commit()
+
+
+def write_bytes(path: str | Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary file (see :func:`atomic_path`).
+
+    Raises:
+        UserError: naming the path, when it cannot be written.
+    """
+    with atomic_path(path) as temporary:
         try:
-            os.fsync(dir_fd)
-        finally:
-            os.close(dir_fd)
+            temporary.write_bytes(data)
+        except OSError as exc:
+            raise UserError(f"cannot write {path}: {exc.strerror or exc}") from None
+
+
+def write_text(path: str | Path, text: str) -> None:
+    """Write UTF-8 ``text`` to ``path`` through a temporary file (see :func:`atomic_path`)."""
+    write_bytes(path, text.encode("utf-8"))

@@ -19,7 +19,7 @@ import numpy as np
 from apf_physics.errors import UserError
 from apf_physics.generate import generate_world
 from apf_physics.planners.gradient import GradientPlanner
-from apf_physics.render.output import check_writable, write_text
+from apf_physics.safefile import check_writable, write_text
 from apf_physics.render.video import progress_bar
 from apf_physics.rollout import rollout
 from apf_physics.search import shortest_path_length

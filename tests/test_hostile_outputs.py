@@ -8,15 +8,16 @@ from pathlib import Path
 
 import pytest
 
-from apf_physics import evaluate as evaluate_module
 from apf_physics.cli import main
+from apf_physics.commands import eval as eval_command
 
 WORLD = "fixed20"
 
 
 def no_work(monkeypatch):
-    """Fail the test if an evaluation starts."""
-    monkeypatch.setattr(evaluate_module, "evaluate", lambda *a, **k: pytest.fail("the evaluation ran"))
+    """Fail the test if an evaluation starts (patched where the command calls it: its module is
+    imported once, so patching ``apf_physics.evaluate`` would leak into later tests)."""
+    monkeypatch.setattr(eval_command, "evaluate", lambda *a, **k: pytest.fail("the evaluation ran"))
 
 
 def refused(capsys, argv) -> str:

@@ -20,7 +20,7 @@ from apf_physics.bundled import bundled_dir
 from apf_physics.errors import UserError
 from apf_physics.evaluate import evaluate, format_table, write_json
 from apf_physics.planners import make_planner
-from apf_physics.render.output import check_writable, write_text
+from apf_physics.safefile import check_writable, write_text
 from apf_physics.render.page import PAGE, Section, write_media, write_page
 from apf_physics.render.video import progress_bar
 

@@ -13,7 +13,7 @@ from apf_physics.campaign import evaluate_on_ray
 from apf_physics.errors import UserError
 from apf_physics.evaluate import evaluate, format_table, write_json, write_text_atomic
 from apf_physics.planners import make_planner
-from apf_physics.render.output import check_writable
+from apf_physics.safefile import check_writable
 from apf_physics.render.page import PAGE, write_results
 from apf_physics.worldfile import MAX_STARTS, load_worlds
 

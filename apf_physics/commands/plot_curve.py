@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from apf_physics.errors import UserError
-from apf_physics.render.output import check_writable
+from apf_physics.safefile import check_writable
 from apf_physics.render.video import write_png
 from apf_physics.rl.plot import plot_training_curve
 

@@ -9,7 +9,7 @@ from apf_physics.errors import UserError
 from apf_physics.planners.gradient import GradientPlanner
 from apf_physics.render.drawing import FieldImage
 from apf_physics.render.field_plot import plot_field
-from apf_physics.render.output import check_writable
+from apf_physics.safefile import check_writable
 from apf_physics.rollout import rollout
 from apf_physics.worldfile import load_world
 

@@ -8,7 +8,7 @@ from collections import Counter
 from apf_physics.errors import UserError
 from apf_physics.planners import make_planner
 from apf_physics.render.episodes import write_episode_video
-from apf_physics.render.output import check_writable
+from apf_physics.safefile import check_writable
 from apf_physics.render.video import VIDEO_EXTENSIONS, choose_codec
 from apf_physics.rollout import rollout, rollout_formations
 from apf_physics.worldfile import load_world

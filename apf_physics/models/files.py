@@ -26,7 +26,6 @@ import io
 import json
 import math
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -39,7 +38,8 @@ from apf_physics.errors import ModelError
 from apf_physics.models.mapnet import MapNetwork
 from apf_physics.models.network import OBS_TRANSFORMS, QNetwork
 from apf_physics.observation import CHANNELS, SCALES, ObserverConfig
-from apf_physics.worldfile import RASTER_MARGIN, open_regular_file
+from apf_physics.safefile import open_regular_file, write_bytes
+from apf_physics.worldfile import RASTER_MARGIN
 
 MAGIC = b"APF-PHYSICS-DQN\n"
 """First line of every model or checkpoint file."""
@@ -79,7 +79,7 @@ def field_dict(field: Any) -> dict[str, float]:
 
 
 def write_file(path: str | os.PathLike, meta: Mapping[str, Any], tensors: Mapping[str, Any]) -> Path:
-    """Write a model or checkpoint file atomically.
+    """Write a model or checkpoint file atomically and durably (:func:`~apf_physics.safefile.write_bytes`).
 
     Args:
         path: Destination; its directory must exist.
@@ -88,6 +88,9 @@ def write_file(path: str | os.PathLike, meta: Mapping[str, Any], tensors: Mappin
 
     Returns:
         The path written.
+
+    Raises:
+        UserError: naming the path, when its folder takes no new file or the file cannot be written.
     """
     path = Path(path)
     buffer = io.BytesIO()
@@ -100,30 +103,7 @@ def write_file(path: str | os.PathLike, meta: Mapping[str, Any], tensors: Mappin
         "meta_bytes": len(meta_bytes),
         "payload_bytes": len(payload),
     }
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.fchmod(fd, 0o666 & ~umask)  # mkstemp's 0600 would make shared models unreadable
-        with os.fdopen(fd, "wb") as f:
-            f.write(MAGIC)
-            f.write(json.dumps(header).encode() + b"\n")
-            f.write(meta_bytes)
-            f.write(payload)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    try:  # make the rename itself durable
-        dir_fd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dir_fd)
-        finally:
-            os.close(dir_fd)
-    except OSError:
-        pass
+    write_bytes(path, b"".join([MAGIC, json.dumps(header).encode() + b"\n", meta_bytes, payload]))
     return path
 
 

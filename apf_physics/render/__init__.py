@@ -4,8 +4,6 @@
   built once) and the pure :func:`draw_frame` (snapshot → ``uint8 (H, W, 3)`` RGB).
 - :mod:`~apf_physics.render.video`: trajectories to frames, frames to H.264 MP4, VP9 WebM,
   MJPG AVI and PNG.
-- :mod:`~apf_physics.render.output`: output files checked before any work and replaced
-  atomically.
 - :mod:`~apf_physics.render.field_plot`: the level-line plot with paths (thesis Fig. 22–23),
   as a figure with a colour bar and a legend.
 - :mod:`~apf_physics.render.episodes`: videos of rollout episodes.

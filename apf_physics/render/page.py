@@ -21,7 +21,7 @@ from apf_physics.errors import UserError
 from apf_physics.render.drawing import FieldImage
 from apf_physics.render.episodes import is_formation, write_episode_video
 from apf_physics.render.field_plot import field_figure
-from apf_physics.render.output import check_writable, write_text
+from apf_physics.safefile import check_writable, write_text
 from apf_physics.render.video import progress_bar, write_png
 
 PAGE = "index.html"

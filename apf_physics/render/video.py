@@ -15,7 +15,7 @@ Codecs (see :data:`CODECS`); the file's extension picks the default:
   desktop players such as VLC play it, web browsers do not.
 
 Every file is written to a temporary file beside it and renamed over it at the end (see
-:mod:`~apf_physics.render.output`). FFmpeg's log stays off (PyAV's default), so encoding
+:mod:`~apf_physics.safefile`). FFmpeg's log stays off (PyAV's default), so encoding
 prints nothing.
 """
 
@@ -33,7 +33,7 @@ from tqdm import tqdm
 
 from apf_physics.errors import UserError
 from apf_physics.render.drawing import FieldImage, Snapshot, TrailLayer, draw_frame, field_image
-from apf_physics.render.output import Replacement, check_writable, write_bytes
+from apf_physics.safefile import Replacement, check_writable, write_bytes
 
 if TYPE_CHECKING:
     from apf_physics.world import World
