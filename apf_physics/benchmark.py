@@ -16,7 +16,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from apf_physics.errors import UserError
-from apf_physics.evaluate import Evaluation, evaluate
+from apf_physics.evaluate import Evaluation, evaluate, figures
 from apf_physics.mapfiles import Scenario, read_movingai_map, read_movingai_scen, scenario_points
 from apf_physics.planners.base import Planner
 from apf_physics.world import World
@@ -104,11 +104,10 @@ def bucket_summary(evaluation: Evaluation, trials: Sequence[Trial]) -> list[dict
     out = []
     for bucket in sorted(rows, key=lambda b: (b == "all", b if b != "all" else 0)):
         entries = rows[bucket]
-        ok = [(e, opt) for e, opt in entries if e.success and opt > 0]
-        ratios = [e.path_length / opt for e, opt in ok]
-        out.append({"bucket": bucket, "episodes": len(entries), "successes": sum(e.success for e, _ in entries),
-                    "collisions": sum(e.outcome == "collision" for e, _ in entries),
-                    "path_over_optimal": round(float(np.mean(ratios)), 4) if ratios else None})
+        scored = figures([e for e, _ in entries], optimal=[opt for _, opt in entries])
+        ratio = scored.path_over_optimal
+        out.append({"bucket": bucket, "episodes": scored.episodes, "successes": scored.successes,
+                    "collisions": scored.collisions, "path_over_optimal": None if ratio is None else round(ratio, 4)})
     return out
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 
@@ -13,6 +13,82 @@ from apf_physics.planners.base import Planner
 from apf_physics.safefile import check_writable, write_text
 from apf_physics.rollout import Episode, rollout, rollout_formations
 from apf_physics.world import World
+
+
+@dataclass(frozen=True)
+class Figures:
+    """What a set of episodes scores: every report's figures come from here (:func:`figures`).
+
+    Attributes:
+        episodes: How many episodes.
+        successes: Episodes that succeeded (:attr:`~apf_physics.rollout.Episode.success`).
+        collisions: Episodes that ended in a collision.
+        trapped: Episodes that ended trapped.
+        success_rate: ``successes / episodes`` (0 without episodes); likewise
+            ``collision_rate`` and ``trapped_rate``.
+        mean_steps: Mean steps of the successes (None without any).
+        mean_path_length: Mean path length of the successes (None without any).
+        length_ratio: Summed path length over summed optimal length, both over the successes
+            that have an optimal length (None without any, or without optimal lengths).
+        path_over_optimal: The mean over the same successes of path length / optimal length.
+        spl: Success weighted by path length (Anderson et al. 2018): the mean over all
+            episodes of ``optimal / max(path, optimal)`` for a success, else 0 (a success
+            without an optimal length counts 1). None without optimal lengths.
+        trap_success: The success rate over the episodes whose starts are marked trapped
+            (None without marks, or none marked).
+    """
+
+    episodes: int
+    successes: int
+    collisions: int
+    trapped: int
+    success_rate: float
+    collision_rate: float
+    trapped_rate: float
+    mean_steps: Optional[float]
+    mean_path_length: Optional[float]
+    length_ratio: Optional[float] = None
+    path_over_optimal: Optional[float] = None
+    spl: Optional[float] = None
+    trap_success: Optional[float] = None
+
+
+def figures(episodes: Sequence[Episode], optimal: Sequence[Optional[float]] | np.ndarray | None = None,
+            trapped: Sequence[bool] | np.ndarray | None = None) -> Figures:
+    """The figures of ``episodes`` (see :class:`Figures`).
+
+    Args:
+        episodes: The episodes.
+        optimal: Per episode, the optimal (A*, octile) path length from its start (None, nan,
+            or 0: none); without it, no length ratios and no SPL.
+        trapped: Per episode, whether its start traps gradient descent; without it, no ``trap_success``.
+    """
+    n = len(episodes)
+    success = np.array([e.success for e in episodes], bool)
+    length = np.array([e.path_length for e in episodes], float)
+    ok = [e for e in episodes if e.success]
+    collisions = sum(e.outcome == "collision" for e in episodes)
+    stuck = sum(e.outcome == "trapped" for e in episodes)
+    extra: dict = {}
+    if optimal is not None:
+        best = np.array([np.nan if v is None else v for v in optimal], float)
+        efficient = success & np.isfinite(best) & (best > 0)
+        spl = np.where(efficient, best / np.maximum(length, np.where(efficient, best, 1.0)), success.astype(float))
+        extra.update(
+            length_ratio=float(length[efficient].sum() / best[efficient].sum()) if efficient.any() else None,
+            path_over_optimal=float(np.mean(length[efficient] / best[efficient])) if efficient.any() else None,
+            spl=float(spl.mean()) if n else None)
+    if trapped is not None:
+        marked = np.asarray(trapped, bool)
+        extra["trap_success"] = float(success[marked].mean()) if marked.any() else None
+    return Figures(
+        episodes=n, successes=len(ok), collisions=collisions, trapped=stuck,
+        success_rate=len(ok) / n if n else 0.0,
+        collision_rate=collisions / n if n else 0.0,
+        trapped_rate=stuck / n if n else 0.0,
+        mean_steps=float(np.mean([e.steps for e in ok])) if ok else None,
+        mean_path_length=float(np.mean([e.path_length for e in ok])) if ok else None,
+        **extra)
 
 
 @dataclass
@@ -25,7 +101,7 @@ class Evaluation:
     def summary(self, episodes: Sequence[Episode] | None = None) -> dict:
         eps = self.episodes if episodes is None else list(episodes)
         n = len(eps)
-        ok = [e for e in eps if e.success]
+        score = figures(eps)
         extra = {}
         formations = [e.formation for e in eps if e.formation is not None]
         if formations and len(formations) == n:  # formations: link and robot–robot figures
@@ -56,12 +132,12 @@ class Evaluation:
                 )
         return {
             "episodes": n,
-            "successes": len(ok),
-            "success_rate": round(len(ok) / n, 4) if n else 0.0,
-            "collision_rate": round(sum(e.outcome == "collision" for e in eps) / n, 4) if n else 0.0,
-            "trapped_rate": round(sum(e.outcome == "trapped" for e in eps) / n, 4) if n else 0.0,
-            "mean_steps": round(float(np.mean([e.steps for e in ok])), 2) if ok else None,
-            "mean_path_length": round(float(np.mean([e.path_length for e in ok])), 3) if ok else None,
+            "successes": score.successes,
+            "success_rate": round(score.success_rate, 4),
+            "collision_rate": round(score.collision_rate, 4),
+            "trapped_rate": round(score.trapped_rate, 4),
+            "mean_steps": None if score.mean_steps is None else round(score.mean_steps, 2),
+            "mean_path_length": None if score.mean_path_length is None else round(score.mean_path_length, 3),
             **extra,
         }
 

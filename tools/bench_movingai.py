@@ -17,10 +17,10 @@ import json
 import time
 from pathlib import Path
 
-import numpy as np
-
 from apf_physics.benchmark import bucket_summary, evaluate_trials, scenario_trials, trials_json
+from apf_physics.evaluate import figures
 from apf_physics.planners import make_planner
+from apf_physics.safefile import write_text
 
 MAPS = [  # (family, name): the table's maps, 32 to 512 cells a side
     ("dao", "arena"), ("dao", "den312d"), ("dao", "lak303d"),
@@ -80,12 +80,13 @@ def main() -> None:
     for planner, entries in totals.items():
         if not entries:
             continue
-        ok = [e.path_length / opt for e, opt in entries if e.success and opt > 0]
-        rows.append(f"{'all':<10} {'':<24} {'':>9} {planner:<15} {sum(e.success for e, _ in entries):>4}/{len(entries):<4} "
-                    f"{sum(e.outcome == 'collision' for e, _ in entries):>8} {np.mean(ok) if ok else float('nan'):>9.3f}")
+        scored = figures([e for e, _ in entries], optimal=[opt for _, opt in entries])
+        ratio = float("nan") if scored.path_over_optimal is None else scored.path_over_optimal
+        rows.append(f"{'all':<10} {'':<24} {'':>9} {planner:<15} {scored.successes:>4}/{scored.episodes:<4} "
+                    f"{scored.collisions:>8} {ratio:>9.3f}")
     print("\n".join(rows))
     if args.json:
-        args.json.write_text(json.dumps(out, indent=1))
+        write_text(args.json, json.dumps(out, indent=1))
 
 
 if __name__ == "__main__":

@@ -36,9 +36,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from apf_physics.evaluate import evaluate  # noqa: E402
+from apf_physics.evaluate import evaluate, figures  # noqa: E402
 from apf_physics.worldsets import label_starts  # noqa: E402
 from apf_physics.planners import make_planner  # noqa: E402
+from apf_physics.safefile import write_text  # noqa: E402
 from apf_physics.worldfile import load_world  # noqa: E402
 
 
@@ -73,37 +74,35 @@ def family_of(world_name: str) -> str:
 
 
 def summarise(episodes, labels) -> dict:
-    """Overall and trap-start figures for one planner's episodes."""
+    """Overall and trap-start figures for one planner's episodes (:func:`apf_physics.evaluate.figures`)."""
     rows = []
     index: dict[str, int] = {}
     for e in episodes:
         k = index.get(e.world, 0)
         index[e.world] = k + 1
-        trapped, astar, lattice = labels[e.world][k]
-        rows.append((e.success, e.outcome == "collision", trapped, e.path_length, astar, lattice))
-    spl = [r[4] / max(r[3], r[4]) if r[0] and r[4] else float(r[0]) for r in rows]
-    success = np.array([r[0] for r in rows])
-    collision = np.array([r[1] for r in rows])
-    trapped = np.array([r[2] for r in rows])
-    lattice = np.array([r[5] for r in rows])
-    ok = [r for r in rows if r[0] and r[4]]
-    ratio = (np.mean([r[3] for r in ok]) / np.mean([r[4] for r in ok])) if ok else float("nan")
+        rows.append(labels[e.world][k])                    # (trapped, astar, lattice)
+    trapped = np.array([r[0] for r in rows], bool)
+    astar = [r[1] for r in rows]
+    lattice = np.array([r[2] for r in rows], bool)
+    scored = figures(episodes, optimal=astar, trapped=trapped)
+    success = np.array([e.success for e in episodes], bool)
+    ok = [(e.path_length, a) for e, a in zip(episodes, astar) if e.success and a]
+    nan = float("nan")
     return {
-        "starts": len(rows),
-        "successes": int(success.sum()),
-        "success_rate": float(success.mean()),
+        "starts": scored.episodes,
+        "successes": scored.successes,
+        "success_rate": scored.success_rate,
         "trap_starts": int(trapped.sum()),
         "trap_successes": int(success[trapped].sum()),
-        "trap_success_rate": float(success[trapped].mean()) if trapped.any() else float("nan"),
-        "collisions": int(collision.sum()),
+        "trap_success_rate": nan if scored.trap_success is None else scored.trap_success,
+        "collisions": scored.collisions,
         "lattice_starts": int(lattice.sum()),
         "lattice_successes": int(success[lattice].sum()),
-        "length_ratio_vs_astar": float(ratio),
-        "mean_path_length": float(np.mean([r[3] for r in ok])) if ok else float("nan"),
-        "mean_astar_length": float(np.mean([r[4] for r in ok])) if ok else float("nan"),
-        "spl": float(np.mean(spl)),
+        "length_ratio_vs_astar": nan if scored.length_ratio is None else scored.length_ratio,
+        "mean_path_length": float(np.mean([p for p, _ in ok])) if ok else nan,
+        "mean_astar_length": float(np.mean([a for _, a in ok])) if ok else nan,
+        "spl": scored.spl,
     }
-
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -167,7 +166,7 @@ def main(argv=None) -> int:
             print(f"{'':<26} worlds with a success: {worlds_ok}/{len(per)} ({detail})")
             s["per_world"] = {w: [bool(x) for x in v] for w, v in per.items()}
     if args.json:
-        Path(args.json).write_text(json.dumps(results, indent=1))
+        write_text(args.json, json.dumps(results, indent=1))
         print(f"wrote {args.json}")
     return 0
 

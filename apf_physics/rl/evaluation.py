@@ -15,7 +15,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from apf_physics.evaluate import evaluate
+from apf_physics.evaluate import evaluate, figures
 from apf_physics.models.network import QNetwork
 from apf_physics.models.policy import DQNPolicy
 from apf_physics.observation import ObserverConfig
@@ -69,20 +69,16 @@ def summarise(episodes: Sequence[Episode], evalset: EvalSet) -> dict[str, Option
         starts where gradient descent is trapped; None without any), ``collisions`` (episodes
         ending in one), ``length_ratio`` (summed path length over summed A* length, both over
         the successes; None without any) and ``spl``, success weighted by path length (Anderson
-        et al. 2018: the mean over all starts of ``A* / max(path, A*)`` for a success, else 0).
+        et al. 2018: the mean over all starts of ``A* / max(path, A*)`` for a success, else 0):
+        :func:`apf_physics.evaluate.figures` with the A* lengths and trap labels.
     """
-    success = np.array([e.success for e in episodes], bool)
-    length = np.array([e.path_length for e in episodes], float)
-    astar = evalset.astar
-    efficient = success & np.isfinite(astar) & (astar > 0)
-    spl = np.where(efficient, astar / np.maximum(length, np.where(efficient, astar, 1.0)), success.astype(float))
-    trapped = evalset.trapped
+    scored = figures(episodes, optimal=evalset.astar, trapped=evalset.trapped)
     return {
-        "success": float(success.mean()),
-        "trap_success": float(success[trapped].mean()) if trapped.any() else None,
-        "collisions": int(sum(e.outcome == "collision" for e in episodes)),
-        "length_ratio": float(length[efficient].sum() / astar[efficient].sum()) if efficient.any() else None,
-        "spl": float(spl.mean()),
+        "success": scored.success_rate,
+        "trap_success": scored.trap_success,
+        "collisions": scored.collisions,
+        "length_ratio": scored.length_ratio,
+        "spl": scored.spl,
     }
 
 
