@@ -19,6 +19,7 @@ steers the leader (a planner, a Gymnasium agent).
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Sequence
 
 import numpy as np
 
@@ -44,6 +45,29 @@ def formation_offsets(spec: FormationSpec) -> np.ndarray | None:
         side = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
         return np.column_stack([rows, side * rows])
     return np.asarray(spec.offsets, dtype=float).reshape(n, 2)
+
+
+def link_lengths(positions: np.ndarray, followed: Sequence[int]) -> np.ndarray:
+    """(..., F) the distance of each follower to the robot it follows (its link, Model §3).
+
+    Args:
+        positions: (..., m, 2) a formation's robots, the leader first (m = 1 + F).
+        followed: For each follower, the robot it follows (:attr:`FormationSpec.followed`).
+    """
+    positions = np.asarray(positions, float)
+    d = positions[..., 1:, :] - positions[..., np.asarray(followed, np.intp), :]
+    return np.hypot(d[..., 0], d[..., 1])
+
+
+def links_in_range(positions: np.ndarray, followed: Sequence[int], comm_range: float) -> np.ndarray:
+    """(..., F) bool: each link within the communication range (:func:`link_lengths` ≤ ``comm_range``)."""
+    return link_lengths(positions, followed) <= comm_range
+
+
+def formation_success(reached: bool, positions: np.ndarray, followed: Sequence[int], comm_range: float) -> bool:
+    """A formation's success (Model §3): its leader reached the target and, where the robots
+    stand (``positions``, (m, 2)), every follower is within ``comm_range`` of the robot it follows."""
+    return bool(reached) and bool(np.all(links_in_range(positions, followed, comm_range)))
 
 
 def swept_distance(p: np.ndarray, dp: np.ndarray, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
@@ -271,10 +295,8 @@ class FormationTeam:
         return out
 
     def links(self, positions: np.ndarray) -> np.ndarray:
-        """(..., F) distance of each follower to the robot it follows."""
-        followers = positions[..., 1:, :]
-        ahead = positions[..., self.followed, :]
-        return np.hypot(*(followers - ahead).transpose(-1, *range(followers.ndim - 1)))
+        """(..., F) distance of each follower to the robot it follows (:func:`link_lengths`)."""
+        return link_lengths(positions, self.followed)
 
 
 def right_of_way(world: World, positions: np.ndarray, moves: np.ndarray, order: np.ndarray, t: float = 0.0,
@@ -436,6 +458,5 @@ class FormationCrowd:
                 self.since[f] = 0
 
     def links(self, positions: np.ndarray) -> list[np.ndarray]:
-        """Per formation, the distance of each follower to the robot it follows."""
-        return [np.hypot(*(positions[f, 1:self.sizes[f]] - positions[f, self.followed[f]]).T)
-                for f in range(self.count)]
+        """Per formation, the distance of each follower to the robot it follows (:func:`link_lengths`)."""
+        return [link_lengths(positions[f, :self.sizes[f]], self.followed[f]) for f in range(self.count)]

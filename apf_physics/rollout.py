@@ -15,7 +15,7 @@ from typing import Sequence
 import numpy as np
 
 from apf_physics.engine import Outcome, Stepper, TrapDetector
-from apf_physics.formation import FormationCrowd, FormationTeam, formation_spec
+from apf_physics.formation import FormationCrowd, FormationTeam, formation_spec, formation_success, links_in_range
 from apf_physics.planners.base import Planner
 from apf_physics.world import World
 
@@ -59,8 +59,12 @@ class FormationRecord:
         return float(d[:, ~np.eye(n, dtype=bool)].min())
 
     def final_links_in_range(self) -> list[bool]:
-        last = self.positions[-1]
-        return [bool(np.hypot(*(last[i + 1] - last[j])) <= self.comm_range) for i, j in enumerate(self.followed)]
+        """Per link, whether it is within range at the end (:func:`~apf_physics.formation.links_in_range`)."""
+        return links_in_range(self.positions[-1], self.followed, self.comm_range).tolist()
+
+    def succeeded(self, reached: bool) -> bool:
+        """The formation's success, its leader having ``reached`` the target (:func:`~apf_physics.formation.formation_success`)."""
+        return formation_success(reached, self.positions[-1], self.followed, self.comm_range)
 
 
 @dataclass
@@ -90,7 +94,7 @@ class Episode:
     def success(self) -> bool:
         """Reached; for a formation, also every follower within range of the robot it follows at the end."""
         reached = self.outcome == "reached"
-        return reached and (self.formation is None or all(self.formation.final_links_in_range()))
+        return reached if self.formation is None else self.formation.succeeded(reached)
 
     @property
     def path_length(self) -> float:

@@ -12,6 +12,7 @@ from apf_physics.actions import ACTIONS
 from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, resolve_worlds
 from apf_physics.envs.reward import TERMS, reward_weights
 from apf_physics.envs.task import NavigationTask
+from apf_physics.formation import formation_success, link_lengths, links_in_range
 from apf_physics.observation import ObserverConfig
 from apf_physics.render.drawing import Snapshot, draw_frame, field_image, formation_roles
 from apf_physics.world import FormationSpec
@@ -109,23 +110,23 @@ class FormationEnv(gym.Env):
         for trail, p in zip(self.trails, self.positions):
             trail.append(p.copy())
         self.steps += 1
-        links = self._task.team.links(self.positions)
-        self.in_range += links <= self.formation.comm_range
+        self.in_range += links_in_range(self.positions, self.followed, self.formation.comm_range)
         reached, collided = bool(result.reached[0]), bool(result.collided[0])
         info = self._get_info()
         info["reward_terms"] = dict(zip(TERMS, result.terms[:, 0].tolist()))
         info["success"] = reached
         info["collision"] = collided
         info["robot_robot_contact"] = bool(result.robot_contact[0])
-        info["formation_success"] = reached and bool(np.all(links <= self.formation.comm_range))
+        info["formation_success"] = formation_success(reached, self.positions, self.followed, self.formation.comm_range)
         return result.observation[0], float(result.reward[0]), bool(result.terminated[0]), False, info
 
     def _get_info(self) -> dict:
-        links = self._task.team.links(self.positions)
+        links = link_lengths(self.positions, self.followed)
         share = self.in_range / self.steps if self.steps else np.ones_like(links)
         return {"positions": self.positions, "position": self.positions[0], "world": self.world.name,
                 "distance": float(self._task.distance()[0]), "links": links,
-                "links_in_range": links <= self.formation.comm_range, "link_in_range_share": share}
+                "links_in_range": links_in_range(self.positions, self.followed, self.formation.comm_range),
+                "link_in_range_share": share}
 
     def render(self):
         if self.render_mode != "rgb_array":
