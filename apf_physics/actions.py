@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from apf_physics.world import World
+from apf_physics.world import Moment, World
 
 ACTION_NAMES = ("up", "down", "left", "right", "left-up", "left-down", "right-up", "right-down", "stay")
 ACTIONS = np.array(
@@ -23,21 +23,21 @@ MOVE_SAMPLES = 8
 """Points sampled along a move by :func:`move_clearance`, after its start."""
 
 
-def move_clearance(world: World, positions: np.ndarray, moves: np.ndarray = ACTIONS, t: float | None = None) -> np.ndarray:
+def move_clearance(where: Moment | World, positions: np.ndarray, moves: np.ndarray = ACTIONS) -> np.ndarray:
     """A lower bound of the clearance of a robot's centre along each straight move.
 
-    The world's clearance is sampled at the start and at :data:`MOVE_SAMPLES` evenly spaced
-    points of the move (:meth:`World.path_clearance`), and the least of them is lowered by
-    half the spacing: clearance changes no faster than distance, so no point between two
-    samples is nearer than that. A move whose bound is at least the robot's radius cannot
-    touch anything (the physics moves the disc along the segment).
+    The clearance is sampled at the start and at :data:`MOVE_SAMPLES` evenly spaced points of
+    the move (:meth:`Moment.path_clearance`), and the least of them is lowered by half the
+    spacing: clearance changes no faster than distance, so no point between two samples is
+    nearer than that. A move whose bound is at least the robot's radius cannot touch anything
+    (the physics moves the disc along the segment).
 
     Args:
-        world: The world.
+        where: The world at the control step the moves start at (:meth:`World.at`): moving
+            obstacles are taken where they are along the move. A :class:`World`: its static
+            obstacles only (:meth:`World.static_path_clearance`).
         positions: (N, 2) robot centres.
         moves: (M, 2) displacements (default: the nine moves of :data:`ACTIONS`).
-        t: The control step the moves start at: moving obstacles are taken where they are
-            along the move (:meth:`World.path_clearance`); None: at step 0.
 
     Returns:
         (N, M) clearance bounds.
@@ -48,5 +48,5 @@ def move_clearance(world: World, positions: np.ndarray, moves: np.ndarray = ACTI
     start = np.repeat(positions, len(moves), axis=0)
     end = start + np.tile(moves, (len(positions), 1))
     # a move of length 0 is one point: any positive spacing samples it
-    clear = world.path_clearance(start, end, np.tile(np.where(spacing > 0, spacing, 1.0), len(positions)), t=t)
+    clear = where.path_clearance(start, end, np.tile(np.where(spacing > 0, spacing, 1.0), len(positions)))
     return clear.reshape(len(positions), len(moves)) - 0.5 * spacing[None, :]

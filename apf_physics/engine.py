@@ -4,8 +4,12 @@ A :class:`Stepper` runs a batch of episodes ("slots"), each of one or several ro
 world: the single environment (a batch of one), the vector environment, ``eval``'s rollouts
 and formations all call it. Each control step it takes a velocity command per robot, moves
 every robot of the running slots through one :class:`~apf_physics.physics.Physics` call,
-and decides how each episode stands, with one definition for all callers:
+and decides how each episode stands, with one definition for all callers (Model §2,
+episode rules):
 
+- **reached at the start**: :meth:`Stepper.start` ends at once, as reached after 0 steps, an
+  episode whose leader starts within the goal tolerance of a target; the next
+  :meth:`Stepper.step` reports it as ended (and reached) without moving it;
 - **collision**: any robot of the slot touched an obstacle, the map's edge or another robot
   during the step (every robot involved is flagged in :attr:`StepReport.contacts`);
 - **reached**: otherwise, the slot's leader (robot 0) ends the step within the goal
@@ -13,6 +17,14 @@ and decides how each episode stands, with one definition for all callers:
 - **trapped**: otherwise, the caller's planner gave up (``gave_up``), or the
   :class:`TrapDetector` given to the stepper sees the leader stuck;
 - **timeout**: otherwise, the episode has run ``max_steps`` control steps.
+
+Which callers use which rules: every caller gets the first three. ``eval``'s rollouts
+(:mod:`apf_physics.rollout`) give the stepper their planner's trap detector (its rule and
+window), its give-up signal, and a step limit; the environments have a step limit
+(Gymnasium's ``TimeLimit`` for the single ones) and a trap detector only when asked for
+(their ``trap`` option, default None: no trap rule, as in training). With the same detector
+and limit, an environment driven by a planner's moves and ``eval`` running that planner end
+the same episode the same way, at the same step.
 
 An ended slot's robots stay where the episode ended until :meth:`Stepper.start` begins the
 slot's next episode.
@@ -27,7 +39,7 @@ from typing import Literal, Sequence
 import numpy as np
 
 from apf_physics.physics import ContactLog, Physics
-from apf_physics.world import World
+from apf_physics.world import Moment, World
 
 TrapRule = Literal["descent", "oscillation"]
 
@@ -168,6 +180,7 @@ class Stepper:
         self.trap = trap
         self._watch = TrapWatch(trap, self.num_slots) if trap is not None else None
         self._nobody = np.zeros(self.num_slots, bool)
+        self._unreported = np.zeros(self.num_slots, bool)   # ended at their start, not yet in a report
         self._moving = any(w.moving for w in self.worlds)
         self.last_distance = np.full(self.num_slots, np.inf)
         """Each leader's distance to its nearest target, after the last start or step."""
@@ -179,6 +192,11 @@ class Stepper:
 
     def world(self, slot: int) -> World:
         return self.worlds[self.world_of[slot]]
+
+    def moment(self, slot: int) -> Moment:
+        """The world of ``slot`` at its episode's step (where its moving obstacles are): what a
+        planner steering the slot's robots is given for this control step."""
+        return self.world(slot).at(int(self.steps[slot]))
 
     def distance(self) -> np.ndarray:
         """(S,) each leader's distance to the nearest target of its world."""
@@ -193,13 +211,16 @@ class Stepper:
         keys = self.world_of[slots] * (self.steps.max(initial=0) + 1) + self.steps[slots]
         for key in np.unique(keys).tolist():
             mine = keys == key
-            world = self.worlds[self.world_of[slots[mine][0]]]
-            out[mine] = world.potential(self.positions[slots[mine], 0], float(self.steps[slots[mine][0]]))
+            out[mine] = self.moment(int(slots[mine][0])).potential(self.positions[slots[mine], 0])
         return out
 
     def start(self, slots: np.ndarray, positions: np.ndarray, world_ids: np.ndarray | None = None,
               present: np.ndarray | None = None) -> None:
         """Begin episodes in ``slots``: robots at ``positions`` (k, m, 2), in ``worlds[world_ids]`` (default 0).
+
+        An episode whose leader starts within the goal tolerance of a target of its world ends
+        at once, reached after 0 steps; the next :meth:`step` reports it (``ended`` and
+        ``reached``, not ``moved``).
 
         ``present``: (k, m) bool, the robots that exist (a formation smaller than the slot has
         absent ones, which never move or touch anything); default all.
@@ -227,9 +248,12 @@ class Stepper:
         self.last_distance = self.distance()
         if self._watch is not None:
             self._watch.reset(slots, positions[:, 0], self._leader_potential(slots))
+        arrived = self.last_distance[slots] <= self._slot_tolerance[slots]
+        self.outcome[slots[arrived]] = REACHED
+        self._unreported[slots] = arrived
 
     def finish(self, slots: np.ndarray, outcome: Outcome) -> None:
-        """End the running episodes among ``slots`` with ``outcome`` (e.g. a start already at its target)."""
+        """End the running episodes among ``slots`` with ``outcome`` (e.g. a planner that gave up)."""
         slots = np.asarray(slots, np.intp).reshape(-1)
         self.outcome[slots[self.outcome[slots] == RUNNING]] = int(outcome)
 
@@ -276,5 +300,9 @@ class Stepper:
                 outcome[moved & (outcome == RUNNING) & (self.steps >= self.max_steps)] = TIMEOUT
             ended = moved & (outcome != RUNNING)
             self.outcome[ended] = outcome[ended]
+        if self._unreported.any():   # episodes that ended at their start: reported once, by this step
+            ended = ended | self._unreported
+            reached = reached | self._unreported
+            self._unreported[:] = False
         self.last_distance = distance
         return StepReport(self.positions, contacts, moved, collided, reached, ended, distance)

@@ -2,8 +2,10 @@
 
 All starts of a world run at once, one :class:`~apf_physics.engine.Stepper` slot per start.
 The planner steers each slot's leader; in a formation the followers follow by their own rule
-(:class:`~apf_physics.formation.FormationTeam`). How an episode ends is the stepper's
-decision (reached, collision, trapped, timeout), with the planner's trap rule.
+(:class:`~apf_physics.formation.FormationTeam`). Each control step the planner is given the
+world at that step (:meth:`~apf_physics.engine.Stepper.moment`, built once for the step). How
+an episode ends is the stepper's decision (reached, also at the start; collision, trapped,
+timeout), with the planner's trap rule.
 """
 
 from __future__ import annotations
@@ -173,7 +175,6 @@ def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | 
     if team is not None:
         team.reset(slots, [world] * n, initial)
     planner.reset(world, starts.copy())
-    stepper.finish(slots[stepper.distance() <= world.goal_tolerance], Outcome.REACHED)
 
     history = [initial.copy()]
     contacts: list[list[str]] = [[] for _ in range(n)]
@@ -183,7 +184,8 @@ def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | 
     while stepper.running.any():
         active = stepper.running
         positions = stepper.positions
-        leader = planner.act(positions[:, 0], active, int(stepper.steps[active].max()))
+        moment = stepper.moment(int(np.flatnonzero(active)[0]))   # every running slot is at the same step
+        leader = planner.act(positions[:, 0], active, moment)
         gave_up = planner.stuck()
         gave_up = active & gave_up if gave_up is not None else np.zeros(n, bool)
         moving = active & ~gave_up
@@ -245,7 +247,6 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
     slots = np.arange(count)
     stepper.start(slots, initial, world_ids=slots, present=crowd.present)
     crowd.reset(initial)
-    stepper.finish(slots[stepper.distance() <= np.array([w.goal_tolerance for w in crowd.worlds])], Outcome.REACHED)
 
     history = [initial.copy()]
     contacts: list[list[str]] = [[] for _ in range(count)]
@@ -260,8 +261,8 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
         leader = np.zeros((count, 2))
         gave_up = np.zeros(count, bool)
         for f in np.flatnonzero(active).tolist():
-            planners[f].world = crowd.view(positions, f)
-            leader[f] = planners[f].act(positions[f, :1], np.ones(1, bool), step)[0]
+            view = planners[f].world = crowd.view(positions, f)
+            leader[f] = planners[f].act(positions[f, :1], np.ones(1, bool), view.at(step))[0]
             stuck = planners[f].stuck()
             gave_up[f] = bool(stuck[0]) if stuck is not None else False
         commands = crowd.commands(positions, leader, active & ~gave_up, step)

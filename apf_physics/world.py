@@ -6,6 +6,14 @@ with :func:`apf_physics.worldfile.load_world` or from a mapping with
 asks of the map: the potential and its gradient at points (Model §1), clearance from
 obstacles and the map's edge, free positions, and a cache of what is derived from it
 (rasters, free cells, search grids) through :meth:`World.cached`.
+
+With moving obstacles the field and the clearance depend on the control step: a
+:class:`Moment`, made by :meth:`World.at`, is the world at one step. It places the moving
+obstacles once and answers every query of that step (potential, gradient, clearance, the
+clearance along moves, the obstacles where they are) while sharing what is static with its
+world. Callers build one per control step and hand it down (the rollout to its planner, the
+planner to :func:`~apf_physics.actions.move_clearance`); the world's own ``potential(points,
+t)`` and the like are one-line conveniences over ``world.at(t)``.
 """
 
 from __future__ import annotations
@@ -19,7 +27,7 @@ from apf_physics import field as apf
 from apf_physics import geometry
 from apf_physics.errors import WorldError
 from apf_physics.field import FieldParams
-from apf_physics.obstacles import CircleObstacle, GridObstacle, Obstacle, obstacle_at
+from apf_physics.obstacles import CircleObstacle, GridObstacle, Obstacle
 from apf_physics.spatial import ShapeSet
 
 T = TypeVar("T")
@@ -32,6 +40,8 @@ MOVE_REACH = 1.5
 radius: every test of a move asks about less (the shield's room saturates at 1 beyond its margin)."""
 RASTER_CHUNK = 1 << 16
 """Raster nodes computed at a time (bounds the temporaries of a large map)."""
+MOMENTS_KEPT = 8
+"""Moments a world keeps (:meth:`World.at`): the steps of the slots of a batch in one world, at most."""
 
 
 @dataclass(frozen=True)
@@ -153,6 +163,7 @@ class World:
     frame: Frame = Frame()
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
     _static: dict = field(default_factory=dict, repr=False, compare=False)
+    _moments: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def label(self) -> str:
@@ -232,12 +243,24 @@ class World:
             self._cache["motion_table"] = table
         return table[steps]
 
+    def at(self, t: float = 0.0) -> Moment:
+        """The world at control step ``t`` (fractional steps allowed): see :class:`Moment`.
+
+        Cheap: a moment places its moving obstacles only when a query first needs them. The
+        last few moments asked for are kept, so that callers of the conveniences below (and of
+        :meth:`at`) with the step a caller already built a moment for share its placed obstacles.
+        """
+        key = float(t)
+        moment = self._moments.get(key)
+        if moment is None:
+            if len(self._moments) >= MOMENTS_KEPT:
+                del self._moments[next(iter(self._moments))]   # the oldest
+            moment = self._moments[key] = Moment(self, key)
+        return moment
+
     def obstacles_at(self, t: float = 0.0) -> tuple[Obstacle, ...]:
-        """Every obstacle where it is at control step ``t`` (and the crowd's discs)."""
-        crowd = tuple(CircleObstacle(c, self.robot_radius) for c in self.crowd)
-        if not self.moving:
-            return self.obstacles + crowd
-        return tuple(obstacle_at(o, t) for o in self.obstacles) + crowd
+        """Every obstacle where it is at control step ``t`` (and the crowd's discs): ``at(t).obstacles``."""
+        return self.at(t).obstacles
 
     # -- the field ---------------------------------------------------------------------
     @property
@@ -258,24 +281,13 @@ class World:
         return self.cached("near_shapes", lambda: ShapeSet(self.static_obstacles, self.robot_radius + MOVE_REACH),
                            static=True)
 
-    def _moving_shapes(self, t: float) -> tuple[Obstacle, ...]:
-        """The moving obstacles where they are at step ``t``, and the crowd's discs."""
-        return (tuple(obstacle_at(self.obstacles[i], t) for i in self.moving)
-                + tuple(CircleObstacle(c, self.robot_radius) for c in self.crowd))
-
     def potential(self, points: np.ndarray, t: float = 0.0) -> np.ndarray:
-        """Total potential U at ``(N, 2)`` points at control step ``t`` (Model §1)."""
-        points = np.asarray(points, float).reshape(-1, 2)
-        u = apf.potential(points, self.targets, self.shapes, self.field)
-        others = self._moving_shapes(t)
-        return u + apf.repulsive(points, others, self.field) if others else u
+        """Total potential U at ``(N, 2)`` points at control step ``t`` (Model §1): ``at(t).potential``."""
+        return self.at(t).potential(points)
 
     def gradient(self, points: np.ndarray, t: float = 0.0) -> np.ndarray:
-        """``∇U`` at ``(N, 2)`` points at control step ``t``."""
-        points = np.asarray(points, float).reshape(-1, 2)
-        g = apf.gradient(points, self.targets, self.shapes, self.field)
-        others = self._moving_shapes(t)
-        return g + apf.repulsive_gradient(points, others, self.field) if others else g
+        """``∇U`` at ``(N, 2)`` points at control step ``t``: ``at(t).gradient``."""
+        return self.at(t).gradient(points)
 
     def raster(self, resolution: int = 4) -> apf.Raster:
         """U at step 0 at the nodes of a grid over the map, ``resolution`` nodes per unit; built once and cached."""
@@ -310,7 +322,7 @@ class World:
         """Signed distance to the nearest obstacle's boundary (negative inside); +inf without obstacles.
 
         Exact up to :attr:`reach`; a point farther from every static obstacle reads :attr:`reach`
-        (:class:`~apf_physics.spatial.ShapeSet`).
+        (:class:`~apf_physics.spatial.ShapeSet`). For one step, ``at(t).obstacle_distance``.
 
         Args:
             points: (N, 2) points.
@@ -319,18 +331,14 @@ class World:
             near: Exact only up to :data:`MOVE_REACH` beyond the robot's radius (:attr:`near_shapes`), for
                 the clearance of moves.
         """
-        points = np.asarray(points, dtype=float).reshape(-1, 2)
-        best = (self.near_shapes if near else self.shapes).distance(points)
         if static:
-            return best
-        for i in self.moving:   # measured in the obstacle's own frame: points moved back by its offset at t
-            obstacle = self.obstacles[i]
-            d, _ = obstacle.signed_distance(points - obstacle.motion.offset(t))
-            best = np.minimum(best, d)
-        if len(self.crowd):
-            gap = np.hypot(points[:, None, 0] - self.crowd[None, :, 0], points[:, None, 1] - self.crowd[None, :, 1])
-            best = np.minimum(best, gap.min(axis=1) - self.robot_radius)
-        return best
+            points = np.asarray(points, dtype=float).reshape(-1, 2)
+            return (self.near_shapes if near else self.shapes).distance(points)
+        if np.ndim(t) == 0:
+            return self.at(float(t)).obstacle_distance(points, near=near)
+        points = np.asarray(points, dtype=float).reshape(-1, 2)
+        offsets = [self.obstacles[i].motion.offset(t) for i in self.moving]
+        return _with_moving(self, points, (self.near_shapes if near else self.shapes).distance(points), offsets)
 
     def edge_distance(self, points: np.ndarray) -> np.ndarray:
         """Signed distance to the map's edge (negative outside)."""
@@ -339,7 +347,8 @@ class World:
         return np.minimum.reduce([points[:, 0], w - points[:, 0], points[:, 1], h - points[:, 1]])
 
     def clearance(self, points: np.ndarray, t: np.ndarray | float = 0.0, near: bool = False) -> np.ndarray:
-        """Distance from each point to the nearest obstacle (at step ``t``) or the map's edge (negative when blocked).
+        """Distance from each point to the nearest obstacle (at step ``t``, one for all points or (N,)) or
+        the map's edge (negative when blocked). For one step, ``at(t).clearance``.
 
         ``near``: exact only up to :data:`MOVE_REACH` beyond the robot's radius (see :meth:`obstacle_distance`).
         """
@@ -348,6 +357,17 @@ class World:
     def path_clearance(self, a: np.ndarray, b: np.ndarray, spacing: np.ndarray | float,
                        t: float | None = None, during: bool = True) -> np.ndarray:
         """Least clearance sampled along each straight segment ``a[i] → b[i]``.
+
+        ``t`` None: the static obstacles only (:meth:`static_path_clearance`); a step:
+        ``at(t).path_clearance(a, b, spacing, during)`` (:meth:`Moment.path_clearance`).
+        """
+        if t is None:
+            return self.static_path_clearance(a, b, spacing)
+        return self.at(t).path_clearance(a, b, spacing, during)
+
+    def static_path_clearance(self, a: np.ndarray, b: np.ndarray, spacing: np.ndarray | float) -> np.ndarray:
+        """Least clearance from the static obstacles and the map's edge sampled along each straight
+        segment ``a[i] → b[i]``.
 
         Samples are at most ``spacing`` apart, ends included (:func:`~apf_physics.geometry.segment_samples`).
         Exact up to :data:`MOVE_REACH` beyond the robot's radius; more clearance reads as that.
@@ -358,29 +378,13 @@ class World:
             a: (K, 2) segment starts.
             b: (K, 2) segment ends.
             spacing: Scalar or (K,) largest distance between samples (> 0).
-            t: None: only the static obstacles. A step: also the moving obstacles, where they
-                are at step ``t`` (``during`` False), or, with ``during`` (each segment is a
-                move made during control step ``t → t + 1``), where they are at ``t + s`` for a
-                sample a fraction ``s`` along it.
-            during: See ``t``.
 
         Returns:
             (K,) sampled minimum clearance of each segment.
         """
         a = np.asarray(a, float).reshape(-1, 2)
         points, owner = geometry.segment_samples(a, b, spacing)
-        if t is None or not self.moving:
-            clearance = self.static_clearance(points, near=True)
-        elif not during:
-            clearance = self.clearance(points, t, near=True)
-        else:
-            along = np.hypot(*(points - a[owner]).T)
-            length = np.hypot(*(np.asarray(b, float).reshape(-1, 2) - a).T)[owner]
-            clearance = self.clearance(points, t + np.where(length > 0, along / np.where(length > 0, length, 1.0), 0.0),
-                                       near=True)
-        out = np.full(len(a), np.inf)
-        np.minimum.at(out, owner, clearance)
-        return out
+        return _least_per_segment(len(a), owner, self.static_clearance(points, near=True))
 
     def static_clearance(self, points: np.ndarray, near: bool = False) -> np.ndarray:
         """Distance from each point to the nearest static obstacle or the map's edge (negative when blocked).
@@ -490,6 +494,159 @@ class World:
                                    "target": frame.to_file(task.target).tolist()} for task in self.formations]
         return data
 
+
+class Moment:
+    """A world at one control step: the queries of Model §1's ``U(·, t)`` and the clearance at ``t``.
+
+    Made by :meth:`World.at`. The moving obstacles are placed at step :attr:`t` once (their
+    route offsets, the moved shapes, and their index for the field, each when a query first
+    needs it), and every query of the step uses them; what is static is the world's own,
+    built once per world and shared by all its moments (:attr:`World.shapes`,
+    :attr:`World.near_shapes`, rasters, caches). A world without moving obstacles has nothing
+    to place: its moments cost an object each.
+
+    The crowd's discs (:meth:`World.among`) are in the field, the obstacle list and the
+    clearance at points; like the static obstacles' they are not in :meth:`path_clearance` of
+    a world without moving obstacles (robots keep clear of one another by the right of way).
+
+    Attributes:
+        world: The world.
+        t: The control step (a float; fractional steps allowed).
+    """
+
+    __slots__ = ("world", "t", "_offsets", "_movers", "_obstacles", "_field_shapes")
+
+    def __init__(self, world: World, t: float = 0.0):
+        self.world = world
+        self.t = float(t)
+        self._offsets: tuple[np.ndarray, ...] | None = None
+        self._movers: tuple[Obstacle, ...] | None = None
+        self._obstacles: tuple[Obstacle, ...] | None = None
+        self._field_shapes: ShapeSet | None = None
+
+    def __repr__(self) -> str:
+        return f"Moment({self.world.name!r}, t={self.t:g})"
+
+    @property
+    def offsets(self) -> tuple[np.ndarray, ...]:
+        """The route offset (2,) of each moving obstacle, in :attr:`World.moving` order."""
+        if self._offsets is None:
+            self._offsets = tuple(self.world.obstacles[i].motion.offset(self.t) for i in self.world.moving)
+        return self._offsets
+
+    @property
+    def movers(self) -> tuple[Obstacle, ...]:
+        """The moving obstacles where they are (in :attr:`World.moving` order), then the crowd's discs."""
+        if self._movers is None:
+            world = self.world
+            self._movers = (tuple(world.obstacles[i].moved(shift) for i, shift in zip(world.moving, self.offsets))
+                            + tuple(CircleObstacle(c, world.robot_radius) for c in world.crowd))
+        return self._movers
+
+    @property
+    def obstacles(self) -> tuple[Obstacle, ...]:
+        """Every obstacle where it is, in :attr:`World.obstacles` order, then the crowd's discs."""
+        if self._obstacles is None:
+            world = self.world
+            placed = list(world.obstacles)
+            for k, i in enumerate(world.moving):
+                placed[i] = self.movers[k]
+            self._obstacles = tuple(placed) + self.movers[len(world.moving):]
+        return self._obstacles
+
+    def _field_set(self) -> ShapeSet | None:
+        """:attr:`movers` indexed for the field (reach ``p0``); None when there are none."""
+        if self._field_shapes is None and self.movers:
+            self._field_shapes = ShapeSet(self.movers, self.world.field.p0)
+        return self._field_shapes
+
+    # -- the field ---------------------------------------------------------------------
+    def potential(self, points: np.ndarray) -> np.ndarray:
+        """Total potential U at ``(N, 2)`` points (Model §1)."""
+        points = np.asarray(points, float).reshape(-1, 2)
+        world = self.world
+        u = apf.potential(points, world.targets, world.shapes, world.field)
+        movers = self._field_set()
+        return u + apf.repulsive(points, movers, world.field) if movers is not None else u
+
+    def gradient(self, points: np.ndarray) -> np.ndarray:
+        """``∇U`` at ``(N, 2)`` points."""
+        points = np.asarray(points, float).reshape(-1, 2)
+        world = self.world
+        g = apf.gradient(points, world.targets, world.shapes, world.field)
+        movers = self._field_set()
+        return g + apf.repulsive_gradient(points, movers, world.field) if movers is not None else g
+
+    # -- geometry ----------------------------------------------------------------------
+    def obstacle_distance(self, points: np.ndarray, static: bool = False, near: bool = False) -> np.ndarray:
+        """Signed distance to the nearest obstacle's boundary (negative inside); see :meth:`World.obstacle_distance`.
+
+        ``static``: leave the moving obstacles (and the crowd) out. ``near``: exact only up to
+        :data:`MOVE_REACH` beyond the robot's radius.
+        """
+        points = np.asarray(points, dtype=float).reshape(-1, 2)
+        world = self.world
+        best = (world.near_shapes if near else world.shapes).distance(points)
+        return best if static else _with_moving(world, points, best, self.offsets)
+
+    def clearance(self, points: np.ndarray, near: bool = False) -> np.ndarray:
+        """Distance from each point to the nearest obstacle or the map's edge (negative when blocked).
+
+        ``near``: exact only up to :data:`MOVE_REACH` beyond the robot's radius.
+        """
+        return np.minimum(self.obstacle_distance(points, near=near), self.world.edge_distance(points))
+
+    def path_clearance(self, a: np.ndarray, b: np.ndarray, spacing: np.ndarray | float,
+                       during: bool = True) -> np.ndarray:
+        """Least clearance sampled along each straight segment ``a[i] → b[i]``, the moving obstacles included.
+
+        As :meth:`World.static_path_clearance` (samples at most ``spacing`` apart, exact up to
+        :data:`MOVE_REACH` beyond the robot's radius), with the moving obstacles where they are
+        at this step (``during`` False), or, with ``during`` (each segment is a move made during
+        control step ``t → t + 1``), where they are at ``t + s`` for a sample a fraction ``s``
+        along it. A world without moving obstacles: the static clearance.
+
+        Returns:
+            (K,) sampled minimum clearance of each segment.
+        """
+        world = self.world
+        if not world.moving:
+            return world.static_path_clearance(a, b, spacing)
+        a = np.asarray(a, float).reshape(-1, 2)
+        points, owner = geometry.segment_samples(a, b, spacing)
+        if not during:
+            clearance = self.clearance(points, near=True)
+        else:
+            along = np.hypot(*(points - a[owner]).T)
+            length = np.hypot(*(np.asarray(b, float).reshape(-1, 2) - a).T)[owner]
+            when = self.t + np.where(length > 0, along / np.where(length > 0, length, 1.0), 0.0)
+            offsets = [world.obstacles[i].motion.offset(when) for i in world.moving]
+            clearance = np.minimum(_with_moving(world, points, world.near_shapes.distance(points), offsets),
+                                   world.edge_distance(points))
+        return _least_per_segment(len(a), owner, clearance)
+
+
+def _with_moving(world: World, points: np.ndarray, best: np.ndarray, offsets) -> np.ndarray:
+    """``best`` (N,) lowered to the signed distance to each moving obstacle, shifted by its offset in
+    ``offsets`` ((2,) or (N, 2) each, in :attr:`World.moving` order), and to the crowd's discs.
+
+    Measured in each obstacle's own frame: the points moved back by its offset.
+    """
+    for i, shift in zip(world.moving, offsets):
+        d, _ = world.obstacles[i].signed_distance(points - shift)
+        best = np.minimum(best, d)
+    if len(world.crowd):
+        crowd = world.crowd
+        gap = np.hypot(points[:, None, 0] - crowd[None, :, 0], points[:, None, 1] - crowd[None, :, 1])
+        best = np.minimum(best, gap.min(axis=1) - world.robot_radius)
+    return best
+
+
+def _least_per_segment(count: int, owner: np.ndarray, clearance: np.ndarray) -> np.ndarray:
+    """(count,) the least ``clearance`` of each segment's samples (``owner``: each sample's segment)."""
+    out = np.full(count, np.inf)
+    np.minimum.at(out, owner, clearance)
+    return out
 
 def _formation_to_file(spec: dict[str, Any], unit: float) -> dict[str, Any]:
     spec = dict(spec, comm_range=spec["comm_range"] * unit, spacing=spec["spacing"] * unit)

@@ -13,7 +13,7 @@ from apf_physics.models.files import SavedModel, load_model, observer_of
 from apf_physics.models.mapnet import MapNetwork, move_features, sample_values
 from apf_physics.models.network import QNetwork
 from apf_physics.observation import MapView, ObserverConfig
-from apf_physics.world import World
+from apf_physics.world import Moment, World
 
 
 SMALL_BATCH = 256
@@ -153,24 +153,30 @@ class MapPolicy:
             return map_scores(self.network, view, v, positions, self.moves, room, du).numpy()
 
 
-def move_inputs(world: World, positions: np.ndarray, moves: np.ndarray, t: float | None = None
-                ) -> tuple[np.ndarray, np.ndarray]:
+def move_inputs(where: Moment | World, positions: np.ndarray, moves: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The map network's per-move inputs, the same when it acts and when it is trained.
+
+    ``where``: the world at the control step the moves start at (:meth:`World.at`), or a world:
+    its static obstacles for the room, U at step 0 (as training labels them).
 
     Returns:
         ``room`` (N, M): the clearance along each move (:func:`~apf_physics.actions.move_clearance`)
         beyond the robot's radius and the safety margin (negative: the move is unsafe); and ``du``
         (N, M): the signed-log change of U over each move (:func:`potential_change`).
     """
-    room = move_clearance(world, positions, moves, t=t) - (world.robot_radius + SAFETY)
-    return room, potential_change(world, positions, moves, 0.0 if t is None else t)
+    world = where.world if isinstance(where, Moment) else where
+    room = move_clearance(where, positions, moves) - (world.robot_radius + SAFETY)
+    return room, potential_change(where, positions, moves)
 
 
-def potential_change(world: World, positions: np.ndarray, moves: np.ndarray, t: float = 0.0) -> np.ndarray:
-    """(N, M) ``sign(d)·log(1 + |d|) / 4`` of ``d = U(p + a, t) − U(p, t)`` for each robot and move."""
+def potential_change(where: Moment | World, positions: np.ndarray, moves: np.ndarray) -> np.ndarray:
+    """(N, M) ``sign(d)·log(1 + |d|) / 4`` of ``d = U(p + a, t) − U(p, t)`` for each robot and move.
+
+    ``where``: the world at step ``t`` (:meth:`World.at`), or a world (at step 0).
+    """
     positions = np.asarray(positions, float).reshape(-1, 2)
     ends = (positions[:, None, :] + moves[None]).reshape(-1, 2)
-    d = world.potential(ends, t).reshape(len(positions), -1) - world.potential(positions, t)[:, None]
+    d = where.potential(ends).reshape(len(positions), -1) - where.potential(positions)[:, None]
     return np.sign(d) * np.log1p(np.abs(d)) / 4.0
 
 

@@ -6,7 +6,7 @@ import numpy as np
 
 from apf_physics.planners.base import Planner
 from apf_physics.search import LOS_MARGIN, LOS_SPACING, SearchGrid
-from apf_physics.world import World
+from apf_physics.world import Moment, World
 
 HORIZON = 4.0
 """How far ahead (along the path, in units) a replanning robot checks its path against the moving obstacles."""
@@ -45,8 +45,9 @@ class AStarPlanner(Planner):
         """Robots from whose start no target can be reached."""
         return self._no_path
 
-    def act(self, positions: np.ndarray, active: np.ndarray, t: int = 0) -> np.ndarray:
+    def act(self, positions: np.ndarray, active: np.ndarray, moment: Moment | None = None) -> np.ndarray:
         positions = np.asarray(positions, float).reshape(-1, 2)
+        moment = self._moment(moment)
         step = np.zeros_like(positions)
         movers = [i for i in np.flatnonzero(active) if not self._no_path[i] and len(self.paths[i]) > 1]
         if not movers:
@@ -57,18 +58,23 @@ class AStarPlanner(Planner):
             while k < len(path) - 1 and np.hypot(*(path[k] - positions[i])) <= self.arrive:
                 k += 1
             self._waypoint[i] = k
-        if self.world.moving:
-            waiting = self._replan(positions, movers, t)
+        moving = bool(self.world.moving)
+        if moving:
+            waiting = self._replan(positions, movers, moment)
             movers = [i for i in movers if i not in waiting]
-        when = t if self.world.moving else None
         # Skip a waypoint when the one after it is already in sight (one check per robot, batched).
         ahead = [i for i in movers if self._waypoint[i] < len(self.paths[i]) - 1]
         if ahead:
             a = positions[ahead]
             b = np.array([self.paths[i][self._waypoint[i] + 1] for i in ahead])
-            now = self.world.clearance(a, t) if when is not None else self.world.static_clearance(a)
+            if moving:
+                now = moment.clearance(a)
+                sight = moment.path_clearance(a, b, LOS_SPACING, during=False)
+            else:
+                now = self.world.static_clearance(a)
+                sight = self.world.static_path_clearance(a, b, LOS_SPACING)
             threshold = np.minimum(self.world.robot_radius + LOS_MARGIN, now)
-            for i, ok in zip(ahead, self.world.path_clearance(a, b, LOS_SPACING, t=when, during=False) >= threshold):
+            for i, ok in zip(ahead, sight >= threshold):
                 if ok:
                     self._waypoint[i] += 1
         for i in movers:
@@ -76,8 +82,8 @@ class AStarPlanner(Planner):
             step[i] = d / max(1.0, float(np.max(np.abs(d))))
         return step
 
-    def _replan(self, positions: np.ndarray, movers: list[int], t: int) -> set[int]:
-        """Plan again for the robots whose path ahead meets a moving obstacle now; returns those that wait."""
+    def _replan(self, positions: np.ndarray, movers: list[int], moment: Moment) -> set[int]:
+        """Plan again for the robots whose path ahead meets a moving obstacle now (at ``moment``); returns those that wait."""
         waiting = set()
         bar = self.world.robot_radius + LOS_MARGIN
         for i in movers:
@@ -85,11 +91,11 @@ class AStarPlanner(Planner):
             lengths = np.hypot(*np.diff(path, axis=0).T)
             keep = int(np.searchsorted(np.cumsum(lengths), HORIZON)) + 1
             a, b = path[:-1][:keep], path[1:][:keep]
-            static = self.world.path_clearance(a, b, LOS_SPACING)
-            now = self.world.path_clearance(a, b, LOS_SPACING, t=t, during=False) if len(a) else static
+            static = self.world.static_path_clearance(a, b, LOS_SPACING)
+            now = moment.path_clearance(a, b, LOS_SPACING, during=False) if len(a) else static
             # blocked by a moving obstacle (not by the static ones, which the path already respects)
             if len(a) and np.any((now < bar) & (now < static)):
-                new = self.search.path(positions[i], t)
+                new = self.search.path(positions[i], moment.t)
                 if new is None or len(new) < 2:
                     waiting.add(i)
                     continue

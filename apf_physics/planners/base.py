@@ -1,9 +1,10 @@
 """The planner interface: a policy that turns robot positions into velocity commands.
 
 Planners know nothing of the physics. :func:`apf_physics.rollout.rollout` asks a planner
-for one displacement per robot each control step and hands it to the engine
-(:class:`~apf_physics.engine.Stepper`) as a velocity command; the engine decides when an
-episode ends.
+for one displacement per robot each control step, giving it the world at that step (a
+:class:`~apf_physics.world.Moment`, built once per step), and hands the displacements to the
+engine (:class:`~apf_physics.engine.Stepper`) as velocity commands; the engine decides when
+an episode ends.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from typing import ClassVar
 import numpy as np
 
 from apf_physics.engine import TrapRule
-from apf_physics.world import World
+from apf_physics.world import Moment, World
 
 
 class Planner:
@@ -43,18 +44,24 @@ class Planner:
         """(N,) bool: robots for which the planner itself gives up (it knows it is trapped), or None."""
         return None
 
-    def act(self, positions: np.ndarray, active: np.ndarray, t: int = 0) -> np.ndarray:
+    def act(self, positions: np.ndarray, active: np.ndarray, moment: Moment | None = None) -> np.ndarray:
         """Return the displacement each robot should make during this control step.
 
         Args:
             positions: (N, 2) current robot centres in world coordinates.
             active: (N,) bool, False for robots whose episode already ended (their
                 command is ignored).
-            t: The control step the episodes are at (where the moving obstacles are; the
-                move is made during ``t → t + 1``).
+            moment: The world at the control step the episodes are at (``world.at(t)``:
+                where the moving obstacles are; the move is made during ``t → t + 1``), built
+                once per step by the caller and used for every query of the step (its step is
+                ``moment.t``). None: ``self.world.at(0)``.
 
         Returns:
             (N, 2) float displacements in world units per control step; each component
             in [-1, 1] (a unit move along an axis or a diagonal).
         """
         raise NotImplementedError
+
+    def _moment(self, moment: Moment | None) -> Moment:
+        """``moment``, or the world at step 0 when None."""
+        return self.world.at(0.0) if moment is None else moment

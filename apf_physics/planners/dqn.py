@@ -17,7 +17,7 @@ from apf_physics.models import DQNPolicy, MapPolicy, load_policy, resolve_model,
 from apf_physics.models.policy import move_inputs
 from apf_physics.observation import Observer
 from apf_physics.planners.base import Planner
-from apf_physics.world import World
+from apf_physics.world import Moment, World
 
 
 class DQNPlanner(Planner):
@@ -70,24 +70,25 @@ class DQNPlanner(Planner):
         self.trap_window = self.MEMORY_TRAP_WINDOW if self._policy.observer.memory else None
         self._started = False
 
-    def act(self, positions: np.ndarray, active: np.ndarray, t: int = 0) -> np.ndarray:
+    def act(self, positions: np.ndarray, active: np.ndarray, moment: Moment | None = None) -> np.ndarray:
+        moment = self._moment(moment)
         if self.observer is None:
-            return self._act_on_map(positions, active, t)
+            return self._act_on_map(positions, active, moment)
         if self._started:  # the first call sees the starts, which reset() counted already
             self.observer.visit(positions)
         self._started = True
-        obs = self.observer.observe(positions, t=t, discs=self.world.crowd)
+        obs = self.observer.observe(positions, t=moment.t, discs=moment.world.crowd)
         if not self.shield:
             return ACTIONS[self._policy.act(obs)] * active[:, None]
-        room = move_clearance(self.world, positions, t=t) - (self.world.robot_radius + SAFETY)
+        room = move_clearance(moment, positions) - (self.world.robot_radius + SAFETY)
         return ACTIONS[shielded_argmax(self._policy.q_values(obs), room)] * active[:, None]
 
 
-    def _act_on_map(self, positions: np.ndarray, active: np.ndarray, t: int) -> np.ndarray:
+    def _act_on_map(self, positions: np.ndarray, active: np.ndarray, moment: Moment) -> np.ndarray:
         """A map network's move: its best-valued one (with the shield: among the safe ones)."""
         policy = self._policy
         moves = policy.moves
-        room, du = move_inputs(self.world, positions, moves, t)
+        room, du = move_inputs(moment, positions, moves)
         q = policy.q_values(self.world, positions, room, du)
         chosen = shielded_argmax(q, room) if self.shield else q.argmax(axis=1)
         return moves[chosen] * active[:, None]

@@ -34,7 +34,7 @@ import numpy as np
 
 from apf_physics.planners.base import Planner
 from apf_physics.planners.gradient import GradientPlanner
-from apf_physics.world import World
+from apf_physics.world import Moment, World
 
 _DESCEND, _FOLLOW = 0, 1
 
@@ -81,7 +81,7 @@ class EscapePlanner(Planner):
         super().reset(world, positions)
         n = len(positions)
         self._descent = GradientPlanner()
-        self._t = 0
+        self._now = world.at(0.0)
         self._descent.reset(world, positions)
         self.mode = np.full(n, _DESCEND)
         self._side = np.ones(n)                       # +1: obstacle on the left of the travel, −1: right
@@ -100,14 +100,14 @@ class EscapePlanner(Planner):
         return self.world.targets[np.argmin(d, axis=1)]
 
     def _safe(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        return self.world.path_clearance(a, b, 0.1, t=self._t) >= self.world.robot_radius + self.safety_margin
+        return self._now.path_clearance(a, b, 0.1) >= self.world.robot_radius + self.safety_margin
 
     # -- descent ----------------------------------------------------------------------------
     def _descend(self, positions: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Descent steps for robots ``idx`` and whether each is usable (lowers U, safe)."""
         mask = np.zeros(len(positions), bool)
         mask[idx] = True
-        step = self._descent.act(positions, mask, self._t)[idx]
+        step = self._descent.act(positions, mask, self._now)[idx]
         ok = ~self._descent.stuck()[idx]
         ok &= np.hypot(step[:, 0], step[:, 1]) > 1e-9
         ok[ok] &= self._safe(positions[idx[ok]], positions[idx[ok]] + step[ok])
@@ -119,7 +119,7 @@ class EscapePlanner(Planner):
         map's four edges. Static obstacles come from the world's index: those farther than its
         reach read the reach (none is followed from so far)."""
         world = self.world
-        moved = world.obstacles_at(self._t)
+        moved = self._now.obstacles
         out = np.full((len(points), len(moved) + 4), world.reach)
         who, owner, d, _ = world.shapes.pairs(points, with_nearest=False)
         out[who, world.static_numbers[owner]] = d
@@ -203,11 +203,11 @@ class EscapePlanner(Planner):
         return step
 
     # -- the policy -------------------------------------------------------------------------
-    def act(self, positions: np.ndarray, active: np.ndarray, t: int = 0) -> np.ndarray:
+    def act(self, positions: np.ndarray, active: np.ndarray, moment: Moment | None = None) -> np.ndarray:
         positions = np.asarray(positions, float).reshape(-1, 2)
-        self._t = t
+        self._now = self._moment(moment)   # the world at this step, for every query of the step
         step = np.zeros_like(positions)
-        u = self.world.potential(positions, t)
+        u = self._now.potential(positions)
 
         # Followers that are now closer to the target than their best trap leave the boundary
         # if descent can move from here.

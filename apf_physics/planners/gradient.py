@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from apf_physics.planners.base import Planner
+from apf_physics.world import Moment
 
 
 class GradientPlanner(Planner):
@@ -30,8 +31,9 @@ class GradientPlanner(Planner):
         """Robots whose next unit step would not lower the potential: a local minimum at this step size."""
         return self._stuck
 
-    def act(self, positions: np.ndarray, active: np.ndarray, t: int = 0) -> np.ndarray:
-        grad = self.world.gradient(positions, t)
+    def act(self, positions: np.ndarray, active: np.ndarray, moment: Moment | None = None) -> np.ndarray:
+        moment = self._moment(moment)
+        grad = moment.gradient(positions)
         norm = np.hypot(grad[:, 0], grad[:, 1])
         step = np.zeros_like(grad)
         moving = active & (norm > 1e-12)
@@ -40,14 +42,14 @@ class GradientPlanner(Planner):
         # obstacle that the target lies behind, the step would land in its repulsion. Before
         # calling that trapped, halve the step (backtracking) so that a minimum that is a
         # target, a little off the unit lattice, is still reached.
-        here = self.world.potential(positions, t)
+        here = moment.potential(positions)
         scale = np.ones(len(positions))
         pending = moving.copy()
         for factor in self.backtracking:
             if not pending.any():
                 break
             scale[pending] = factor
-            there = self.world.potential(positions[pending] + factor * step[pending], t)
+            there = moment.potential(positions[pending] + factor * step[pending])
             idx = np.flatnonzero(pending)
             pending[idx[there < here[idx]]] = False
         self._stuck = active & (pending | ~moving)
