@@ -12,7 +12,7 @@ import pytest
 
 from apf_physics.curriculum import load_curriculum
 from apf_physics.errors import UserError
-from apf_physics.rl import phases_for_curriculum, preset, train, trainer
+from apf_physics.rl import dqn, phases_for_curriculum, preset, train
 from apf_physics.rl.config import HELDOUT_SEED
 from apf_physics.rl.phases import draw_pool
 
@@ -40,8 +40,8 @@ def test_general_preset_randomises_over_all_curriculum_worlds():
     config = preset("general", validation_worlds=1)
     (phase,) = phases_for_curriculum(load_curriculum(CURRICULUM), config)
     assert phase.pool and phase.open_ended and len(phase.worlds) == 8 and phase.starts == "random"
-    assert config.obs_transform == "relative-log" and config.double_dqn and config.loss == "huber"
-    assert config.target_update == "soft" and config.world_start_fraction == 0.25
+    assert config.network.obs_transform == "relative-log" and config.dqn.double_dqn and config.dqn.loss == "huber"
+    assert config.dqn.target_update == "soft" and config.env.world_start_fraction == 0.25
 
 
 def test_world_presets_need_stages_or_a_pool():
@@ -63,7 +63,7 @@ def test_pool_is_deterministic_and_not_the_heldout_set():
 def test_trainer_trains_each_stage_on_its_rehearsal_set(monkeypatch):
     seen: list[list[str]] = []
     drawn: list[set[str]] = []
-    real = trainer.TrainingEnvs
+    real = dqn.TrainingEnvs
 
     class Recording(real):
         def __init__(self, worlds, starts, config, seed):
@@ -76,7 +76,7 @@ def test_trainer_trains_each_stage_on_its_rehearsal_set(monkeypatch):
             drawn[-1].update(env.worlds[i].name for i in env._task.world_of)
             return super().step(actions)
 
-    monkeypatch.setattr(trainer, "TrainingEnvs", Recording)
+    monkeypatch.setattr(dqn, "TrainingEnvs", Recording)
     config = preset("thesis-general", stage_episodes=6, max_episode_steps=15, **TINY)
     stages = load_curriculum(CURRICULUM)
     result = train(config, phases_for_curriculum(stages, config))

@@ -16,7 +16,8 @@ from apf_physics.models.mapnet import UNREACHED
 from apf_physics.observation import MapView
 from apf_physics.planners.dqn import DQNPlanner
 from apf_physics.rl.config import preset
-from apf_physics.rl.imitation import Teacher, map_network, quick_room, train_imitation, update
+from apf_physics.rl import train
+from apf_physics.rl.imitation import Teacher, batch, map_network, update
 from apf_physics.rl.phases import phases_for_curriculum
 
 from conftest import simple_world_dict
@@ -75,17 +76,17 @@ def test_map_model_files_round_trip_and_refuse_what_does_not_fit(tmp_path):
     assert "arch.moves" in str(err.value) and "\n" not in str(err.value)
 
 
-def test_quick_room_is_a_lower_bound_of_the_exact_clearance():
-    from apf_physics.actions import FINE_ACTIONS, SAFETY, move_clearance
+def test_training_and_acting_see_the_same_per_move_inputs():
+    """The teacher's batches carry exactly what the planner computes when it acts (policy.move_inputs)."""
+    from apf_physics.actions import MOVE_SETS
+    from apf_physics.models.policy import move_inputs
     world = world_from_dict(WALLED)
-    rng = np.random.default_rng(0)
-    points = rng.uniform(0, 20, size=(300, 2))
-    exact = move_clearance(world, points, FINE_ACTIONS) - (world.robot_radius + SAFETY)
-    quick = quick_room(world, points, FINE_ACTIONS)
-    # the network sees the room clamped to [-1, 1]; a move's clearance is exact up to MOVE_REACH beyond the radius
-    exact, quick = np.minimum(exact, 1.0), np.minimum(quick, 1.0)
-    assert np.all(quick <= exact + 1e-9)
-    assert np.median(exact - quick) < 0.2
+    config = preset("map", demo_positions=64)
+    data = batch(Teacher.of(world, config.imitation.map_resolution), config.imitation, np.random.default_rng(3))
+    positions, room, du, _ = data
+    exact_room, exact_du = move_inputs(world, positions, MOVE_SETS[config.imitation.map_moves])
+    assert len(positions) > 20 and np.array_equal(room, exact_room) and np.array_equal(du, exact_du)
+    assert (room < 0).any() and (room >= 0).any()       # near the walls some moves are unsafe, elsewhere safe
 
 
 def test_imitation_lowers_the_loss_and_the_planner_follows_the_values():
@@ -93,10 +94,10 @@ def test_imitation_lowers_the_loss_and_the_planner_follows_the_values():
     config = preset("map", demo_positions=128, grad_iterations=8)
     torch.manual_seed(0)
     net = map_network(config)
-    optimizer = torch.optim.Adam(net.parameters(), lr=config.learning_rate)
-    teacher = Teacher.of(world, config.map_resolution)
+    optimizer = torch.optim.Adam(net.parameters(), lr=config.network.learning_rate)
+    teacher = Teacher.of(world, config.imitation.map_resolution)
     rng = np.random.default_rng(0)
-    losses = [update(net, optimizer, teacher, config, rng) for _ in range(40)]
+    losses = [update(net, optimizer, teacher, batch(teacher, config.imitation, rng), config) for _ in range(40)]
     assert np.mean(losses[-5:]) < 0.9 * np.mean(losses[:5])
     episodes = evaluate(DQNPlanner(policy=MapPolicy(net)), [world]).episodes
     assert [e.outcome for e in episodes] == ["reached", "reached"]
@@ -108,10 +109,10 @@ def test_a_tiny_imitation_run_writes_a_usable_model_and_resumes(tmp_path):
     config = preset("map", total_steps=6, eval_every=6, validation_worlds=2, validation_starts=1, pool_size=2,
                     map_sizes=(30.0,), families=("point", "narrow_gap"), demo_positions=64, grad_iterations=4)
     phases = phases_for_curriculum(load_curriculum(WORLDS / "curricula" / "thesis.yaml"), config)
-    result = train_imitation(config, phases, out_dir=tmp_path / "run")
+    result = train(config, phases, out_dir=tmp_path / "run")
     assert result.counters.global_step == 6 and (tmp_path / "run" / "best.pt").is_file()
     assert isinstance(load_policy(tmp_path / "run" / "best.pt"), MapPolicy)
-    again = train_imitation(config, phases, out_dir=tmp_path / "run", resume=True)
+    again = train(config, phases, out_dir=tmp_path / "run", resume=True)
     assert again.already_finished
 
 
@@ -142,12 +143,8 @@ def test_fixed_point_equals_the_sweeps_to_the_bit(world_name):
 # -- training through the public entry points --------------------------------------------------------------------
 
 def _fit(config, phases, out_dir=None, resume=False):
-    """The imitation trainer's public entry point (``train_imitation``, or ``train`` once one loop runs both)."""
-    try:
-        from apf_physics.rl.imitation import train_imitation as fit
-    except ImportError:  # pragma: no cover - after the trainers are merged
-        from apf_physics.rl import train as fit
-    return fit(config, phases, out_dir, resume=resume)
+    """The imitation trainer's public entry point: the one training loop, ``train``."""
+    return train(config, phases, out_dir, resume=resume)
 
 
 def _tiny_map_config(**overrides):

@@ -151,7 +151,7 @@ def test_general_memory_presets_train_a_two_channel_network(tmp_path, name):
     from apf_physics.models.files import load_model
     from apf_physics.rl import CURRICULUM_DEFAULT, TrainConfig, phases_for_curriculum, preset, train
 
-    weights = preset(name).reward_weights
+    weights = preset(name).env.reward_weights
     if name == "general-revisit":
         assert name == CURRICULUM_DEFAULT
         assert weights.revisit < 0 and weights.length < 0 and weights.w2 == 1000
@@ -160,13 +160,13 @@ def test_general_memory_presets_train_a_two_channel_network(tmp_path, name):
     config = preset(name, total_steps=300, time_limit=None, num_envs=4, batch_size=16, learning_starts=32,
                     buffer_size=2_000, pool_size=2, pool_starts=2, max_episode_steps=30, validation_worlds=1,
                     validation_starts=2, eval_every=200, log_every=100, checkpoint_every=200, seed=1)
-    assert config.memory and config.obs_transform == "relative-log-memory" and config.observer.shape == (2, 11, 11)
-    assert config.world_start_fraction == 0.5
+    assert config.env.memory and config.network.obs_transform == "relative-log-memory" and config.observer.shape == (2, 11, 11)
+    assert config.env.world_start_fraction == 0.5
     assert TrainConfig.from_dict(config.to_dict()) == config
-    assert not preset("general").memory
+    assert not preset("general").env.memory
     with pytest.raises(UserError, match="memory"):
         preset("general", memory=True)          # relative-log would transform the memory too
     result = train(config, phases_for_curriculum([], config), out_dir=tmp_path)
     assert result.global_step >= 300
     model = load_model(tmp_path / "best.pt", expect_obs_shape=(2, 11, 11))
-    assert model.meta["config"]["memory"] is True and model.observer == config.observer
+    assert model.meta["config"]["env"]["memory"] is True and model.observer == config.observer

@@ -72,8 +72,8 @@ def test_the_example_sweeps_are_read():
     assert tiny.budget == ("total_steps", 3000) and tiny.reports == 3 and tiny.metric == "success"
     assert [tiny.leg_budget(k) for k in (1, 2, 3)] == [1000, 2000, 3000]
     config = tiny.config({"learning_rate": 1e-9, "seed": 4}, 2)
-    assert config.learning_rate == 1e-9 and config.seed == 4 and config.total_steps == 2000
-    assert config.time_limit is None and config.total_episodes is None and config.obs_size == 5
+    assert config.network.learning_rate == 1e-9 and config.run.seed == 4 and config.schedule.total_steps == 2000
+    assert config.schedule.time_limit is None and config.schedule.total_episodes is None and config.env.obs_size == 5
     recipes = load_sweep(ROOT / "sweeps" / "general-recipes.yaml")
     assert recipes.curriculum.endswith("thesis.yaml") and recipes.metric == "spl" and len(recipes.seeds) == 3
     assert recipes.config({"preset": "general", "seed": 1}, 6).preset == "general"
@@ -171,7 +171,7 @@ def test_sweep_is_interrupted_resumed_and_picks_the_better_trial(local_ray, tmp_
         rows = list(csv.DictReader(f))
     assert [r["learning_rate"] for r in rows] == ["0.001", "1e-09"] and rows[0]["status"] == "finished"
     best = json.loads((out / "best.json").read_text())
-    assert best["values"] == better.values and best["config"]["learning_rate"] == 1e-3
+    assert best["values"] == better.values and best["config"]["network"]["learning_rate"] == 1e-3
     with better.checkpoint.as_directory() as folder:   # best.pt is the trial's, from the trainer's own files
         assert (out / "best.pt").read_bytes() == (Path(folder) / "best.pt").read_bytes()
     model = load_model(out / "best.pt")

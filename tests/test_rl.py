@@ -5,6 +5,8 @@ Training runs use the 8×8 world of ``rl_worlds`` (real physics, learned in seco
 
 from __future__ import annotations
 
+import dataclasses
+
 import csv
 import io
 import os
@@ -40,6 +42,8 @@ from apf_physics.rl import evaluation
 from apf_physics.rl.config import replace
 from apf_physics.rl.phases import reachable_mask, training_starts, validation_starts
 from apf_physics.rl.rundir import RunDir
+from apf_physics.rl.config import load_config
+from apf_physics.rl.dqn import q_network
 from apf_physics.rl.trainer import CSV_COLUMNS
 from rl_worlds import TINY_OPTIONS, tiny_world, write_tiny_world
 
@@ -84,10 +88,10 @@ def test_max_pool_ties_send_the_gradient_where_max_pool2d_does():
                                              ("thesis-general", 9, 4_673)])
 def test_thesis_networks_have_the_tables_layers(name, k, params):
     config = preset(name)
-    assert config.obs_size == k
-    net = config.network()
+    assert config.env.obs_size == k
+    net = q_network(config)
     assert sum(p.numel() for p in net.parameters()) == params
-    assert [c.out_channels for c in net.convs] == list(config.filters)
+    assert [c.out_channels for c in net.convs] == list(config.network.filters)
     assert [layer.out_features for layer in net.hidden] == [32, 32]
     assert net(torch.zeros(5, 1, k, k)).shape == (5, 9)
 
@@ -117,39 +121,40 @@ def test_observation_transform_is_part_of_the_saved_network():
 
 def test_thesis_presets_stay_as_written():
     fixed = preset("thesis-fixed")
-    assert (fixed.loss, fixed.batch_size, fixed.target_update, fixed.obs_transform) == ("mse", 7, "none", "raw")
-    assert (fixed.gamma, fixed.learning_rate, fixed.epsilon_initial, fixed.epsilon_final) == (0.95, 1e-3, 0.95, 0.05)
-    assert fixed.exploration_episodes == fixed.total_episodes == 30_000 and fixed.max_episode_steps == 100
-    assert fixed.filters == (10, 10, 20) and not fixed.double_dqn and fixed.reward_scale == 1.0
-    assert fixed.reward == "thesis-fixed" and fixed.num_envs == 1 and fixed.train_starts == "world"
+    assert (fixed.dqn.loss, fixed.dqn.batch_size, fixed.dqn.target_update, fixed.network.obs_transform) == ("mse", 7, "none", "raw")
+    assert (fixed.dqn.gamma, fixed.network.learning_rate, fixed.dqn.epsilon_initial, fixed.dqn.epsilon_final) == (0.95, 1e-3, 0.95, 0.05)
+    assert fixed.dqn.exploration_episodes == fixed.schedule.total_episodes == 30_000 and fixed.env.max_episode_steps == 100
+    assert fixed.network.filters == (10, 10, 20) and not fixed.dqn.double_dqn and fixed.dqn.reward_scale == 1.0
+    assert fixed.env.reward == "thesis-fixed" and fixed.env.num_envs == 1 and fixed.env.train_starts == "world"
     for name in ("thesis-general-world", "thesis-general"):  # Table 4
         general = preset(name)
-        assert (general.obs_size, general.filters, general.exploration_episodes) == (9, (4, 4), 150)
-        assert (general.reward, general.batch_size, general.loss, general.target_update) == (
+        assert (general.env.obs_size, general.network.filters, general.dqn.exploration_episodes) == (9, (4, 4), 150)
+        assert (general.env.reward, general.dqn.batch_size, general.dqn.loss, general.dqn.target_update) == (
             "thesis-general", 7, "mse", "none")
-    assert preset("thesis-general-world").total_episodes == 150
+    assert preset("thesis-general-world").schedule.total_episodes == 150
     curriculum = preset("thesis-general")
-    assert curriculum.stage_episodes == 150 and curriculum.restart_exploration and curriculum.total_episodes is None
+    assert curriculum.schedule.stage_episodes == 150 and curriculum.dqn.restart_exploration
+    assert curriculum.schedule.total_episodes is None
     fast = preset("fast")
-    assert (fast.num_envs, fast.batch_size, fast.loss, fast.double_dqn, fast.target_update, fast.tau) == (
+    assert (fast.env.num_envs, fast.dqn.batch_size, fast.dqn.loss, fast.dqn.double_dqn, fast.dqn.target_update, fast.dqn.tau) == (
         64, 64, "huber", True, "soft", 0.01)
-    assert (fast.reward_scale, fast.obs_transform, fast.train_starts, fast.target_success) == (
+    assert (fast.dqn.reward_scale, fast.network.obs_transform, fast.env.train_starts, fast.schedule.target_success) == (
         1e-3, "relative-log", "lattice", 1.0)
-    assert not fast.eval_shield and fast.select == ("success", "random_success")
+    assert not fast.evaluation.eval_shield and fast.evaluation.select == ("success", "random_success")
 
 
 def test_general_presets_keep_their_recipes():
     general = preset("general")
-    assert (general.num_envs, general.batch_size, general.max_episode_steps, general.world_start_fraction) == (
+    assert (general.env.num_envs, general.dqn.batch_size, general.env.max_episode_steps, general.env.world_start_fraction) == (
         32, 128, 200, 0.25)
-    assert general.families and general.time_limit == 1500 and general.eval_shield
-    assert general.select == ("-collisions", "spl", "success") and not general.memory
+    assert general.schedule.families and general.schedule.time_limit == 1500 and general.evaluation.eval_shield
+    assert general.evaluation.select == ("-collisions", "spl", "success") and not general.env.memory
     memory = preset("general-memory")
-    assert memory.memory and memory.obs_transform == "relative-log-memory" and memory.world_start_fraction == 0.5
+    assert memory.env.memory and memory.network.obs_transform == "relative-log-memory" and memory.env.world_start_fraction == 0.5
     revisit = preset("general-revisit")
-    assert revisit.reward == "general" and revisit.reward_weights.revisit < 0 and revisit.reward_weights.length < 0
-    assert {k: v for k, v in revisit.to_dict().items() if k not in ("preset", "reward")} == \
-        {k: v for k, v in memory.to_dict().items() if k not in ("preset", "reward")}
+    assert revisit.env.reward == "general" and revisit.env.reward_weights.revisit < 0 and revisit.env.reward_weights.length < 0
+    assert {k: v for k, v in revisit.options().items() if k not in ("preset", "reward")} == \
+        {k: v for k, v in memory.options().items() if k not in ("preset", "reward")}
 
 
 def test_unknown_names_keys_and_bad_values_are_refused():
@@ -175,12 +180,46 @@ def test_unknown_names_keys_and_bad_values_are_refused():
 
 def test_values_from_yaml_take_the_fields_types_and_round_trip():
     config = preset("fast", filters=[4, 4], max_grad_norm=1, time_limit=60, total_steps=5e4, select="-collisions")
-    assert config.filters == (4, 4) and config.max_grad_norm == 1.0 and isinstance(config.time_limit, float)
-    assert config.total_steps == 50_000 and config.select == ("-collisions",)
+    assert config.network.filters == (4, 4) and config.network.max_grad_norm == 1.0 and isinstance(config.schedule.time_limit, float)
+    assert config.schedule.total_steps == 50_000 and config.evaluation.select == ("-collisions",)
     for name in PRESETS:
         assert TrainConfig.from_dict(preset(name).to_dict()) == preset(name)
     custom = preset("fast", reward={"w1": -1, "w2": 1, "w3": 0, "beta": -1})
-    assert TrainConfig.from_dict(custom.to_dict()) == custom and custom.reward_weights.w2 == 1
+    assert TrainConfig.from_dict(custom.to_dict()) == custom and custom.env.reward_weights.w2 == 1
+
+
+def test_options_are_named_by_name_or_path_and_checked_once_when_built():
+    config = preset("fast", **{"network.learning_rate": 3e-4}, gamma=0.9, run={"seed": 7})
+    assert (config.network.learning_rate, config.dqn.gamma, config.run.seed) == (3e-4, 0.9, 7)
+    assert config.option("learning_rate") == config.option("network.learning_rate") == 3e-4
+    with pytest.raises(UserError, match="option 'dqn.learning_rate' \\(did you mean 'network.learning_rate'\\?\\)"):
+        preset("fast", **{"dqn.learning_rate": 1e-3})
+    with pytest.raises(UserError, match="target_update must be one of none, hard, soft, got 'sfot' \\(did you mean 'soft'\\?\\)"):
+        preset("fast", target_update="sfot")
+    with pytest.raises(UserError, match="method must be one of dqn, imitation"):
+        preset("fast", method="ppo")
+    with pytest.raises(UserError, match="section run must be a mapping"):
+        preset("fast", run=3)
+    # a built configuration cannot be made invalid afterwards: every section is frozen
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        config.dqn.gamma = 2.0
+
+
+def test_a_configuration_saves_to_yaml_and_loads_back(tmp_path):
+    config = preset("map", hidden=(16, 16), total_steps=40)
+    path = config.to_yaml(tmp_path / "config.yaml")
+    text = path.read_text()
+    assert "imitation:\n" in text and "  map_moves: fine\n" in text and "network:\n" in text
+    assert load_config(path) == config
+    # a flat file (or an old model file's configuration) reads the same
+    flat = tmp_path / "flat.yaml"
+    flat.write_text("preset: map\nmethod: imitation\nhidden: [16, 16]\n")
+    assert load_config(flat).network.hidden == (16, 16) and load_config(flat).method == "imitation"
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("network:\n  learning_rat: 0.1\n")
+    with pytest.raises(UserError, match="bad.yaml: unknown training option 'network.learning_rat' \\(did you mean "
+                                        "'network.learning_rate'\\?\\)"):
+        load_config(bad)
 
 
 def test_epsilon_schedule_is_specs_eq_34():
@@ -364,10 +403,13 @@ def test_progress_bar_measures_the_stop_rule_and_shows_the_latest_evaluation(mon
     assert "eval -" in target and "eval 100%" in target.split("\r")[-1]
     # a time-limited run counts seconds up to its limit, and says nothing of a target
     assert re.search(r"2\.0/2\.0 \[.*s/s", timed) and "until" not in timed and re.search(r"eval \d+%", timed)
-    quiet = io.StringIO()  # not a terminal: no bar
-    monkeypatch.setattr(sys, "stderr", quiet)
-    train(config, phases_for_world(world, config), progress=True)
-    assert quiet.getvalue() == ""
+    logged = io.StringIO()  # not a terminal (nohup, CI, a notebook): no bar, a plain line per row of train.csv
+    monkeypatch.setattr(sys, "stderr", logged)
+    result = train(config, phases_for_world(world, config), progress=True)
+    lines = logged.getvalue().splitlines()
+    assert "\r" not in logged.getvalue() and len(lines) == len(result.history) >= 2
+    assert all(re.fullmatch(r"train: step [\d,]+, phase tiny, episodes [\d,]+, .*\d+ s", line) for line in lines)
+    assert "eval success" in lines[-1] and "loss" in lines[-1]
 
 
 def test_tensorboard_logs_beside_train_csv(tmp_path):
@@ -554,6 +596,6 @@ def test_lattice_reachable_and_validation_starts(worlds_dir):
 def test_a_list_of_whole_numbers_sets_a_tuple_of_floats():
     from apf_physics.rl.config import preset, replace
     config = replace(preset("map"), map_sizes=[50, 100, 250])
-    assert config.map_sizes == (50.0, 100.0, 250.0)
+    assert config.schedule.map_sizes == (50.0, 100.0, 250.0)
     with pytest.raises(UserError, match="map_sizes must be a list of float"):
         replace(preset("map"), map_sizes=["big"])

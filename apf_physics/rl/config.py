@@ -457,7 +457,9 @@ def _locate(name: str) -> tuple[Optional[str], str]:
     elif section in SECTIONS and OPTIONS.get(leaf, "") == section:
         return section, leaf
     paths = list(OPTIONS) + [f"{s}.{n}" for n, s in OPTIONS.items() if s is not None]
-    raise UserError(f"unknown training option {name!r}{did_you_mean(name, paths)}; the options are the fields "
+    hint = (f" (did you mean '{OPTIONS[leaf]}.{leaf}'?)" if dot and OPTIONS.get(leaf) else
+            did_you_mean(name, [p for p in paths if "." in p] if dot else paths))
+    raise UserError(f"unknown training option {name!r}{hint}; the options are the fields "
                     "of apf_physics.rl.TrainConfig's sections (env, network, dqn, imitation, schedule, "
                     "evaluation, run)")
 
@@ -619,10 +621,11 @@ def preset(name: str, **overrides: Any) -> TrainConfig:
     return replace(TrainConfig(preset=name), **{**PRESETS[name], **overrides})
 
 
-def epsilon_schedule(config: DQNConfig, episodes: int) -> float:
+def epsilon_schedule(config: TrainConfig | DQNConfig, episodes: int) -> float:
     """ε after ``episodes`` finished searches: ``max(ε_i·(ts − s)/ts, ε_f)`` (Model eq. 34)."""
-    ts = config.exploration_episodes
-    return max(config.epsilon_initial * (ts - episodes) / ts, config.epsilon_final)
+    dqn = config.dqn if isinstance(config, TrainConfig) else config
+    ts = dqn.exploration_episodes
+    return max(dqn.epsilon_initial * (ts - episodes) / ts, dqn.epsilon_final)
 
 
 def differing_fields(saved: TrainConfig, config: TrainConfig) -> list[str]:
