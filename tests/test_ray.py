@@ -176,3 +176,24 @@ def test_sweep_is_interrupted_resumed_and_picks_the_better_trial(local_ray, tmp_
         assert (out / "best.pt").read_bytes() == (Path(folder) / "best.pt").read_bytes()
     model = load_model(out / "best.pt")
     assert model.meta["training"]["evaluation"]["success"] == better.metrics["success"]
+
+
+def test_a_map_preset_sweep_trains_the_map_network(local_ray, tmp_path):
+    """``preset: map`` trains the map network by imitation, through the same loop as DQN (not a Q-network)."""
+    from apf_physics.models import MapPolicy, load_policy
+    from apf_physics.rl.sweep import run_sweep
+
+    curriculum = ROOT / "worlds" / "curricula" / "thesis.yaml"
+    path = tmp_path / "map.yaml"
+    path.write_text(
+        f"curriculum: {curriculum}\npreset: map\n"
+        "overrides: {validation_worlds: 2, validation_starts: 1, pool_size: 2, map_sizes: [30.0], demo_positions: 64,\n"
+        "            grad_iterations: 4, families: [point, narrow_gap], eval_every: 4, log_every: 2}\n"
+        "grid: {learning_rate: [0.003]}\nseeds: [0]\nbudget: {total_steps: 8}\nreports: 2\nasha: false\n")
+    sweep = load_sweep(path)
+    result = run_sweep(sweep, tmp_path / "sweep", verbose=0)
+    (row,) = result.rows
+    assert row.status == "finished" and row.metrics["global_step"] == 8 and row.metrics["legs"] == 2
+    best = json.loads((tmp_path / "sweep" / "best.json").read_text())
+    assert best["config"]["method"] == "imitation" and best["config"]["preset"] == "map"
+    assert isinstance(load_policy(tmp_path / "sweep" / "best.pt"), MapPolicy)
