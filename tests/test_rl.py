@@ -599,3 +599,35 @@ def test_a_list_of_whole_numbers_sets_a_tuple_of_floats():
     assert config.schedule.map_sizes == (50.0, 100.0, 250.0)
     with pytest.raises(UserError, match="map_sizes must be a list of float"):
         replace(preset("map"), map_sizes=["big"])
+
+
+def test_a_diverging_run_stops_and_says_what_to_change(tmp_path):
+    # a learning rate far too large for the thesis's MSE on raw rewards: the loss explodes
+    config = tiny_config(loss="mse", reward_scale=1.0, max_grad_norm=None, learning_rate=50.0, loss_limit=1e6,
+                         target_success=None, total_steps=3_000, log_every=100)
+    result = train(config, phases_for_world(tiny_world(), config), out_dir=tmp_path / "run")
+    assert result.diverged and result.global_step < 3_000
+    assert result.stop_reason.startswith("diverged: the mean loss reached") and "learning_rate" in result.stop_reason
+    last = read_csv(tmp_path / "run" / "train.csv")[-1]
+    assert last["loss"] in ("nan", "inf") or float(last["loss"]) > 1e6
+    # the checkpoint keeps it: resuming does not train on
+    again = train(config, phases_for_world(tiny_world(), config), out_dir=tmp_path / "run", resume=True)
+    assert again.already_finished and again.diverged
+
+
+def test_train_prints_progress_lines_and_a_finished_run_names_the_limit_to_lift(tmp_path):
+    world = write_tiny_world(tmp_path)
+    out = tmp_path / "run"
+    options = [f"--set={k}={v}" for k, v in {**TINY_OPTIONS, "total_steps": 600, "eval_every": 300,
+                                              "log_every": 300}.items() if not isinstance(v, tuple)]
+    done = subprocess.run([sys.executable, "-m", "apf_physics.cli", "train", "--world", str(world), "--out", str(out),
+                           "--set", "filters=[8, 8]", *options], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    lines = [line for line in done.stderr.splitlines() if line.startswith("train: step")]
+    assert len(lines) >= 2 and "\r" not in done.stderr            # stderr is a pipe: lines, no bar
+    assert (out / "config.yaml").is_file() and load_config(out / "config.yaml").schedule.total_steps == 600
+    again = subprocess.run([sys.executable, "-m", "apf_physics.cli", "train", "--world", str(world), "--out",
+                            str(out), "--resume"], capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0 and "has already finished" in again.stdout
+    reason = "target_success=null" if "target_success" in again.stdout.split("nothing more")[0] else "total_steps="
+    assert f"--resume --set {reason}" in again.stdout
