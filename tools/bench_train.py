@@ -32,6 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from apf_physics.commands.train import parse_overrides  # noqa: E402
 from apf_physics.rl import evaluation  # noqa: E402
 from apf_physics.rl.config import preset  # noqa: E402
+from apf_physics.rl.dqn import q_network  # noqa: E402
 from apf_physics.rl.phases import phases_for_world, training_starts  # noqa: E402
 from apf_physics.rl.trainer import train  # noqa: E402
 from apf_physics.worldfile import load_world  # noqa: E402
@@ -47,7 +48,7 @@ def bench_ours(world, seeds, budget: float, overrides: dict) -> tuple[list[float
         c = result.counters
         rate = c.global_step / c.wall_time
         reached = None if c.time_to_target is None else round(c.time_to_target, 1)
-        print(f"ours seed {seed}: time to {config.target_success:.0%}: {reached} s, {c.global_step} env steps, "
+        print(f"ours seed {seed}: time to {config.schedule.target_success:.0%}: {reached} s, {c.global_step} env steps, "
               f"{result.updates} updates, {rate:.0f} env steps/s; best evaluation {result.best['success']:.1%} "
               f"at step {c.best_step}", flush=True)
         times.append(c.time_to_target)
@@ -79,7 +80,7 @@ def bench_sb3(world, seconds: float, seed: int, num_envs: int = 16, eval_every: 
     from apf_physics.models.network import max_pool_2x2_stride1, relative_log
 
     config = preset("fast", seed=seed)
-    torch.set_num_threads(config.threads)
+    torch.set_num_threads(config.run.threads)
     phase = phases_for_world(world, config)[0]
 
     class ThesisExtractor(BaseFeaturesExtractor):
@@ -87,7 +88,7 @@ def bench_sb3(world, seconds: float, seed: int, num_envs: int = 16, eval_every: 
 
         def __init__(self, observation_space, features_dim: int = 32):
             super().__init__(observation_space, features_dim)
-            self.net = config.network()
+            self.net = q_network(config)
             self.first = self.net.hidden[0]
 
         def forward(self, obs):
@@ -98,21 +99,21 @@ def bench_sb3(world, seconds: float, seed: int, num_envs: int = 16, eval_every: 
                     x = max_pool_2x2_stride1(x)
             return F.leaky_relu(self.first(x.flatten(1)), self.net.negative_slope)
 
-    starts = training_starts(world, config.train_starts, seed)  # the same training starts as ours
+    starts = training_starts(world, config.env.train_starts, seed)  # the same training starts as ours
 
     def make():
-        env = NavigateEnv(world=world, observer=config.observer, reward=config.reward_weights, starts=starts)
-        env = gym.wrappers.TimeLimit(env, config.max_episode_steps)
-        return gym.wrappers.TransformReward(env, lambda r: r * config.reward_scale)
+        env = NavigateEnv(world=world, observer=config.observer, reward=config.env.reward_weights, starts=starts)
+        env = gym.wrappers.TimeLimit(env, config.env.max_episode_steps)
+        return gym.wrappers.TransformReward(env, lambda r: r * config.dqn.reward_scale)
 
     vec = DummyVecEnv([make for _ in range(num_envs)])
     model = DQN(
-        "CnnPolicy", vec, learning_rate=config.learning_rate, buffer_size=config.buffer_size,
-        learning_starts=config.learning_starts, batch_size=config.batch_size, tau=config.tau, gamma=config.gamma,
+        "CnnPolicy", vec, learning_rate=config.network.learning_rate, buffer_size=config.dqn.buffer_size,
+        learning_starts=config.dqn.learning_starts, batch_size=config.dqn.batch_size, tau=config.dqn.tau, gamma=config.dqn.gamma,
         # ε decays over the first 40,000 transitions, about where ours reaches ε_f
         train_freq=1, gradient_steps=1, target_update_interval=1, exploration_fraction=0.02,
-        exploration_initial_eps=config.epsilon_initial, exploration_final_eps=config.epsilon_final,
-        max_grad_norm=config.max_grad_norm, seed=seed, device="cpu",
+        exploration_initial_eps=config.dqn.epsilon_initial, exploration_final_eps=config.dqn.epsilon_final,
+        max_grad_norm=config.network.max_grad_norm, seed=seed, device="cpu",
         policy_kwargs=dict(features_extractor_class=ThesisExtractor, net_arch=[32], normalize_images=False),
     )
 
@@ -127,14 +128,14 @@ def bench_sb3(world, seconds: float, seed: int, num_envs: int = 16, eval_every: 
             if self.num_timesteps >= self.next_eval:
                 self.next_eval += eval_every
                 network = _SB3Network(self.model.q_net, config.observer.shape)
-                episodes = evaluation.run(network, config.observer, phase.validation, config.eval_shield)
+                episodes = evaluation.run(network, config.observer, phase.validation, config.evaluation.eval_shield)
                 self.best = max(self.best, evaluation.summarise(episodes, phase.validation)["success"])
             return time.perf_counter() - self.start < seconds and self.best < 1.0
 
     stop = Stop()
     model.learn(total_timesteps=2_000_000, callback=stop)
     elapsed = time.perf_counter() - stop.start
-    print(f"SB3 DQN ({num_envs} envs, batch {config.batch_size}, same network and starts): {elapsed:.1f} s, "
+    print(f"SB3 DQN ({num_envs} envs, batch {config.dqn.batch_size}, same network and starts): {elapsed:.1f} s, "
           f"{model.num_timesteps} env steps ({model.num_timesteps / elapsed:.0f}/s), best greedy success {stop.best:.0%}")
     return model.num_timesteps / elapsed, stop.best
 
