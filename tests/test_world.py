@@ -298,9 +298,9 @@ def test_a_polygon_of_20k_vertices_is_refused_before_its_simplicity_is_checked(t
 
 
 def test_too_many_obstacles_or_vertices_are_refused_before_any_is_parsed(tmp_path, monkeypatch):
-    from apf_physics import worldfile
+    from apf_physics import worldschema
 
-    monkeypatch.setattr(worldfile, "_parse_obstacle", lambda *a: pytest.fail("parsed an obstacle of a refused list"))
+    monkeypatch.setattr(worldschema, "_parse_obstacle", lambda *a: pytest.fail("parsed an obstacle of a refused list"))
     points = [{"circle": {"center": [10, 10], "radius": 0}}] * 10_001
     assert "obstacles: at most 10,000 obstacles, got 10,001" in one_line_error(
         lambda: world_from_dict(simple_world_dict(obstacles=points), "w.yaml"))
