@@ -435,6 +435,12 @@ def test_render_command_writes_h264_and_png_into_a_new_folder(world, tmp_path, c
                               "--hold", "0", "--size", "64", "--no-progress"])
     assert mp4v.func(mp4v) == 0
     assert "mp4v, which browsers do not play" in capsys.readouterr().out
+    avi = parser.parse_args(["render", str(world_file), "--out", str(tmp_path / "run.avi"), "--hold", "0",
+                             "--size", "64", "--no-progress"])
+    assert avi.func(avi) == 0
+    said = capsys.readouterr().out     # PyAV is installed: an .avi is MJPG by choice of extension, not for want of PyAV
+    assert "MJPG, which browsers do not play (write .mp4 for H.264 or .webm for VP9)" in said
+    assert "not installed" not in said
 
 
 def test_render_refuses_a_symlink_before_any_work(tmp_path):

@@ -87,7 +87,8 @@ def run(args: argparse.Namespace) -> int:
                                   codec=codec.name, progress=not args.no_progress)
     counts = Counter(episode.outcome for episode in episodes)
     playable = "" if codec.browsers else ", which browsers do not play" + (
-        "" if args.codec else " (PyAV is not installed: pip install av for H.264)")
+        "" if args.codec else " (write .mp4 for H.264 or .webm for VP9)" if out.suffix.lower() != ".mp4"
+        else " (PyAV is not installed: pip install av for H.264)")
     print(f"wrote {out} ({codec.label}{playable}; {written} frames at {args.fps:g} fps; "
           + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) + ")"
           + (f" and {png}" if png is not None else ""))
