@@ -1,5 +1,7 @@
 """The command line: help, and errors as one message without a traceback."""
 
+import pytest
+
 from apf_physics.cli import main
 
 
@@ -42,3 +44,13 @@ def test_plot_curve_from_a_training_log(tmp_path, capsys):
     assert image is not None and image.std() > 5
     assert main(["plot-curve", str(tmp_path / "missing.csv"), "--out", str(out)]) == 2
     assert "no such training log" in capsys.readouterr().err
+
+
+def test_help_texts_are_plain_text_not_markup(capsys):
+    """``--help`` of every command reads as prose: no reST roles or double back-quotes."""
+    import re
+    for name in ("demo", "eval", "train", "generate", "render", "plot-field", "plot-curve", "worlds", "sweep"):
+        with pytest.raises(SystemExit):
+            main([name, "--help"])
+        text = capsys.readouterr().out
+        assert "``" not in text and not re.search(r":(class|func|mod|attr):`", text), name

@@ -33,7 +33,13 @@ MAP_WORLD = "ros_arena.yaml"
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("demo", help="run the shipped models: fixed-world formation and general worlds; "
                                            "write a results page with figures and videos, print the table",
-                              description=__doc__.splitlines()[0])
+                              description="The shipped models at work, no training needed: the fixed 20×20 "
+                                          "world's three-robot formation with the shipped fixed-world DQN as leader, "
+                                          "the thesis's general test worlds with the shipped general DQN, a world "
+                                          "with moving obstacles, four formations crossing each other and a ROS "
+                                          "occupancy map in metres, beside gradient descent (and escape and A* where "
+                                          "they apply). Prints the summary table and writes a results page "
+                                          "(index.html: the table, field figures and browser-playable videos).")
     p.add_argument("--out", default="apf-demo",
                    help="folder for the results page, figures and videos (default: apf-demo)")
     p.add_argument("--worlds", default=None, metavar="DIR",
