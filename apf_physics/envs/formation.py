@@ -11,7 +11,7 @@ from gymnasium import spaces
 from apf_physics.actions import ACTIONS
 from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, resolve_worlds
 from apf_physics.envs.reward import TERMS, reward_weights
-from apf_physics.envs.task import NavigationTask
+from apf_physics.envs.task import NavigationTask, TrapOption
 from apf_physics.formation import formation_success, link_lengths, links_in_range
 from apf_physics.observation import ObserverConfig
 from apf_physics.render.drawing import Snapshot, draw_frame, field_image, formation_roles
@@ -49,14 +49,15 @@ class FormationEnv(gym.Env):
 
     ## Episode End
 
-    Terminated when the leader reaches a target or any robot collides; truncated after
-    ``max_episode_steps`` (registration, 100). ``info["formation_success"]`` is true at the
+    Terminated when the leader reaches a target (also at its start: see ``Navigate-v0``) or
+    any robot collides; truncated after ``max_episode_steps`` (registration, 100), and, with a
+    ``trap`` detector, when it finds the leader stuck (``info["trapped"]``; see ``Navigate-v0``). ``info["formation_success"]`` is true at the
     end when the leader reached the target and every link is within ``comm_range``.
 
     ## Arguments
 
     ``world``, ``obs_size``, ``reward``, ``starts``, ``resolution``, ``memory``,
-    ``obs_scale``, ``observer``, ``render_mode`` as in ``Navigate-v0``; ``formation``: a
+    ``obs_scale``, ``observer``, ``trap``, ``render_mode`` as in ``Navigate-v0``; ``formation``: a
     :class:`~apf_physics.world.FormationSpec` or dict overriding the world's (default: the
     world's, else 2 followers in a line, comm_range 3).
 
@@ -69,7 +70,7 @@ class FormationEnv(gym.Env):
     def __init__(self, world: WorldSpec | None = None, obs_size: int = 11, reward: Any = "thesis-fixed",
                  starts: Any = "world", resolution: int = 4, formation: FormationSpec | dict | None = None,
                  render_mode: str | None = None, memory: bool = False, previous: bool = False, obs_scale: str = "raw",
-                 observer: ObserverConfig | dict | None = None):
+                 observer: ObserverConfig | dict | None = None, trap: TrapOption = None):
         self.worlds = resolve_worlds(world)
         if formation is None:
             spec = self.worlds[0].formation or FormationSpec()
@@ -83,7 +84,7 @@ class FormationEnv(gym.Env):
         self.action_space = spaces.Discrete(len(ACTIONS))
         low, high = self.observer.bounds
         self.observation_space = spaces.Box(low, high, self.observer.shape, np.float32)
-        self._task = NavigationTask(self.worlds, 1, self.observer, self.weights, formation=spec)
+        self._task = NavigationTask(self.worlds, 1, self.observer, self.weights, formation=spec, trap=trap)
         self.m = spec.followers + 1
         self.followed = spec.followed
 
@@ -118,7 +119,10 @@ class FormationEnv(gym.Env):
         info["collision"] = collided
         info["robot_robot_contact"] = bool(result.robot_contact[0])
         info["formation_success"] = formation_success(reached, self.positions, self.followed, self.formation.comm_range)
-        return result.observation[0], float(result.reward[0]), bool(result.terminated[0]), False, info
+        if self._task.stepper.trap is not None:
+            info["trapped"] = bool(result.trapped[0])
+        return (result.observation[0], float(result.reward[0]), bool(result.terminated[0]), bool(result.truncated[0]),
+                info)
 
     def _get_info(self) -> dict:
         links = link_lengths(self.positions, self.followed)

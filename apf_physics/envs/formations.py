@@ -15,7 +15,7 @@ from gymnasium.utils import seeding
 from apf_physics.actions import ACTIONS
 from apf_physics.envs.options import observer_config, resolve_worlds
 from apf_physics.envs.reward import TERMS, reward_weights
-from apf_physics.envs.task import CrowdTask
+from apf_physics.envs.task import CrowdTask, TrapOption
 from apf_physics.observation import ObserverConfig
 from apf_physics.render.drawing import Snapshot, draw_frame, field_image, formation_roles
 
@@ -54,14 +54,16 @@ class FormationsParallelEnv(ParallelEnv):
 
     ## Episode End
 
-    An agent terminates when its formation reaches its target or collides; it is truncated
-    after ``max_episode_steps``. Its formation's robots then stay where they are.
+    An agent terminates when its formation reaches its target (also at its start: see
+    ``Navigate-v0``) or collides; it is truncated after ``max_episode_steps``, and, with a
+    ``trap`` detector, when it finds the formation's leader stuck (``infos[agent]["trapped"]``;
+    see ``Navigate-v0``). Its formation's robots then stay where they are.
 
     ## Arguments
 
     ``world`` (a world file with ``formations:``, a bundled name, or a World), ``agents``,
     ``obs_size``, ``reward``, ``resolution``, ``memory``, ``obs_scale``, ``observer``,
-    ``max_episode_steps`` (100), ``render_mode``.
+    ``max_episode_steps`` (100), ``trap`` (default None), ``render_mode``.
     """
 
     metadata = {"name": "apf_physics_formations_v0", "render_modes": ["rgb_array"], "render_fps": 10}
@@ -69,10 +71,10 @@ class FormationsParallelEnv(ParallelEnv):
     def __init__(self, world: Any = None, agents: str = "leaders", obs_size: int = 11, reward: Any = "thesis-fixed",
                  resolution: int = 4, memory: bool = False, previous: bool = False, obs_scale: str = "raw",
                  observer: ObserverConfig | dict | None = None, max_episode_steps: int = 100,
-                 render_mode: str | None = None):
+                 render_mode: str | None = None, trap: TrapOption = None):
         (self.world,) = resolve_worlds(world)
         self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer, previous)
-        self._task = CrowdTask(self.world, self.observer, reward_weights(reward), agents, max_episode_steps)
+        self._task = CrowdTask(self.world, self.observer, reward_weights(reward), agents, max_episode_steps, trap)
         self.possible_agents = list(self._task.names)
         self.agents: list[str] = []
         self.render_mode = render_mode
@@ -112,6 +114,8 @@ class FormationsParallelEnv(ParallelEnv):
             infos[a] = {**self._info(a), "reward_terms": dict(zip(TERMS, result.terms[:, i].tolist())),
                         "success": bool(result.reached[i]), "collision": bool(result.collided[i]),
                         "robot_robot_contact": bool(result.robot_contact[i])}
+            if self._task.stepper.trap is not None:
+                infos[a]["trapped"] = bool(result.trapped[i])
         self.agents = [a for a in live if not (terminations[a] or truncations[a])]
         return observations, rewards, terminations, truncations, infos
 

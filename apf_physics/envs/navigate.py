@@ -11,7 +11,7 @@ from gymnasium import spaces
 from apf_physics.actions import ACTION_NAMES, ACTIONS
 from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, resolve_worlds
 from apf_physics.envs.reward import TERMS, reward_weights
-from apf_physics.envs.task import NavigationTask
+from apf_physics.envs.task import NavigationTask, TrapOption
 from apf_physics.observation import ObserverConfig
 from apf_physics.render.drawing import Snapshot, draw_frame, field_image
 
@@ -80,9 +80,20 @@ class NavigateEnv(gym.Env):
 
     ## Episode End
 
+    The rules of ``apf-physics eval`` (:mod:`apf_physics.engine`, one definition for both).
     Terminated when the robot's centre is within ``goal_tolerance`` of a target (success) or
     it touches an obstacle or the map's edge (collision, W1). Truncated after ``tt`` steps,
-    set by the registration's ``max_episode_steps`` (100, thesis Tables 3–4).
+    set by the registration's ``max_episode_steps`` (100, thesis Tables 3–4). A start already
+    within ``goal_tolerance`` of a target (``options={"start": [x, y]}`` or an array of
+    starts can give one) is an episode reached at its start, in 0 steps: the first step
+    returns ``terminated=True`` and ``info["success"]`` without moving the robot, reward 0.
+
+    ``trap`` (default None: no trap rule, as in training) adds ``eval``'s trap detector:
+    ``"oscillation"`` truncates the episode once the robot's last 10 positions lie within
+    1.5 of their mean, ``"descent"`` also once U stopped dropping over them, and a
+    :class:`~apf_physics.engine.TrapDetector` sets the window and radius; ``info["trapped"]``
+    then says whether it did. With the detector of a planner's rule and window (and the step
+    limit of ``eval``) an episode driven by the planner's moves ends as ``eval``'s does.
 
     ## Arguments
 
@@ -104,11 +115,13 @@ class NavigateEnv(gym.Env):
     - ``obs_scale``: ``"raw"`` (default) or ``"log"`` (see Observation Space).
     - ``observer``: an :class:`~apf_physics.observation.ObserverConfig` (or its dict) instead
       of ``obs_size``, ``resolution``, ``memory`` and ``obs_scale``, e.g. a model's.
+    - ``trap``: None (default), ``"oscillation"``, ``"descent"`` or a
+      :class:`~apf_physics.engine.TrapDetector` (see Episode End).
     - ``render_mode``: ``"rgb_array"`` for OpenCV-drawn frames.
 
     ``info`` holds ``position``, ``world`` (its name) and ``distance`` (to the nearest target)
     after every reset and step, and after a step also ``reward_terms``, ``success`` and
-    ``collision``.
+    ``collision`` (and ``trapped``, with a ``trap`` detector).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -116,7 +129,7 @@ class NavigateEnv(gym.Env):
     def __init__(self, world: WorldSpec | None = None, obs_size: int = 11, reward: Any = "thesis-fixed",
                  starts: Any = "world", resolution: int = 4, render_mode: str | None = None,
                  memory: bool = False, previous: bool = False, obs_scale: str = "raw",
-                 observer: ObserverConfig | dict | None = None):
+                 observer: ObserverConfig | dict | None = None, trap: TrapOption = None):
         self.worlds = resolve_worlds(world)
         self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer, previous)
         self.weights = reward_weights(reward)
@@ -127,7 +140,7 @@ class NavigateEnv(gym.Env):
         self.action_space = spaces.Discrete(len(ACTIONS))
         low, high = self.observer.bounds
         self.observation_space = spaces.Box(low, high, self.observer.shape, np.float32)
-        self._task = NavigationTask(self.worlds, 1, self.observer, self.weights)
+        self._task = NavigationTask(self.worlds, 1, self.observer, self.weights, trap=trap)
         self._trail: list[np.ndarray] = []
         self._steps = 0
 
@@ -157,7 +170,10 @@ class NavigateEnv(gym.Env):
         info["reward_terms"] = dict(zip(TERMS, result.terms[:, 0].tolist()))
         info["success"] = bool(result.reached[0])
         info["collision"] = bool(result.collided[0])
-        return result.observation[0], float(result.reward[0]), bool(result.terminated[0]), False, info
+        if self._task.stepper.trap is not None:
+            info["trapped"] = bool(result.trapped[0])
+        return (result.observation[0], float(result.reward[0]), bool(result.terminated[0]), bool(result.truncated[0]),
+                info)
 
     def _get_info(self) -> dict:
         return {"position": self.position, "world": self.world.name, "distance": float(self._task.distance()[0])}

@@ -10,12 +10,13 @@ is a batch of one, :class:`~apf_physics.envs.vector.NavigateVectorEnv` a batch o
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Sequence, Union
 
 import numpy as np
 
 from apf_physics.actions import ACTIONS
-from apf_physics.engine import TIMEOUT, Stepper
+from apf_physics.engine import TIMEOUT, TRAPPED, Stepper, TrapDetector
+from apf_physics.errors import UserError
 from apf_physics.envs.reward import RewardWeights, reward_terms
 from apf_physics.formation import FormationCrowd, FormationTeam
 from apf_physics.observation import Observer, ObserverConfig
@@ -35,6 +36,42 @@ class TaskStep:
     collided: np.ndarray       # (N,) bool
     moved: np.ndarray          # (N,) bool: slots that were running
     robot_contact: np.ndarray  # (N,) bool: two robots of the slot touched
+    trapped: np.ndarray        # (N,) bool: the trap detector ended the episode (truncated)
+
+
+TrapOption = Union[None, str, TrapDetector]
+"""The environments' ``trap`` option (:func:`trap_detector`)."""
+TRAP_RULES = ("oscillation", "descent")
+
+
+def trap_detector(trap: TrapOption) -> TrapDetector | None:
+    """The environments' ``trap`` option as the stepper's detector.
+
+    None (the default): no trap rule, episodes end only by reaching, colliding or the step
+    limit (as in training). ``"oscillation"`` or ``"descent"``: that rule of
+    :class:`~apf_physics.engine.TrapDetector` with its defaults (a window of 10 steps, radius
+    1.5), the detector ``eval`` gives a planner with that rule and no window of its own. A
+    :class:`~apf_physics.engine.TrapDetector`: as it is (e.g. ``TrapDetector(window=40)``,
+    a DQN planner's with a visit memory).
+
+    Raises:
+        UserError: Anything else.
+    """
+    if trap is None or isinstance(trap, TrapDetector):
+        return trap
+    if isinstance(trap, str) and trap in TRAP_RULES:
+        return TrapDetector(trap)
+    raise UserError(f"trap must be None, one of {', '.join(TRAP_RULES)} or a TrapDetector, got {trap!r}")
+
+
+def _ends(ended: np.ndarray, outcome: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(terminated, truncated, trapped)`` of the episodes that ``ended``, from their outcome:
+    reached or collided terminate; the step limit and the trap detector truncate."""
+    if not ended.any():
+        return ended, ended, ended
+    trapped = ended & (outcome == TRAPPED)
+    truncated = trapped | (ended & (outcome == TIMEOUT))
+    return ended & ~truncated, truncated, trapped
 
 
 class NavigationTask:
@@ -48,16 +85,22 @@ class NavigationTask:
         formation: Followers behind each leader (None: robots alone).
         max_steps: Truncate episodes after this many steps (None: never; the single
             environments leave it to Gymnasium's ``TimeLimit``).
+        trap: Truncate episodes whose leader the trap detector finds stuck (:func:`trap_detector`;
+            default None: no trap rule).
+
+    The episode rules are the stepper's (:mod:`apf_physics.engine`): an episode that starts
+    within the goal tolerance of a target has ended at its start, and its next step reports
+    it terminated and reached, without moving it and with reward 0.
     """
 
     def __init__(self, worlds: Sequence[World], num: int, observer: ObserverConfig, weights: RewardWeights,
-                 formation: FormationSpec | None = None, max_steps: int | None = None):
+                 formation: FormationSpec | None = None, max_steps: int | None = None, trap: TrapOption = None):
         self.worlds = list(worlds)
         self.num = int(num)
         self.weights = weights
         self.team = FormationTeam(formation, self.num) if formation is not None else None
         robots = 1 if self.team is None else self.team.robots
-        self.stepper = Stepper(self.worlds, self.num, robots, max_steps=max_steps)
+        self.stepper = Stepper(self.worlds, self.num, robots, max_steps=max_steps, trap=trap_detector(trap))
         self.observer = Observer(observer, self.num, self.worlds, track_visits=bool(weights.revisit))
         self._centre = observer.size // 2
         self._obs = np.zeros((self.num, *observer.shape), np.float32)
@@ -137,15 +180,11 @@ class NavigationTask:
             terms *= moved
         reward = terms.sum(axis=0)
         ended = report.ended
-        if ended.any():
-            truncated = ended & (self.stepper.outcome == TIMEOUT)
-            terminated = ended & ~truncated
-        else:
-            truncated = terminated = ended
+        terminated, truncated, trapped = _ends(ended, self.stepper.outcome)
         robot_contact = report.contacts.robot.reshape(self.num, -1).any(axis=1) if report.contacts.touched \
             else ended & False
         return TaskStep(self._obs, reward, terminated, truncated, terms, report.reached, report.collided, moved,
-                        robot_contact)
+                        robot_contact, trapped)
 
     def distance(self) -> np.ndarray:
         """(N,) each leader's distance to the nearest target of its world, after the last start or step."""
@@ -167,10 +206,12 @@ class CrowdTask:
         agents: ``"leaders"``: one agent per formation, its followers follow by their rule and
             every move gets the right of way; ``"all"``: every robot is an agent, moved as told.
         max_steps: Truncate after this many steps (None: never).
+        trap: Truncate a formation whose leader the trap detector finds stuck (:func:`trap_detector`;
+            default None: no trap rule).
     """
 
     def __init__(self, world: World, observer: ObserverConfig, weights: RewardWeights, agents: str = "leaders",
-                 max_steps: int | None = None):
+                 max_steps: int | None = None, trap: TrapOption = None):
         if agents not in ("leaders", "all"):
             raise ValueError(f"agents must be 'leaders' or 'all', got {agents!r}")
         if not world.formations:
@@ -180,7 +221,8 @@ class CrowdTask:
         self.weights = weights
         self.mode = agents
         count, m = self.crowd.count, self.crowd.robots
-        self.stepper = Stepper(self.crowd.worlds, count, m, max_steps=max_steps, crowds=[0] * count)
+        self.stepper = Stepper(self.crowd.worlds, count, m, max_steps=max_steps, trap=trap_detector(trap),
+                               crowds=[0] * count)
         if agents == "leaders":
             self.members = [(f, 0) for f in range(count)]
         else:
@@ -246,8 +288,7 @@ class CrowdTask:
         reached = report.reached[self._formation]
         walked = np.hypot(*(self._agent_positions() - before).T) if self.weights.length else None
         terms = reward_terms(self.weights, touched & moved, reached & moved, u_before, self._u, None, walked) * moved
-        ended = report.ended[self._formation]
-        truncated = ended & (self.stepper.outcome[self._formation] == TIMEOUT)
+        terminated, truncated, trapped = _ends(report.ended[self._formation], self.stepper.outcome[self._formation])
         robot_contact = report.contacts.robot[self._robot]
-        return TaskStep(self._obs, terms.sum(axis=0), ended & ~truncated, truncated, terms, reached, touched, moved,
-                        robot_contact)
+        return TaskStep(self._obs, terms.sum(axis=0), terminated, truncated, terms, reached, touched, moved,
+                        robot_contact, trapped)

@@ -10,7 +10,8 @@ with ``seed + i`` and driven by the same actions.
 ``info`` has the keys and ``_key`` masks that Gymnasium's ``SyncVectorEnv`` would give for
 N ``Navigate-v0`` copies: at an autoreset step a copy's entries are those of its reset
 (``position``, ``world``, ``distance``: the new episode's), and its ``success``,
-``collision`` and ``reward_terms`` masks are False.
+``collision`` and ``reward_terms`` masks are False. A copy whose episode started at its
+target reports it at its next step (terminated, success, reward 0: see ``Navigate-v0``).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from gymnasium.vector.utils import batch_space
 from apf_physics.actions import ACTIONS
 from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, resolve_worlds
 from apf_physics.envs.reward import TERMS, reward_weights
-from apf_physics.envs.task import NavigationTask
+from apf_physics.envs.task import NavigationTask, TrapOption
 from apf_physics.observation import ObserverConfig
 from apf_physics.render.drawing import Snapshot, draw_frame, field_image
 
@@ -49,6 +50,8 @@ class NavigateVectorEnv(VectorEnv):
         previous: Add the window of the field one step earlier (see ``NavigateEnv``).
         obs_scale: ``"raw"`` or ``"log"`` (see ``NavigateEnv``).
         observer: An observer configuration instead of the four options above.
+        trap: Truncate an episode that a trap detector finds stuck (see ``NavigateEnv``; default
+            None: no trap rule); ``info["trapped"]`` then says which.
 
     Also reachable as ``gymnasium.make_vec("apf_physics/Navigate-v0", num_envs=N,
     vectorization_mode="vector_entry_point", world=...)``.
@@ -59,7 +62,7 @@ class NavigateVectorEnv(VectorEnv):
     def __init__(self, world: WorldSpec | None = None, num_envs: int = 8, obs_size: int = 11,
                  reward: Any = "thesis-fixed", starts: Any = "world", max_episode_steps: int = 100,
                  resolution: int = 4, render_mode: str | None = None, memory: bool = False, previous: bool = False,
-                 obs_scale: str = "raw", observer: ObserverConfig | dict | None = None):
+                 obs_scale: str = "raw", observer: ObserverConfig | dict | None = None, trap: TrapOption = None):
         self.worlds = resolve_worlds(world)
         self.num_envs = int(num_envs)
         self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer, previous)
@@ -73,7 +76,7 @@ class NavigateVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self._task = NavigationTask(self.worlds, self.num_envs, self.observer, self.weights,
-                                    max_steps=self.max_episode_steps)
+                                    max_steps=self.max_episode_steps, trap=trap)
         self._rngs = [seeding.np_random(None)[0] for _ in range(self.num_envs)]
         self._uniforms = np.zeros((self.num_envs, _BLOCK, 4))
         self._drawn = np.full(self.num_envs, _BLOCK)
@@ -125,13 +128,15 @@ class NavigateVectorEnv(VectorEnv):
         if self.render_mode is not None and not self._needs_reset[0]:  # the trail is only drawn
             self._trail.append(self._task.positions[0, 0].copy())
         self._needs_reset = result.terminated | result.truncated
-        stepped = result.moved
+        stepped = result.moved | self._needs_reset   # (an episode reached at its start ends without moving)
         info = self._info()
         info["reward_terms"] = dict(zip(TERMS, result.terms))
         info["reward_terms"].update({f"_{k}": stepped for k in TERMS})
         info["_reward_terms"] = stepped
         info["success"], info["_success"] = result.reached & stepped, stepped
         info["collision"], info["_collision"] = result.collided & stepped, stepped
+        if self._task.stepper.trap is not None:
+            info["trapped"], info["_trapped"] = result.trapped & stepped, stepped
         return self._task.observation(), result.reward.astype(np.float32), result.terminated, result.truncated, info
 
     def _info(self) -> dict:
