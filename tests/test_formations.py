@@ -146,3 +146,9 @@ def test_spatial_hash_finds_exactly_the_near_points():
         reach = rng.uniform(0.5, 15)
         exact = np.hypot(points[:, None, 0] - centres[None, :, 0], points[:, None, 1] - centres[None, :, 1])
         np.testing.assert_array_equal(near_any(points, centres, reach), (exact <= reach).any(axis=1))
+
+
+def test_the_parallel_env_is_importable_where_the_readme_says():
+    import apf_physics.envs as envs
+    from apf_physics.envs.formations import FormationsParallelEnv
+    assert envs.FormationsParallelEnv is FormationsParallelEnv and "FormationsParallelEnv" in envs.__all__

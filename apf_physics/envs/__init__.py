@@ -1,9 +1,11 @@
-"""Gymnasium environments: ``apf_physics/Navigate-v0`` (and its vectorised version) and ``apf_physics/Formation-v0``."""
+"""Gymnasium environments: ``apf_physics/Navigate-v0`` (and its vectorised version) and ``apf_physics/Formation-v0``;
+several formations as a PettingZoo ``ParallelEnv`` (:class:`FormationsParallelEnv`, with the ``[pettingzoo]`` extra)."""
 
 from gymnasium.envs.registration import register, registry
 
 from apf_physics.envs.navigate import ACTIONS, NavigateEnv
 from apf_physics.envs.formation import FormationEnv
+from apf_physics.envs.formations import FormationsParallelEnv
 from apf_physics.envs.vector import NavigateVectorEnv
 
 
@@ -24,4 +26,4 @@ def register_envs() -> None:
         )
 
 
-__all__ = ["ACTIONS", "FormationEnv", "NavigateEnv", "NavigateVectorEnv", "register_envs"]
+__all__ = ["ACTIONS", "FormationEnv", "FormationsParallelEnv", "NavigateEnv", "NavigateVectorEnv", "register_envs"]
