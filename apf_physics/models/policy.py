@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import itertools
 import os
-from typing import Any, Sequence
+import weakref
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import torch
@@ -100,19 +102,56 @@ class DQNPolicy:
                 torch.set_num_threads(threads)
 
 
+MAP_VALUES_PER_WORLD = 4
+"""Most map policies whose values one world keeps; the least recently used go first."""
+
+
+class MapValues:
+    """One world's map values, per :class:`MapPolicy`: kept in the world's cache (``"map_values"``).
+
+    An entry lives while both its world and its policy do: the world's cache holds it (a
+    world that is gone takes its values with it, and views of a world made by
+    :meth:`~apf_physics.world.World.among` share them), and it is keyed by a weak reference to
+    the policy (a policy that is gone, e.g. a network's evaluation during training, leaves
+    nothing behind). At most :data:`MAP_VALUES_PER_WORLD` policies' values are kept; a
+    pickled or copied world starts without any (values are cheap to rebuild, large to ship).
+    """
+
+    def __init__(self):
+        self._entries: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()   # policy -> [last use, values]
+        self._clock = itertools.count()
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def __reduce__(self):
+        return MapValues, ()
+
+    def get(self, policy: "MapPolicy", build: Callable[[], Any]) -> Any:
+        """``policy``'s values: kept, or ``build()`` (making room by dropping the least recently used)."""
+        entry = self._entries.get(policy)
+        if entry is None:
+            while len(self._entries) >= MAP_VALUES_PER_WORLD:
+                oldest = min(self._entries.items(), key=lambda item: item[1][0])[0]
+                del self._entries[oldest]
+            entry = [0, build()]
+            self._entries[policy] = entry
+        entry[0] = next(self._clock)
+        return entry[1]
+
+
 class MapPolicy:
     """Action values of a :class:`~apf_physics.models.mapnet.MapNetwork` for robots in a world.
 
     The network's values over the world's :class:`~apf_physics.observation.MapView` depend
     only on the world's static obstacles and targets, so they are computed once per world
-    (cached with the world) and every step only samples them at the robots' moves.
+    (kept with the world, :class:`MapValues`) and every step only samples them at the
+    robots' moves.
 
     Args:
         network: The map network; it is put in eval mode.
         model: The file it came from, if any.
     """
-
-    _count = 0
 
     def __init__(self, network: MapNetwork, model: SavedModel | None = None):
         self.network = network.eval()
@@ -120,8 +159,6 @@ class MapPolicy:
         self.moves = MOVE_SETS[network.arch["moves"]]
         """(M, 2) the moves the action values are for."""
         self.lengths = np.hypot(*self.moves.T)
-        MapPolicy._count += 1
-        self._key = ("map_values", MapPolicy._count)   # cache key in a world: this policy's values
 
     @property
     def field(self) -> dict[str, float] | None:
@@ -129,14 +166,14 @@ class MapPolicy:
         return None if self.model is None else self.model.field
 
     def values(self, world: World) -> tuple[MapView, torch.Tensor]:
-        """The world's map view and the network's V over it (cached with the world)."""
+        """The world's map view and the network's V over it (kept with the world: :class:`MapValues`)."""
         def build():
             view = MapView.of(world, self.network.resolution)
             with _threads_for(1), torch.inference_mode():
                 v = self.network.values(torch.from_numpy(view.features), torch.from_numpy(view.free),
                                         torch.from_numpy(view.goal))
             return view, v
-        return world.cached(self._key, build)
+        return world.cached("map_values", MapValues).get(self, build)
 
     def q_values(self, world: World, positions: np.ndarray, room: np.ndarray, du: np.ndarray) -> np.ndarray:
         """(N, M) action values of robots at ``positions`` for :attr:`moves`.
