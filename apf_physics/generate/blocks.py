@@ -140,6 +140,22 @@ class Block:
         local = np.array([rng.uniform(x0 - reach, x1 + reach), rng.uniform(y0 - reach, y1 + reach)])
         return self.frame(local[None])[0]
 
+    def in_a_spot(self, rng: np.random.Generator, margin: float) -> np.ndarray | None:
+        """A random point of a random spot (:meth:`point_in`)."""
+        return self.point_in(rng, int(rng.integers(len(self.spots))), margin)
+
+    def proposer(self, rng: np.random.Generator, outside: float, reach: float,
+                 margin: float) -> Callable[[], np.ndarray | None]:
+        """Start candidates: with probability ``outside`` (never when it is 0) a point around the
+        block (:meth:`around`), else one in a random spot, ``margin`` inside it."""
+
+        def propose() -> np.ndarray | None:
+            if outside and rng.random() < outside:
+                return self.around(rng, reach)
+            return self.in_a_spot(rng, margin)
+
+        return propose
+
 
 def rooms_block(rng: np.random.Generator, w: float, h: float, frame: LocalFrame, outer: bool, most: int) -> Block:
     """A building of rooms in the local box [0, w] x [0, h] (with outside walls if ``outer``)."""

@@ -40,6 +40,22 @@ def clear_of_target(obstacle: dict, target: np.ndarray, room: float) -> bool:
     return not bool(np.all((target >= lo) & (target <= hi)))
 
 
+def world_data(family: str, name: str | None, size: float, robot_radius: float, field: str, obstacles: list[dict],
+               target: np.ndarray) -> dict[str, Any]:
+    """The world-file mapping of a generated world of ``family`` with one target and no starts yet
+    (the target rounded; the obstacles as given)."""
+    return {
+        "name": name or family,
+        "size": [size, size],
+        "robot_radius": robot_radius,
+        "goal_tolerance": GOAL_TOLERANCE,
+        "field": field,
+        "obstacles": obstacles,
+        "targets": round_coordinates([np.asarray(target, float).tolist()]),
+        "starts": [],
+    }
+
+
 def round_coordinates(value: Any) -> Any:
     """Round coordinates to 3 decimals so written files read back to the same world."""
     if isinstance(value, float):

@@ -21,8 +21,8 @@ from typing import Callable
 import numpy as np
 
 from apf_physics.errors import UserError
-from apf_physics.generate.common import (GOAL_TOLERANCE, MAX_ATTEMPTS, ROBOT_RADIUS, START_CLEARANCE, clear_of_target,
-                                         inside_map, round_coordinates)
+from apf_physics.generate.common import (MAX_ATTEMPTS, ROBOT_RADIUS, START_CLEARANCE, clear_of_target, inside_map,
+                                         round_coordinates, world_data)
 from apf_physics.generate.shapes import axis_point, bent_line, cup, disc, random_box, thin_line
 from apf_physics.search import reachable
 from apf_physics.world import World
@@ -96,16 +96,7 @@ def axis_world(family: str, draw: AxisObstacles, rng: np.random.Generator, size:
         obstacles = draw(rng, target, u, gap, scale)
         if not all(inside_map(o, size, 0.5) and clear_of_target(o, target, 1.5) for o in obstacles):
             continue
-        data = {
-            "name": name or family,
-            "size": [size, size],
-            "robot_radius": ROBOT_RADIUS,
-            "goal_tolerance": GOAL_TOLERANCE,
-            "field": field,
-            "obstacles": round_coordinates(obstacles),
-            "targets": round_coordinates([target.tolist()]),
-            "starts": [],
-        }
+        data = world_data(family, name, size, ROBOT_RADIUS, field, round_coordinates(obstacles), target)
         try:
             bare = world_from_dict(data, source=f"<generated {family}>")
         except UserError:

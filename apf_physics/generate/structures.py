@@ -56,7 +56,7 @@ import numpy as np
 from apf_physics.errors import UserError
 from apf_physics.generate.blocks import (TARGET_CLEARANCE, Block, LocalFrame, clutter_polygons, cups_block, fit_frame,
                                          maze_block, rooms_block, rotated_extent)
-from apf_physics.generate.common import GOAL_TOLERANCE, START_CLEARANCE, round_coordinates
+from apf_physics.generate.common import START_CLEARANCE, round_coordinates, world_data
 from apf_physics.generate.shapes import axis_point, clip_convex, thick_polyline
 from apf_physics.search import SearchGrid
 from apf_physics.world import World
@@ -111,13 +111,7 @@ def _rooms_world(rng: np.random.Generator, size: float) -> Drawn | None:
         target = block.point_in(rng, block.inner, TARGET_CLEARANCE + 0.2)
     if target is None:
         return None
-
-    def propose() -> np.ndarray | None:
-        if outer and rng.random() < 0.25:
-            return block.around(rng, 8 * scale)
-        return block.point_in(rng, int(rng.integers(len(block.spots))), START_CLEARANCE)
-
-    return block.polygons, target, propose
+    return block.polygons, target, block.proposer(rng, 0.25 if outer else 0.0, 8 * scale, START_CLEARANCE)
 
 
 def _maze_world(rng: np.random.Generator, size: float) -> Drawn | None:
@@ -144,13 +138,7 @@ def _maze_world(rng: np.random.Generator, size: float) -> Drawn | None:
     target = block.point_in(rng, block.inner, TARGET_CLEARANCE + 0.2)
     if target is None:
         return None
-
-    def propose() -> np.ndarray | None:
-        if outer and rng.random() < 0.2:
-            return block.around(rng, 6 * scale)
-        return block.point_in(rng, int(rng.integers(len(block.spots))), START_CLEARANCE)
-
-    return block.polygons, target, propose
+    return block.polygons, target, block.proposer(rng, 0.2 if outer else 0.0, 6 * scale, START_CLEARANCE)
 
 
 def _cups_world(rng: np.random.Generator, size: float) -> Drawn | None:
@@ -266,7 +254,7 @@ def _mixed_world(rng: np.random.Generator, size: float) -> Drawn | None:
         if rng.random() < 0.7:
             other = blocks[int(rng.integers(1, len(blocks)))]
             if rng.random() < 0.6:
-                return other.point_in(rng, int(rng.integers(len(other.spots))), START_CLEARANCE)
+                return other.in_a_spot(rng, START_CLEARANCE)
             return other.around(rng, 3.0)
         return rng.uniform(1, size - 1, 2)
 
@@ -293,16 +281,7 @@ def structure_world(family: str, rng: np.random.Generator, size: float, field: s
         obstacles = [{"polygon": (np.round(np.asarray(p, float), 3) + 0.0).tolist()} for p in polygons]
         if any(min(min(v) for v in o["polygon"]) < 0 or max(max(v) for v in o["polygon"]) > size for o in obstacles):
             continue
-        data = {
-            "name": name or family,
-            "size": [size, size],
-            "robot_radius": STRUCTURE_ROBOT_RADIUS,
-            "goal_tolerance": GOAL_TOLERANCE,
-            "field": field,
-            "obstacles": obstacles,
-            "targets": round_coordinates([np.asarray(target, float).tolist()]),
-            "starts": [],
-        }
+        data = world_data(family, name, size, STRUCTURE_ROBOT_RADIUS, field, obstacles, target)
         try:
             bare = world_from_dict(data, source=f"<generated {family}>")
         except UserError:
