@@ -10,7 +10,7 @@ from __future__ import annotations
 import importlib.resources
 from pathlib import Path
 
-from apf_physics.errors import WorldError
+from apf_physics.errors import WorldError, did_you_mean
 
 WORLD_SUFFIXES = (".yaml", ".yml")
 
@@ -44,7 +44,8 @@ def resolve_world(spec: str | Path) -> Path:
     is dropped, so the README's ``worlds/fixed20.yaml`` works outside a checkout too.
 
     Raises:
-        WorldError: neither a path nor a bundled name; the message lists some bundled names.
+        WorldError: neither a path nor a bundled name; the message suggests the nearest bundled name
+            and lists some.
     """
     path = Path(spec)
     if path.exists():
@@ -59,4 +60,6 @@ def resolve_world(spec: str | Path) -> Path:
                 return candidate
     names = list_bundled()
     shown = ", ".join(names[:8]) + (f", ... ({len(names)} in all; see `apf-physics worlds`)" if len(names) > 8 else "")
-    raise WorldError(f"{spec}: no such world file, and no bundled world of that name (bundled: {shown})")
+    stem = name[:-len(Path(name).suffix)] if Path(name).suffix in WORLD_SUFFIXES else name
+    raise WorldError(f"{spec}: no such world file, and no bundled world of that name{did_you_mean(stem, names)} "
+                     f"(bundled: {shown})")

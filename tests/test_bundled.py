@@ -55,7 +55,16 @@ def test_existing_paths_win_over_bundled_names(tmp_path, monkeypatch):
 @pytest.mark.parametrize("spec", ["nonesuch", "thesis/test9", "../worlds/fixed20", "/nonexistent/fixed20.yaml"])
 def test_unknown_names_list_some_bundled_ones(spec, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    with pytest.raises(WorldError, match=r"no such world file, and no bundled world of that name \(bundled: fixed20, "):
+    with pytest.raises(WorldError, match=r"no such world file, and no bundled world of that name( \(did you mean "
+                                         r"'[a-z_0-9/]+'\?\))? \(bundled: fixed20, "):
+        resolve_world(spec)
+
+
+@pytest.mark.parametrize("spec, nearest", [("fixd20", "fixed20"), ("worlds/romos.yaml", "rooms"),
+                                           ("thesis/tset1", "thesis/test1")])
+def test_a_mistyped_world_name_gets_the_nearest_bundled_one(spec, nearest, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(WorldError, match=f"no bundled world of that name \\(did you mean '{nearest}'\\?\\)"):
         resolve_world(spec)
 
 
