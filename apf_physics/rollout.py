@@ -203,7 +203,7 @@ def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | 
             moved = report.moved
             robot_steps += moved & touched.robot.reshape(n, m).any(axis=1)
             obstacle_steps += moved & (touched.obstacle | touched.wall).reshape(n, m).any(axis=1)
-            in_range += moved[:, None] & (team.links(report.positions) <= team.spec.comm_range)
+            in_range += moved[:, None] & links_in_range(report.positions, team.followed, team.spec.comm_range)
 
     trajectory = np.stack(history)                                     # (T, n, m, 2)
     episodes = []
@@ -280,8 +280,8 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
             between[f] += bool(np.any(others != f))
             robots = slice(f * m, f * m + crowd.sizes[f])
             obstacle_steps[f] += bool((touched.obstacle[robots] | touched.wall[robots] | touched.moving[robots]).any())
-            links = crowd.links(report.positions)[f]
-            in_range[f] += links <= crowd.tasks[f].spec.comm_range
+            in_range[f] += links_in_range(report.positions[f, :crowd.sizes[f]], crowd.followed[f],
+                                          crowd.tasks[f].spec.comm_range)
         for f in np.flatnonzero(report.collided).tolist():
             contacts[f] = sorted({c.kind for c in touched.contacts if c.robot // m == f})
 
