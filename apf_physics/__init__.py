@@ -1,11 +1,10 @@
 """apf-physics: artificial-potential-field path planning with pymunk physics, DQN planners and Gymnasium environments."""
 
 from apf_physics.errors import ModelError, UserError, WorldError
+from apf_physics.version import __version__
 from apf_physics.field import FieldParams
 from apf_physics.world import World
 from apf_physics.worldfile import load_world, load_worlds, save_world, world_from_dict
-
-__version__ = "0.1.0"
 
 from apf_physics.envs import register_envs as _register_envs  # noqa: E402
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import quote
 
-from apf_physics import __version__
+from apf_physics.version import __version__
 from apf_physics.errors import UserError
 from apf_physics.render.drawing import FieldImage
 from apf_physics.render.episodes import is_formation, write_episode_video
