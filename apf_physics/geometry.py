@@ -9,9 +9,11 @@ import numpy as np
 
 
 def polygon_area(vertices: np.ndarray) -> float:
-    """Signed area of a polygon (positive when counter-clockwise)."""
+    """Signed area of a polygon (positive when counter-clockwise; ±inf or nan, silently, when the
+    coordinates are so large that it overflows: the world file's checks report such a polygon)."""
     x, y = vertices[:, 0], vertices[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+    with np.errstate(over="ignore", invalid="ignore"):
+        return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
 
 
 def segments_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -169,3 +169,16 @@ def test_the_fuzzer_sees_both_outcomes():
     outcomes = {check_outcome(lambda: world_from_dict(yaml.safe_load(TEXTS[name]), name)) for name in NAMES}
     outcomes.add(check_outcome(lambda: world_from_dict({"size": [20, "wide"]}, "bad.yaml")))
     assert outcomes == {"accepted", "refused"}
+
+
+def test_huge_coordinates_give_the_one_line_error_and_no_numpy_warning(tmp_path):
+    import subprocess
+    import sys
+    path = tmp_path / "big.yaml"
+    path.write_text("name: big\nsize: [20, 20]\nfield: {katt: 1, krep: 1, kstr: 1, p0: 1, ps: 2, u_max: 10}\n"
+                    "obstacles:\n  - polygon: [[1e308, 1e308], [-1e308, 1e308], [0, -1e308]]\n"
+                    "targets: [[10, 10]]\nstarts: [[2, 2]]\n")
+    done = subprocess.run([sys.executable, "-W", "error::RuntimeWarning", "-m", "apf_physics.cli", "eval", str(path)],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "Warning" not in done.stderr and "Traceback" not in done.stderr
+    assert "obstacles[0].polygon: polygon reaches outside the map" in done.stderr
