@@ -139,8 +139,10 @@ def test_thesis_presets_stay_as_written():
     assert (fast.env.num_envs, fast.dqn.batch_size, fast.dqn.loss, fast.dqn.double_dqn, fast.dqn.target_update, fast.dqn.tau) == (
         64, 64, "huber", True, "soft", 0.01)
     assert (fast.dqn.reward_scale, fast.network.obs_transform, fast.env.train_starts, fast.schedule.target_success) == (
-        1e-3, "relative-log", "lattice", 1.0)
-    assert not fast.evaluation.eval_shield and fast.evaluation.select == ("success", "random_success")
+        1e-3, "relative-log", "reachable", 0.99)
+    # validated on 200 seeded random free starts never trained on: they pick best.pt and stop the run
+    assert fast.evaluation.eval_random_starts == 200 and fast.evaluation.select == ("random_success", "success")
+    assert not fast.evaluation.eval_shield
 
 
 def test_general_presets_keep_their_recipes():
@@ -631,3 +633,20 @@ def test_train_prints_progress_lines_and_a_finished_run_names_the_limit_to_lift(
     assert again.returncode == 0 and "has already finished" in again.stdout
     reason = "target_success=null" if "target_success" in again.stdout.split("nothing more")[0] else "total_steps="
     assert f"--resume --set {reason}" in again.stdout
+
+
+def test_the_target_is_measured_on_the_held_out_starts_when_there_are_some():
+    from apf_physics.rl.learner import Counters
+    from apf_physics.rl.trainer import Evaluations, stop_reason
+    config = tiny_config(target_success=0.9, eval_random_starts=20)
+    phases = phases_for_world(tiny_world(), config)
+    c, evals = Counters(), Evaluations()
+    net = torch.nn.Linear(1, 1)
+    evals.record({"success": 1.0, "random_success": 0.5}, c, net, config)   # all training-world starts, few others
+    assert c.top_success == 0.5 and stop_reason(config, phases, c, 0.0) is None
+    evals.record({"success": 0.8, "random_success": 0.95}, c, net, config)
+    assert stop_reason(config, phases, c, 0.0) == "target_success 0.9 reached"
+    # without held-out starts the validation starts are the measure
+    c2 = Counters()
+    evals.record({"success": 0.95}, c2, net, config)
+    assert c2.top_success == 0.95

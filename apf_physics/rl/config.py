@@ -289,7 +289,8 @@ class ScheduleConfig:
     time_limit: Optional[float] = None
     """Seconds of training over all resumed sessions (None: no limit)."""
     target_success: Optional[float] = None
-    """Stop once a greedy evaluation reaches this share of the validation starts (None: never early)."""
+    """Stop once a greedy evaluation reaches this share of the held-out starts (``eval_random_starts``)
+    when there are any, else of the validation starts (None: never early)."""
     loss_limit: Optional[float] = 1e12
     """Stop, as diverged, when a logged mean loss exceeds this (a non-finite loss always stops; None:
     no limit)."""
@@ -576,8 +577,9 @@ PRESETS: dict[str, dict[str, Any]] = {
     "thesis-fixed": {},  # the defaults are Table 3
     "thesis-general-world": dict(obs_size=9, filters=(4, 4), reward="thesis-general", exploration_episodes=150,
                                  total_episodes=150, eval_every=2_000, checkpoint_every=5_000, log_every=500),
-    "fast": dict(_FAST, exploration_episodes=3_000, total_episodes=None, total_steps=3_000_000, eval_every=3_200,
-                 target_success=1.0, checkpoint_every=128_000, log_every=6_400),
+    "fast": dict(_FAST, train_starts="reachable", eval_random_starts=200, select=("random_success", "success"),
+                 exploration_episodes=3_000, total_episodes=None, total_steps=3_000_000, eval_every=3_200,
+                 target_success=0.99, time_limit=900.0, checkpoint_every=128_000, log_every=6_400),
     "thesis-general": dict(obs_size=9, filters=(4, 4), reward="thesis-general", exploration_episodes=150,
                            stage_episodes=150, restart_exploration=True, total_episodes=None, eval_every=5_000,
                            eval_shield=True, select=("-collisions", "spl", "success"), log_every=2_000,

@@ -43,7 +43,8 @@ class Counters:
     best_step: Optional[int] = None
     """Steps at the best evaluation."""
     top_success: Optional[float] = None
-    """Highest ``success`` of any evaluation (what ``target_success`` is compared with)."""
+    """Highest success of any evaluation on the held-out starts (``random_success``) when the run has them,
+    else on the validation starts (what ``target_success`` is compared with)."""
     time_to_target: Optional[float] = None
     """Wall time at which an evaluation first reached ``target_success``."""
     last_eval_step: Optional[int] = None

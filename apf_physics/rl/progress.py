@@ -76,6 +76,8 @@ class Progress:
         parts = [f"step {row['global_step']:,}{of}", f"phase {row['phase']}", f"episodes {row['episodes']:,}"]
         if row["eval_success"] != "":
             parts.append(f"eval success {row['eval_success']:.1%}")
+            if row["eval_random_success"] != "":
+                parts.append(f"held-out starts {row['eval_random_success']:.1%}")
         elif latest is not None:
             parts.append(f"last eval success {latest['success']:.1%}")
         if row["epsilon"] != "":

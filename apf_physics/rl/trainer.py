@@ -66,9 +66,10 @@ class Evaluations:
         """Note an evaluation made at ``c.global_step``; returns whether it is the best so far."""
         self.latest = summary
         c.last_eval_step = c.global_step
-        c.top_success = max(c.top_success or 0.0, summary["success"])
+        held_out = summary.get("random_success", summary["success"])  # the starts never trained on, if any
+        c.top_success = max(c.top_success or 0.0, held_out)
         target, select = config.schedule.target_success, config.evaluation.select
-        if target is not None and c.time_to_target is None and summary["success"] >= target:
+        if target is not None and c.time_to_target is None and held_out >= target:
             c.time_to_target = c.wall_time
         if self.best is not None and evaluation.score(summary, select) <= evaluation.score(self.best, select):
             return False
