@@ -268,7 +268,8 @@ def test_replay_buffer_wraps_samples_and_round_trips():
 
 
 def _episode(success: bool, length: float, outcome: str | None = None):
-    return SimpleNamespace(success=success, path_length=length, outcome=outcome or ("reached" if success else "trapped"))
+    return SimpleNamespace(success=success, path_length=length, outcome=outcome or ("reached" if success else "trapped"),
+                           steps=int(length))
 
 
 def test_summary_figures_spl_and_length_ratio():
