@@ -25,11 +25,12 @@ def closest_match(word: Any, choices: Iterable[str]) -> str | None:
     """The choice most like ``word`` (:func:`difflib.get_close_matches`, cutoff 0.6), or None.
 
     None, too, for a ``word`` that is not a string or is longer than :data:`MAX_HINT_WORD`
-    characters (what a file holds is not always a name).
+    characters (what a file holds is not always a name); choices that are not strings are
+    passed over.
     """
     if not isinstance(word, str) or len(word) > MAX_HINT_WORD:
         return None
-    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
+    close = difflib.get_close_matches(word, [c for c in choices if isinstance(c, str)], n=1, cutoff=0.6)
     return close[0] if close else None
 
 

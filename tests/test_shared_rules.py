@@ -30,6 +30,7 @@ def test_did_you_mean_names_the_nearest_choice_or_nothing():
     assert did_you_mean("fsat", ("fast", "thesis-fixed")) == " (did you mean 'fast'?)"
     assert did_you_mean("zzz", ("fast", "thesis-fixed")) == ""
     assert closest_match("trinay", ["raw", "trinary", "scale"]) == "trinary"
+    assert did_you_mean("tru", (1, True, "true")) == " (did you mean 'true'?)"    # a Literal's other choices
     for odd in (None, 3, ["fast"], "f" * 101):          # what a file holds is not always a name
         assert did_you_mean(odd, ("fast",)) == "" and closest_match(odd, ("fast",)) is None
 
