@@ -448,7 +448,7 @@ def _wait_for(condition, proc: subprocess.Popen, timeout: float = 120) -> None:
 def test_kill_9_leaves_loadable_models_and_resume_carries_on(tmp_path):
     world = write_tiny_world(tmp_path)
     out = tmp_path / "run"
-    options = [f"--set={k}={v}" for k, v in {**TINY_OPTIONS, "filters": "[8, 8]", "total_steps": 10**7,
+    options = [f"--set={k}={v}" for k, v in {**TINY_OPTIONS, "filters": "[8, 8]", "select": "[success, random_success]", "total_steps": 10**7,
                                              "target_success": "null", "checkpoint_every": 500}.items()]
     proc = _cli("--world", str(world), "--out", str(out), "--no-progress", *options)
     _wait_for(lambda: (out / "best.pt").exists() and (out / "last.pt").exists(), proc)
@@ -471,7 +471,7 @@ def test_kill_9_leaves_loadable_models_and_resume_carries_on(tmp_path):
 def test_interrupt_saves_and_prints_the_resume_command_and_a_second_run_is_refused(tmp_path):
     world = write_tiny_world(tmp_path)
     out = tmp_path / "run"
-    options = [f"--set={k}={v}" for k, v in {**TINY_OPTIONS, "filters": "[8, 8]", "total_steps": 10**7,
+    options = [f"--set={k}={v}" for k, v in {**TINY_OPTIONS, "filters": "[8, 8]", "select": "[success, random_success]", "total_steps": 10**7,
                                              "target_success": "null", "eval_every": 10**6}.items()]
     proc = _cli("--world", str(world), "--out", str(out), *options)
     _wait_for(lambda: len(read_csv(out / "train.csv")) >= 2 if (out / "train.csv").exists() else False, proc)

@@ -9,6 +9,9 @@ from typing import Sequence
 import cv2
 import numpy as np
 
+from apf_physics.errors import UserError
+from apf_physics.safefile import write_bytes
+
 _BLUE, _RED, _GREEN, _GREY, _BLACK = (200, 110, 30), (40, 40, 220), (60, 160, 60), (200, 200, 200), (0, 0, 0)
 
 
@@ -92,5 +95,8 @@ def plot_training_curve(csv_path: str | os.PathLike, png_path: str | os.PathLike
     x_hi = int(x.max()) if x.size else 0
     cv2.putText(image, f"env steps (0 .. {x_hi})", (300, 472), cv2.FONT_HERSHEY_SIMPLEX, 0.45, _BLACK, 1, cv2.LINE_AA)
     if png_path is not None:
-        cv2.imwrite(os.fspath(png_path), image)
+        ok, encoded = cv2.imencode(".png", image)
+        if not ok:
+            raise UserError(f"cannot write {png_path}: OpenCV could not encode the PNG image")
+        write_bytes(png_path, encoded.tobytes())
     return image

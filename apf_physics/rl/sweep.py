@@ -34,6 +34,7 @@ from apf_physics.rl.config import TrainConfig, replace
 from apf_physics.rl.phases import phases_for_curriculum, phases_for_world
 from apf_physics.rl.sweepfile import BUDGETS, METRICS, Sweep, load_sweep
 from apf_physics.rl.trainer import train
+from apf_physics.safefile import atomic_path, write_text
 
 __all__ = ["BUDGETS", "METRICS", "Sweep", "SweepResult", "TrialRow", "format_results", "load_sweep", "run_sweep"]
 
@@ -115,7 +116,7 @@ def run_trial(params: dict, sweep: Sweep, target: Any) -> None:
         result = train(config, phases, out_dir=out, resume=(out / "last.pt").is_file())
         reason = result.stop_reason or ""
         finished = leg == sweep.reports or not reason.startswith(sweep.budget[0])
-        (out / PROGRESS).write_text(json.dumps({"legs": leg, "finished": finished}))
+        write_text(out / PROGRESS, json.dumps({"legs": leg, "finished": finished}))
         best, latest = result.best or {}, result.latest or {}
         metrics = {name: best[name] for name in FIGURES if best.get(name) is not None}
         metrics.update({f"latest_{name}": latest[name] for name in FIGURES if latest.get(name) is not None})
@@ -173,10 +174,7 @@ def ended_callback(path: Path) -> Any:
 
     class Ended(tune.Callback):
         def _note(self, trial: Any) -> None:
-            ids = read_ended(path) | {trial.trial_id}
-            tmp = path.with_name(f".{path.name}.tmp")
-            tmp.write_text(json.dumps(sorted(ids)))
-            tmp.replace(path)
+            write_text(path, json.dumps(sorted(read_ended(path) | {trial.trial_id})))
 
         def on_trial_complete(self, iteration, trials, trial, **info):
             self._note(trial)
@@ -243,7 +241,7 @@ def run_sweep(sweep: Sweep, out: str | Path, resume: bool = False, address: Opti
 
         if not resume:
             out.mkdir(parents=True, exist_ok=True)
-            recipe.write_text(json.dumps(current, indent=1))
+            write_text(recipe, json.dumps(current, indent=1))
         trainable = tune.with_resources(tune.with_parameters(run_trial, sweep=sweep, target=target),
                                         {"cpu": sweep.trial_cpus})
         if resume:
@@ -296,11 +294,11 @@ def _gather(sweep: Sweep, grid: Any, out: Path, ended: set) -> SweepResult:
     if best is not None and not interrupted:
         with best.checkpoint.as_directory() as folder:
             if (Path(folder) / "best.pt").is_file():
-                shutil.copyfile(Path(folder) / "best.pt", out / ".best.pt.tmp")
-                (out / ".best.pt.tmp").replace(out / "best.pt")
+                with atomic_path(out / "best.pt") as tmp:
+                    shutil.copyfile(Path(folder) / "best.pt", tmp)
                 written.append(out / "best.pt")
         config = sweep.config(best.values, sweep.reports)
-        (out / "best.json").write_text(json.dumps(
+        write_text(out / "best.json", json.dumps(
             {"trial": best.trial, "values": best.values, "figures": {k: best.metrics.get(k) for k in FIGURES},
              "metric": sweep.metric, "global_step": best.metrics.get("global_step"),
              "config": config.to_dict()}, indent=1, default=str))
@@ -311,8 +309,7 @@ def _gather(sweep: Sweep, grid: Any, out: Path, ended: set) -> SweepResult:
 def write_results(rows: Sequence[TrialRow], sweep: Sweep, path: Path) -> Path:
     """``results.csv``: a row per trial (its values, status, steps and figures)."""
     columns = ["trial", *sweep.varied(), "status", "legs", "global_step", "train_seconds", *FIGURES, "error"]
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w", newline="") as f:
+    with atomic_path(path) as tmp, open(tmp, "w", newline="") as f:
         writer = csv.DictWriter(f, columns)
         writer.writeheader()
         for r in rows:
@@ -320,7 +317,6 @@ def write_results(rows: Sequence[TrialRow], sweep: Sweep, path: Path) -> Path:
                              **{k: r.metrics.get(k, "") for k in ("legs", "global_step", *FIGURES)},
                              "train_seconds": round(r.metrics["train_seconds"], 1) if "train_seconds" in r.metrics
                              else ""})
-    tmp.replace(path)
     return path
 
 

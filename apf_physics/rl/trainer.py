@@ -267,6 +267,8 @@ def _train(config: TrainConfig, phases: list[Phase], run: Optional[RunDir], resu
             if evals.record(summary, c, learner.network, config):
                 save_best(run, learner, config, phases, c, evals.best)
             history.append(log_row(run, config, c, phase, learner, summary, shown, evals.latest))
+            if shown is not None:
+                shown.update(c, phase, getattr(learner, "epsilon", None), evals.latest)
         c.wall_time = elapsed_before + time.perf_counter() - start
         save_checkpoint(run, config, phases, learner, c, rng, evals)
     except KeyboardInterrupt:
