@@ -34,6 +34,7 @@ from apf_physics.errors import UserError, WorldError
 from apf_physics.field import FieldParams
 from apf_physics.obstacles import CircleObstacle, GridObstacle, Motion, Obstacle, PolygonObstacle
 from apf_physics.safefile import MAX_FILE_BYTES, open_regular_file, read_regular_file  # noqa: F401 (public here too)
+from apf_physics.safefile import write_text
 from apf_physics.safeyaml import MAX_DEPTH, MAX_NODES, MAX_SCALAR_CHARS  # noqa: F401 (public here too)
 from apf_physics.safeyaml import read_yaml_file, shortened
 from apf_physics.world import FormationSpec, FormationTask, World
@@ -360,12 +361,8 @@ def dump_world_yaml(world: World) -> str:
 
 
 def save_world(world: World, path: str | Path) -> None:
-    """Write a world file that :func:`load_world` reads back to the same world."""
-    path = Path(path)
-    try:
-        path.write_text(dump_world_yaml(world), encoding="utf-8")
-    except OSError as exc:
-        raise UserError(f"{path}: cannot write the world file ({exc.strerror})") from None
+    """Write a world file (atomically) that :func:`load_world` reads back to the same world."""
+    write_text(path, dump_world_yaml(world))
 
 
 def load_worlds(paths: Sequence[str | Path]) -> list[World]:

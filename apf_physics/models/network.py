@@ -17,6 +17,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from apf_physics.transforms import signed_log
+
 OBS_TRANSFORMS = ("raw", "relative-log", "relative-log-memory", "relative-log-previous")
 """Names accepted by :class:`QNetwork`'s ``obs_transform``."""
 
@@ -97,7 +99,7 @@ def relative_log(obs: torch.Tensor, reference: torch.Tensor | None = None) -> to
     c = obs.shape[-1] // 2
     ref = obs if reference is None else reference
     d = obs - ref[..., c : c + 1, c : c + 1]
-    return torch.sign(d) * torch.log1p(d.abs())
+    return signed_log(d)
 
 
 class QNetwork(nn.Module):
