@@ -160,3 +160,82 @@ def test_atlas_samples_every_raster_as_raster_sample_does():
     windows = atlas.sample(points[:50], 0, offsets)
     np.testing.assert_allclose(windows, rasters[0].sample((points[:50, None] + offsets[None]).reshape(-1, 2))
                                .reshape(50, 3), rtol=1e-5, atol=2e-3)
+
+
+# -- boundaries of the terms (each found by a mutant that no earlier test told apart) -------------------------
+
+def test_a_capped_repulsive_term_has_no_slope_and_the_boundary_no_nan():
+    f = WORLD.field
+    d = np.array([0.05, 0.1, 0.2, 0.5, 1.0, 1.5, 2.0])
+    u = apf.repulsive_term(d, f.krep, f.p0, f.u_max)
+    capped = u == f.u_max
+    assert capped.tolist() == [True, True, True, False, False, False, False]
+    slope = apf.repulsive_term_slope(d, f.krep, f.p0, f.u_max)
+    assert np.all(slope[capped] == 0) and np.all(slope[3:5] < 0) and slope[5] == 0 and slope[6] == 0
+    # beside the circle of radius 0.5 at (12, 4): within the cap no repulsive gradient; on the rim (d = 0
+    # exactly) none either, and a finite gradient
+    params = apf.FieldParams(**f.as_dict())
+    circle = [o for o in WORLD.obstacles if getattr(o, "radius", None) == 0.5]
+    points = np.array([[12.6, 4.0], [12.5, 4.0], [12.0, 3.45]])
+    with np.errstate(all="raise"):
+        g = apf.repulsive_gradient(points, circle, params)
+    assert np.all(np.isfinite(g)) and np.all(g == 0.0)
+    assert np.all(np.isfinite(WORLD.gradient(points)))
+
+
+def test_the_black_hole_has_no_gradient_at_its_target_and_computes_it_without_a_division_by_zero():
+    targets = np.array([[15.0, 15.0], [4.0, 16.0]])
+    with np.errstate(all="raise"):
+        g = apf.black_hole_gradient(targets, targets, 8.0, 8.0)
+    # at each target its own term is 0; only the other target's (farther than ps) would pull: none
+    np.testing.assert_array_equal(g, np.zeros((2, 2)))
+
+
+def test_a_shape_set_too_short_for_p0_is_refused_by_name():
+    from apf_physics.spatial import ShapeSet
+
+    short = ShapeSet(WORLD.obstacles, 0.5)
+    with pytest.raises(ValueError, match=r"reach 0\.5 cannot give a field of range p0 = 1\.5"):
+        apf.repulsive(np.array([[1.0, 1.0]]), short, WORLD.field)
+
+
+def test_discs_repel_as_circle_obstacles_do():
+    from apf_physics.obstacles import CircleObstacle
+
+    params = WORLD.field
+    centres = np.array([[6.0, 6.0], [7.5, 6.5], [14.0, 3.0]])
+    radius = 0.25
+    circles = [CircleObstacle(c, radius) for c in centres]
+    rng = np.random.default_rng(3)
+    points = np.vstack([rng.uniform(4.0, 16.0, (300, 2)), centres + [[0.3, 0.0], [0.0, -1.0], [2.0, 0.0]]])
+    points = points[np.min(np.hypot(*(points[:, None] - centres[None]).transpose(2, 0, 1)), axis=1) > radius + 1e-3]
+    np.testing.assert_allclose(apf.discs_repulsive(points, centres, radius, params),
+                               apf.repulsive(points, circles, params), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(apf.discs_repulsive_gradient(points, centres, radius, params),
+                               apf.repulsive_gradient(points, circles, params), rtol=1e-7, atol=1e-7)
+    # a point at a disc's centre: capped, no gradient, no NaN
+    with np.errstate(all="raise"):
+        at_centre = apf.discs_repulsive_gradient(centres[:1], centres[:1], radius, params)
+    assert apf.discs_repulsive(centres[:1], centres[:1], radius, params)[0] == params.u_max
+    np.testing.assert_array_equal(at_centre, [[0.0, 0.0]])
+
+
+def test_grid_nodes_of_an_origin_off_the_diagonal():
+    grid = apf.Grid.covering((1.0, -2.0), (2.0, 0.0), 2)
+    assert grid.shape == (5, 3)
+    nodes = grid.node_points()
+    np.testing.assert_array_equal(nodes[:3], [[1.0, -2.0], [1.5, -2.0], [2.0, -2.0]])
+    np.testing.assert_array_equal(nodes[-1], [2.0, 0.0])
+    np.testing.assert_array_equal(grid.to_index(np.array([[2, 0]])), [[2.0, 4.0]])     # integer points too
+    np.testing.assert_array_equal(grid.to_world(np.array([[2, 4]])), [[2.0, 0.0]])
+
+
+def test_raster_sample_clamps_points_outside_to_the_edge():
+    grid = apf.Grid.covering((0.0, 0.0), (3.0, 2.0), 1)                  # 3 rows × 4 columns
+    values = np.arange(12.0).reshape(3, 4) ** 2                           # not linear: no extrapolation fits it
+    raster = apf.Raster(grid, values)
+    inside = np.array([[0.0, 1.0], [3.0, 1.0], [1.5, 0.0], [1.5, 2.0], [0.0, 0.0], [3.0, 2.0]])
+    outside = inside + np.array([[-2.0, 0.0], [2.5, 0.0], [0.0, -1.5], [0.0, 3.0], [-1.0, -1.0], [4.0, 4.0]])
+    np.testing.assert_allclose(raster.sample(outside), raster.sample(inside))
+    # the edge's own values: row 1 at its ends, rows 0 and 2 halfway between columns 1 and 2, two corners
+    np.testing.assert_allclose(raster.sample(inside), [16.0, 49.0, 2.5, 90.5, 0.0, 121.0])

@@ -203,3 +203,31 @@ def test_length_term_charges_the_distance_moved_and_shaping_discounts_the_next_p
     after = world.potential(np.array([[11.0, 16.0], [11.0, 17.0], [10.0, 16.0]]))
     np.testing.assert_allclose(terms["potential"], -4 * (0.9 * after - before), rtol=1e-3, atol=0.5)
     np.testing.assert_allclose(reward, sum(terms[name] for name in TERMS), rtol=1e-5)
+
+
+def test_a_move_with_exactly_no_room_to_spare_is_safe():
+    # room >= 0 is safe: the best-valued move with room exactly 0 beats a worse one with more room
+    q = np.array([[3.0, 2.0, 1.0]])
+    np.testing.assert_array_equal(shielded_argmax(q, np.array([[0.0, 0.5, 1.0]])), [0])
+    np.testing.assert_array_equal(shielded_argmax(q, np.array([[-1e-12, 0.5, 1.0]])), [1])
+
+
+def test_move_clearance_takes_moving_obstacles_where_they_are_at_step_t():
+    # (the world at step t, World.at(t); a World itself: its static obstacles only)
+    import dataclasses
+
+    from apf_physics.obstacles import CircleObstacle, Motion
+
+    base = world_from_dict(simple_world_dict(obstacles=[]))
+    disc = CircleObstacle(np.array([10.0, 14.0]), 1.0, Motion(np.array([[0.0, -8.0]]), 0.5))
+    world = dataclasses.replace(base, obstacles=base.obstacles + (disc,), _cache={})
+    here = np.array([[10.0, 9.0]])
+    # at step 0 the disc is 4 away (moving 0.5 nearer during the move); by step 6 it is 1 above, at 8 on the robot
+    assert np.all(move_clearance(world.at(0), here) > 2.0)
+    at6 = move_clearance(world.at(6), here)
+    assert at6[0, 0] < world.robot_radius < at6[0, 1]           # up runs into it; down gets away
+    for t in (3, 6):     # as if the disc stood where it is then (it moves 0.5 during the move)
+        still = world_from_dict(simple_world_dict(obstacles=[{"circle": {"center": [10.0, 14.0 - 0.5 * t], "radius": 1.0}}]))
+        exact_to = world.robot_radius + MOVE_REACH                # what either reads exactly
+        np.testing.assert_allclose(np.minimum(move_clearance(world.at(t), here), exact_to),
+                                   np.minimum(move_clearance(still, here), exact_to), atol=0.5 + 1e-9)
