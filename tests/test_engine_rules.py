@@ -154,6 +154,7 @@ def test_an_ended_slots_robots_stay_where_the_episode_ended():
     for _ in range(3):    # slot 0 is still sent commands: they are ignored, in the report and in the physics
         report = stepper.step(np.array([[[1.0, 0.0]], [[0.0, 1.0]]]))
         assert report.moved.tolist() == [False, True]
+        assert report.reached.tolist() == [False, False] and report.ended.tolist() == [False, False]
     np.testing.assert_allclose(stepper.physics.positions[0], ended_at)
     np.testing.assert_allclose(report.positions[0, 0], ended_at)
     assert stepper.steps.tolist() == [1, 4]
@@ -195,3 +196,27 @@ def test_the_goal_tolerance_is_inclusive():
     stepper.start(np.array([0]), np.array([[[3.0, 5.0]]]))
     report = stepper.step(np.array([[[1.0, 0.0]]]))           # ends exactly 1.0 from the target
     assert report.distance.tolist() == [1.0] and stepper.outcome.tolist() == [REACHED]
+
+
+def test_a_collision_ends_the_episode_without_a_step_limit_or_trap_detector():
+    world = _open()
+    stepper = Stepper([world], 2, robots_per_slot=2)
+    # slot 1's second robot runs into the map's right edge; slot 0 moves freely
+    stepper.start(np.array([0, 1]), np.array([[[2.0, 2.0], [2.0, 4.0]], [[10.0, 10.0], [19.0, 10.0]]]))
+    report = stepper.step(np.array([[[1.0, 0.0], [1.0, 0.0]], [[0.0, 1.0], [1.4, 0.0]]]))
+    assert report.collided.tolist() == [False, True] and report.ended.tolist() == [False, True]
+    assert stepper.outcome.tolist() == [RUNNING, COLLISION]
+
+
+def test_a_start_within_the_goal_tolerance_is_reached_at_once_and_reported_by_the_next_step_only():
+    world = _open(targets=[[5.0, 5.0]], goal_tolerance=1.0)
+    stepper = Stepper([world], 3, max_steps=10)
+    # exactly at the tolerance (inclusive), inside it, and outside it
+    stepper.start(np.arange(3), np.array([[[4.0, 5.0]], [[5.0, 5.5]], [[2.0, 5.0]]]))
+    assert stepper.outcome.tolist() == [REACHED, REACHED, RUNNING] and stepper.steps.tolist() == [0, 0, 0]
+    report = stepper.step(np.array([[[1.0, 0.0]], [[1.0, 0.0]], [[0.0, 1.0]]]))
+    assert report.ended.tolist() == [True, True, False] and report.reached.tolist() == [True, True, False]
+    assert report.moved.tolist() == [False, False, True]
+    np.testing.assert_allclose(report.positions[:2, 0], [[4.0, 5.0], [5.0, 5.5]])    # not moved
+    report = stepper.step(np.array([[[1.0, 0.0]], [[1.0, 0.0]], [[0.0, 1.0]]]))
+    assert report.ended.tolist() == [False, False, False] and report.reached.tolist() == [False, False, False]
