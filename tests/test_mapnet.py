@@ -84,9 +84,12 @@ def test_training_and_acting_see_the_same_per_move_inputs():
     config = preset("map", demo_positions=64)
     data = batch(Teacher.of(world, config.imitation.map_resolution), config.imitation, np.random.default_rng(3))
     positions, room, du, _ = data
-    exact_room, exact_du = move_inputs(world, positions, MOVE_SETS[config.imitation.map_moves])
-    assert len(positions) > 20 and np.array_equal(room, exact_room) and np.array_equal(du, exact_du)
+    acting_room, acting_du, clearance = move_inputs(world, positions, MOVE_SETS[config.imitation.map_moves])
+    assert len(positions) > 20 and np.array_equal(room, acting_room) and np.array_equal(du, acting_du)
     assert (room < 0).any() and (room >= 0).any()       # near the walls some moves are unsafe, elsewhere safe
+    # what the network reads never claims more room than there is; the shield judges by the exact clearance
+    assert np.all(room <= clearance)
+    assert np.all(np.minimum(room, 1.0) >= np.minimum(clearance, 1.0) - 0.25)
 
 
 def test_imitation_lowers_the_loss_and_the_planner_follows_the_values():

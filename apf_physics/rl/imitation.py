@@ -114,11 +114,11 @@ def batch(teacher: Teacher, config: ImitationConfig, rng: np.random.Generator) -
     world = teacher.world
     moves = MOVE_SETS[config.map_moves]
     candidates = rng.uniform((0.0, 0.0), world.size, size=(4 * config.demo_positions, 2))
-    fits = world.clearance(candidates) >= world.robot_radius + SAFETY
+    fits = move_inputs(world, candidates, np.zeros((1, 2)))[0][:, 0] >= 0
     positions = candidates[fits][:config.demo_positions]
     if not len(positions):
         return None
-    room, du = move_inputs(world, positions, moves)
+    room, du, _ = move_inputs(world, positions, moves)
     target, ok = teacher.labels(positions, moves, room, config.label_temperature)
     if not ok.any():
         return None
