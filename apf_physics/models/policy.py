@@ -10,12 +10,11 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import torch
 
-from apf_physics.actions import MOVE_SAMPLES, MOVE_SETS, SAFETY, move_clearance
+from apf_physics.actions import MOVE_SETS, SAFETY, move_clearance
 from apf_physics.models.files import SavedModel, load_model, observer_of
 from apf_physics.models.mapnet import MapNetwork, move_features, sample_values
 from apf_physics.models.network import QNetwork
 from apf_physics.observation import MapView, ObserverConfig
-from apf_physics.physics import CLEARANCE_CAP, CLEARANCE_RESOLUTION
 from apf_physics.world import Moment, World
 
 
@@ -191,42 +190,21 @@ class MapPolicy:
             return map_scores(self.network, view, v, positions, self.moves, room, du).numpy()
 
 
-def static_room(world: World, positions: np.ndarray, moves: np.ndarray) -> np.ndarray:
-    """A lower bound, within the room the network reads (up to 1), of :func:`~apf_physics.actions.move_clearance`
-    beyond the robot's radius and the safety margin, from the static obstacles' clearance raster.
-
-    The raster is sampled at the move's :data:`~apf_physics.actions.MOVE_SAMPLES` points and
-    lowered by half their spacing and by the raster's interpolation error. Cheap enough for
-    thousands of labelled moves per training update.
-    """
-    raster = world.clearance_raster(CLEARANCE_RESOLUTION, CLEARANCE_CAP)
-    steps = np.linspace(0.0, 1.0, MOVE_SAMPLES + 1)
-    points = positions[:, None, None, :] + steps[None, None, :, None] * moves[None, :, None, :]
-    clearance = raster.sample(points.reshape(-1, 2)).reshape(len(positions), len(moves), -1).min(axis=2)
-    bound = clearance - 0.5 * np.hypot(*moves.T)[None] / MOVE_SAMPLES - 0.71 / CLEARANCE_RESOLUTION
-    return bound - (world.robot_radius + SAFETY)
-
-
-def move_inputs(where: Moment | World, positions: np.ndarray, moves: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def move_inputs(where: Moment | World, positions: np.ndarray, moves: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The map network's per-move inputs: one function for when it acts and when it is trained.
 
     ``where``: the world at the control step the moves start at (:meth:`World.at`), or a world:
     its static obstacles, U at step 0 (as training labels them).
 
     Returns:
-        ``room`` (N, M): what the network reads of the room along each move: the least of
-        :func:`static_room` (the raster bound it was trained on, static obstacles) and the exact
-        ``clearance``, so moving obstacles count too; ``du`` (N, M): the signed-log change of U
-        over each move (:func:`potential_change`); and ``clearance`` (N, M): the clearance along
-        each move (:func:`~apf_physics.actions.move_clearance`) beyond the robot's radius and the
-        safety margin, which the shield judges a move by (negative: unsafe).
+        ``room`` (N, M): the clearance along each move (:func:`~apf_physics.actions.move_clearance`)
+        beyond the robot's radius and the safety margin (negative: the move is unsafe), which the
+        shield judges moves by too; and ``du`` (N, M): the signed-log change of U over each move
+        (:func:`potential_change`).
     """
     world = where.world if isinstance(where, Moment) else where
-    positions = np.asarray(positions, float).reshape(-1, 2)
-    clearance = move_clearance(where, positions, moves) - (world.robot_radius + SAFETY)
-    room = np.minimum(static_room(world, positions, moves), clearance)
-    return room, potential_change(where, positions, moves), clearance
+    room = move_clearance(where, positions, moves) - (world.robot_radius + SAFETY)
+    return room, potential_change(where, positions, moves)
 
 
 def potential_change(where: Moment | World, positions: np.ndarray, moves: np.ndarray) -> np.ndarray:

@@ -88,9 +88,9 @@ class DQNPlanner(Planner):
         """A map network's move: its best-valued one (with the shield: among the safe ones)."""
         policy = self._policy
         moves = policy.moves
-        room, du, clearance = move_inputs(moment, positions, moves)
+        room, du = move_inputs(moment, positions, moves)
         q = policy.q_values(self.world, positions, room, du)
-        chosen = shielded_argmax(q, clearance) if self.shield else q.argmax(axis=1)
+        chosen = shielded_argmax(q, room) if self.shield else q.argmax(axis=1)
         return moves[chosen] * active[:, None]
 
 

@@ -27,10 +27,11 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from apf_physics.actions import MOVE_SETS, SAFETY
+from apf_physics.actions import MOVE_SAMPLES, MOVE_SETS, SAFETY
 from apf_physics.models.mapnet import MapNetwork, sample_values
 from apf_physics.models.policy import MapPolicy, map_scores, move_inputs
 from apf_physics.observation import MapView
+from apf_physics.physics import CLEARANCE_CAP, CLEARANCE_RESOLUTION
 from apf_physics.planners.dqn import DQNPlanner
 from apf_physics.rl.config import ImitationConfig, TrainConfig
 from apf_physics.rl.learner import Counters, Learner
@@ -108,18 +109,37 @@ class Demonstrations:
         return self._teachers[id(world)]
 
 
+def teacher_room(world: World, positions: np.ndarray, moves: np.ndarray) -> np.ndarray:
+    """Which moves the teacher demonstrates as safe (``>= 0``): a lower bound, within the room the
+    network reads (up to 1), of the room :func:`~apf_physics.models.policy.move_inputs` gives, from
+    the static obstacles' clearance raster.
+
+    The teacher keeps a wider berth than the shield: the raster is sampled at the move's
+    :data:`~apf_physics.actions.MOVE_SAMPLES` points and lowered by half their spacing and by the
+    raster's interpolation error. Labels on the exact room made the network alone collide (3 of
+    72 validation starts) and do worse on large maps (BENCHMARKS.md). This is the teacher's rule,
+    not an input: the network reads ``move_inputs`` when it trains as when it acts.
+    """
+    raster = world.clearance_raster(CLEARANCE_RESOLUTION, CLEARANCE_CAP)
+    steps = np.linspace(0.0, 1.0, MOVE_SAMPLES + 1)
+    points = positions[:, None, None, :] + steps[None, None, :, None] * moves[None, :, None, :]
+    clearance = raster.sample(points.reshape(-1, 2)).reshape(len(positions), len(moves), -1).min(axis=2)
+    bound = clearance - 0.5 * np.hypot(*moves.T)[None] / MOVE_SAMPLES - 0.71 / CLEARANCE_RESOLUTION
+    return bound - (world.robot_radius + SAFETY)
+
+
 def batch(teacher: Teacher, config: ImitationConfig, rng: np.random.Generator) -> Optional[tuple]:
     """Positions, per-move inputs (:func:`~apf_physics.models.policy.move_inputs`) and teacher labels for
     one update in ``teacher``'s world; None when it has none."""
     world = teacher.world
     moves = MOVE_SETS[config.map_moves]
     candidates = rng.uniform((0.0, 0.0), world.size, size=(4 * config.demo_positions, 2))
-    fits = move_inputs(world, candidates, np.zeros((1, 2)))[0][:, 0] >= 0
+    fits = teacher_room(world, candidates, np.zeros((1, 2)))[:, 0] >= 0
     positions = candidates[fits][:config.demo_positions]
     if not len(positions):
         return None
-    room, du, _ = move_inputs(world, positions, moves)
-    target, ok = teacher.labels(positions, moves, room, config.label_temperature)
+    room, du = move_inputs(world, positions, moves)
+    target, ok = teacher.labels(positions, moves, teacher_room(world, positions, moves), config.label_temperature)
     if not ok.any():
         return None
     return positions[ok], room[ok], du[ok], target[ok]
