@@ -137,7 +137,9 @@ def _interrupt_at_first_checkpoint(folder: Path) -> threading.Thread:
     def watch():
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:
-            if list(folder.glob("tune/*/checkpoint_000000")):
+            # a trial has finished its first leg (its progress file is written just before it reports), or
+            # Tune has stored its first checkpoint: whichever shows first, so a fast machine cannot outrun it
+            if list(folder.glob("tune/*/*/run/sweep-progress.json")) or list(folder.glob("tune/*/checkpoint_000000")):
                 os.kill(os.getpid(), signal.SIGUSR1)   # Tune's handler is installed by then (fit() is running)
                 return
             time.sleep(0.05)
