@@ -186,12 +186,23 @@ def _check_placement(check: Checker, world: World) -> None:
             elif edge[i] < margin:
                 check.bad(where, f"{at} is closer than the robot radius {radius * world.frame.unit:g} to the map's edge")
             elif inside[i] <= 0:
-                check.bad(where, f"{at} is inside an obstacle")
+                check.bad(where, f"{at} is inside {_nearest_obstacle(world, pts[i])}")
             elif inside[i] < margin:
-                check.bad(where, f"{at} is closer than the robot radius {radius * world.frame.unit:g} to an obstacle")
+                check.bad(where, f"{at} is closer than the robot radius {radius * world.frame.unit:g} to "
+                                 f"{_nearest_obstacle(world, pts[i])}")
             else:
                 check.bad(where, f"{at} is already within goal_tolerance {world.goal_tolerance * world.frame.unit:g} "
                                  "of a target")
+
+
+def _nearest_obstacle(world: World, point: np.ndarray) -> str:
+    """Which obstacle of the file is nearest ``point`` at step 0 (a placement error names it):
+    ``obstacles[k]`` as the file lists them, or ``the grid map``. Only on the error path: one pass
+    over the obstacles."""
+    placed = world.at(0.0).obstacles[:len(world.obstacles)]
+    distances = [float(o.signed_distance(point[None])[0][0]) for o in placed]
+    k = int(np.argmin(distances))
+    return "the grid map's occupied cells" if isinstance(placed[k], GridObstacle) else f"obstacles[{k}]"
 
 
 def _check_formations(check: Checker, world: World) -> None:

@@ -94,7 +94,7 @@ def test_a_start_inside_a_grid_wall_is_reported_in_file_coordinates(tmp_path):
     with pytest.raises(WorldError) as info:
         load_world(tmp_path / "w.yaml")
     lines = str(info.value).splitlines()
-    assert any("starts[0]: [11.0, 21.0] is inside an obstacle" in line for line in lines)
+    assert any("starts[0]: [11.0, 21.0] is inside the grid map's occupied cells" in line for line in lines)
     assert any("starts[1]: [13.0, 20.5] is outside the map [10, 12] x [20, 22]" in line for line in lines)
 
 
