@@ -24,7 +24,7 @@ import math
 import os
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 import yaml
@@ -165,8 +165,13 @@ def _check_together(check: Checker, size, robot_radius, goal_tolerance, params, 
                                     f"got {goal_tolerance:g}")
 
 
-def _check_placement(check: Checker, world: World) -> None:
-    """Targets and starts inside the map and outside the obstacles; starts not yet at a target."""
+def _check_placement(check: Checker, world: World, index: Mapping[str, Sequence[int]] | None = None) -> None:
+    """Targets and starts inside the map and outside the obstacles; starts not yet at a target.
+
+    ``index``: for a world built of the entries that parsed, each list's indices in the file
+    (``starts``, ``targets``, ``obstacles``), so the problems name the file's entries.
+    """
+    index = index or {}
     size, radius = world.size, world.robot_radius
     for key, pts, margin in (("targets", world.targets, 0.0), ("starts", world.starts, radius)):
         if not len(pts):
@@ -179,30 +184,33 @@ def _check_placement(check: Checker, world: World) -> None:
         reached = (world.distance_to_target(pts) <= world.goal_tolerance if key == "starts" and not world.formations
                    else np.zeros(len(pts), bool))
         for i in np.flatnonzero((edge < margin) | (inside < margin) | (inside <= 0) | reached).tolist():
-            where, at = f"{key}[{i}]", [round(v, 9) for v in world.frame.to_file(pts[i]).tolist()]
+            where = f"{key}[{index[key][i] if key in index else i}]"
+            at = [round(v, 9) for v in world.frame.to_file(pts[i]).tolist()]
             if edge[i] < 0:
                 lo, hi = world.frame.to_file([0.0, 0.0]), world.frame.to_file(size)
                 check.bad(where, f"{at} is outside the map [{lo[0]:g}, {hi[0]:g}] x [{lo[1]:g}, {hi[1]:g}]")
             elif edge[i] < margin:
                 check.bad(where, f"{at} is closer than the robot radius {radius * world.frame.unit:g} to the map's edge")
             elif inside[i] <= 0:
-                check.bad(where, f"{at} is inside {_nearest_obstacle(world, pts[i])}")
+                check.bad(where, f"{at} is inside {_nearest_obstacle(world, pts[i], index.get('obstacles'))}")
             elif inside[i] < margin:
                 check.bad(where, f"{at} is closer than the robot radius {radius * world.frame.unit:g} to "
-                                 f"{_nearest_obstacle(world, pts[i])}")
+                                 f"{_nearest_obstacle(world, pts[i], index.get('obstacles'))}")
             else:
                 check.bad(where, f"{at} is already within goal_tolerance {world.goal_tolerance * world.frame.unit:g} "
                                  "of a target")
 
 
-def _nearest_obstacle(world: World, point: np.ndarray) -> str:
+def _nearest_obstacle(world: World, point: np.ndarray, index: Sequence[int] | None = None) -> str:
     """Which obstacle of the file is nearest ``point`` at step 0 (a placement error names it):
-    ``obstacles[k]`` as the file lists them, or ``the grid map``. Only on the error path: one pass
-    over the obstacles."""
+    ``obstacles[k]`` as the file lists them (``index``: the file's index of each of the world's
+    obstacles), or the grid map. Only on the error path: one pass over the obstacles."""
     placed = world.at(0.0).obstacles[:len(world.obstacles)]
     distances = [float(o.signed_distance(point[None])[0][0]) for o in placed]
     k = int(np.argmin(distances))
-    return "the grid map's occupied cells" if isinstance(placed[k], GridObstacle) else f"obstacles[{k}]"
+    if isinstance(placed[k], GridObstacle):
+        return "the grid map's occupied cells"
+    return f"obstacles[{index[k] if index is not None else k}]"
 
 
 def _check_formations(check: Checker, world: World) -> None:
@@ -265,6 +273,8 @@ def _build(check: Checker, data: Any, source: str) -> World | None:
                        for t in parts.formations or ())
     _check_together(check, size, robot_radius, goal_tolerance, parts.params, obstacles, targets)
     if check.problems:
+        _check_what_parsed(check, parts, size, robot_radius, goal_tolerance, obstacles, targets, starts, to_world,
+                           (data.get("grid") if isinstance(data, Mapping) else None), source)
         return None
     world = World(parts.name, size, robot_radius, goal_tolerance, parts.params, obstacles, targets, starts, formation,
                   source, formations, frame=frame)
@@ -272,6 +282,42 @@ def _build(check: Checker, data: Any, source: str) -> World | None:
     _check_routes(check, world)
     _check_formations(check, world)
     return world
+
+
+def _check_what_parsed(check: Checker, parts: Any, size, robot_radius, goal_tolerance, obstacles, targets, starts,
+                       to_world: Callable[[Any], np.ndarray], grid_value: Any, source: str) -> None:
+    """A file with problems: still check the placement of the starts and targets that parsed, among the
+    obstacles that parsed, so one report lists every problem (each named by its index in the file)."""
+    if size is None or robot_radius is None or goal_tolerance is None or parts.params is None or parts.formations:
+        return
+    if any(p.startswith(f"{check.source}: {key}:") for p in check.problems
+           for key in ("size", "robot_radius", "goal_tolerance", "field", "grid")):
+        return                                  # the map or the robot itself is wrong: placement would mislead
+    index: dict[str, list[int]] = {}
+    if obstacles is None:
+        if "obstacles" not in check.partial:
+            return
+        kept, index["obstacles"] = check.partial["obstacles"]
+        frame = parts.frame
+        obstacles = tuple(_obstacle_to_world(o, np.asarray(frame.offset, float), frame.unit) for o in kept)
+        if parts.grid is not None:
+            obstacles += (GridObstacle(parts.grid.occupied, parts.grid.cell / frame.unit, (0.0, 0.0),
+                                       spec=_grid_spec(grid_value, source)),)
+    points = {"targets": targets, "starts": starts}
+    for key in points:
+        if points[key] is None:
+            if key not in check.partial:
+                return
+            kept, index[key] = check.partial[key]
+            points[key] = to_world(np.array(kept, float).reshape(-1, 2))
+    if not len(points["targets"]):
+        return
+    try:
+        world = World(parts.name or "world", size, robot_radius, goal_tolerance, parts.params, obstacles,
+                      points["targets"], points["starts"], None, source, (), frame=parts.frame)
+    except (ValueError, TypeError):             # what did parse does not make a world: nothing more to say
+        return
+    _check_placement(check, world, index)
 
 
 def _grid_spec(value: Mapping[str, Any], source: str) -> dict[str, Any]:

@@ -91,6 +91,10 @@ class Checker:
         self.source = source
         self.problems: list[str] = []
         self.stopped = False
+        self.partial: dict[str, tuple[list[Any], list[int]]] = {}
+        """For a list with a problem in some entries (``starts``, ``targets``, ``obstacles``): the
+        entries that parsed and their indices in the file, so that their placement can still be
+        checked and reported with the schema's problems."""
 
     def bad(self, key: str, problem: str) -> Invalid:
         """Record a problem and return the exception that skips what depends on the value."""
@@ -147,6 +151,7 @@ class Checker:
             raise self.bad(key, f"at most {at_most:,} {what}, got {len(value):,}")
         pts = [self.attempt(self.point, p, f"{key}[{i}]") for i, p in enumerate(value)]
         if any(p is None for p in pts):
+            self.partial[key] = ([p for p in pts if p is not None], [i for i, p in enumerate(pts) if p is not None])
             raise Invalid
         return np.array(pts, dtype=float).reshape(-1, 2)
 
@@ -303,6 +308,8 @@ def _parse_obstacles(check: Checker, value: Any, box: tuple[np.ndarray, np.ndarr
         raise check.bad("obstacles", f"at most {MAX_VERTICES:,} polygon vertices in all, got {vertices:,}")
     parsed = [check.attempt(_parse_obstacle, check, o, f"obstacles[{i}]", box) for i, o in enumerate(value)]
     if any(o is None for o in parsed):
+        check.partial["obstacles"] = ([o for o in parsed if o is not None],
+                                      [i for i, o in enumerate(parsed) if o is not None])
         raise Invalid
     return tuple(parsed)
 

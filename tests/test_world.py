@@ -372,3 +372,27 @@ def test_moving_obstacles_round_trip_and_their_routes_stay_inside_the_map():
     assert str(err.value).split("\n") == [
         "w.yaml: obstacles[0].motion.speed: at most 1 unit per control step, got 3",
         "w.yaml: obstacles[0].motion.loop: expected true or false, got str 'yes'"]
+
+
+def test_a_file_with_five_mistakes_gets_one_report_naming_all_five(tmp_path):
+    """Schema problems and placement problems together: the entries that parsed are still placed."""
+    data = simple_world_dict()
+    data["obstacles"] = [{"polygon": [[1, 1], [3, 1], [3, 3], [1, 3]]},
+                         {"circle": {"center": [10, 10], "radius": 2}},
+                         {"cirle": {"center": [15, 15], "radius": 1}}]                     # 1: a typo
+    data["starts"] = [[2, 2],                                                               # 2: inside obstacles[0]
+                      ["a", 3],                                                             # 3: not a number
+                      [12.2, 10],                                                           # 4: too near obstacles[1]
+                      [30, 3]]                                                              # 5: outside the map
+    path = write(tmp_path, data)
+    with pytest.raises(WorldError) as err:
+        load_world(path)
+    lines = str(err.value).splitlines()
+    expected = ["obstacles[2].cirle: unknown key (did you mean 'circle'?",
+                "starts[0]: [2.0, 2.0] is inside obstacles[0]",
+                "starts[1][0]: expected a number",
+                "starts[2]: [12.2, 10.0] is closer than the robot radius",
+                "starts[3]: [30.0, 3.0] is outside the map"]
+    assert len(lines) == 5 and all(str(path) in line for line in lines)
+    for words in expected:
+        assert sum(words in line for line in lines) == 1, words
