@@ -30,6 +30,7 @@ import numpy as np
 
 from apf_physics import field as apf
 from apf_physics.field import Atlas, Grid, Raster
+from apf_physics.transforms import signed_log
 from apf_physics.world import RASTER_CHUNK, World
 
 CHANNELS = ("potential", "previous", "memory")
@@ -84,7 +85,8 @@ class ObserverConfig:
 
     @property
     def bounds(self) -> tuple[float, float]:
-        """Lowest and highest value of any observation element (infinite for the raw potential)."""
+        """Lowest and highest value of any observation element, whatever the world (infinite for the
+        raw potential; :meth:`Observer.value_bounds` gives the finite ones of an observer's worlds)."""
         return (-1.0, 1.0) if self.scale == "log" else (-np.inf, np.inf)
 
     def to_dict(self) -> dict[str, Any]:
@@ -137,6 +139,7 @@ class Observer:
         self._world_ids: dict[int, int] = {}
         self.worlds: list[World] = []
         self._log_range = np.zeros(0)
+        self._range = (np.inf, -np.inf)      # least and highest U of the registered worlds' rasters
         self._moving = False
         self._everyone = np.arange(self.num)
         half = config.size // 2
@@ -157,7 +160,25 @@ class Observer:
             self.worlds.append(world)
             self._moving = self._moving or bool(world.moving)
             self._log_range = np.append(self._log_range, np.log1p(world.u_wall - raster.values.min()))
+            self._range = (min(self._range[0], float(raster.values.min())), max(self._range[1], float(world.u_wall)))
         return self._world_ids[key]
+
+    def value_bounds(self) -> tuple[float, float]:
+        """Lowest and highest value any observation element can take in the registered worlds.
+
+        ``"log"``: ``[-1, 1]``. ``"raw"``: from the least U of the worlds' rasters (the deepest
+        black-hole well) to the highest ``u_wall`` (what blocked points read; moving obstacles'
+        and other robots' repulsion is capped there), widened by a part in a million against
+        rounding; a memory channel's ``[0, 1]`` is included. Finite, so a Gymnasium ``Box`` of
+        them is bounded.
+        """
+        if self.config.scale == "log" or not self.worlds:
+            return -1.0, 1.0
+        low, high = self._range
+        if "memory" in self.config.channels:
+            low, high = min(low, 0.0), max(high, 1.0)
+        pad = 1e-6 * max(abs(low), abs(high), 1.0)
+        return low - pad, high + pad
 
     def reset(self, robots: np.ndarray, positions: np.ndarray, worlds: Sequence[World]) -> None:
         """Start episodes: robot ``robots[n]`` in ``worlds[n]`` at ``positions[n]``; memories cleared."""
@@ -198,7 +219,7 @@ class Observer:
         if self.config.scale == "log":
             middle = windows[:, k // 2, k // 2, None, None] if centre is None else centre[:, None, None]
             d = windows - middle
-            windows = np.sign(d) * np.log1p(np.abs(d)) / self._log_range[self.world_of[robots], None, None].astype(np.float32)
+            windows = signed_log(d) / self._log_range[self.world_of[robots], None, None].astype(np.float32)
         return windows
 
     def _add_moving(self, values: np.ndarray, positions: np.ndarray, robots: np.ndarray, t: np.ndarray | float,

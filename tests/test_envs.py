@@ -22,15 +22,34 @@ def test_registration_is_idempotent():
     assert gym.registry["apf_physics/Navigate-v0"].max_episode_steps == 100
 
 
-def test_gymnasium_env_checker(fixed20):
+@pytest.mark.parametrize("options", [{}, {"memory": True}, {"world": "moving_obstacles", "previous": True},
+                                     {"obs_scale": "log"}])
+def test_gymnasium_env_checker_passes_without_warnings(fixed20, options):
+    import warnings
     from gymnasium.utils.env_checker import check_env
 
-    check_env(gym.make("apf_physics/Navigate-v0", world=fixed20).unwrapped, skip_render_check=False)
+    env = gym.make("apf_physics/Navigate-v0", **{"world": fixed20, **options})
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env.unwrapped, skip_render_check=False)
+    assert [str(w.message) for w in caught] == []
+    low, high = env.observation_space.low, env.observation_space.high
+    assert np.isfinite(low).all() and np.isfinite(high).all()      # bounded, also in the raw scale
+    env.reset(seed=0)
+    for _ in range(60):                                             # and every observation lies within them
+        obs, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        assert env.observation_space.contains(obs)
+        if terminated or truncated:
+            env.reset()
 
 
-def test_sb3_env_checker(fixed20):
+def test_sb3_env_checker_says_nothing_but_its_image_advice(fixed20):
+    import warnings
     sb3 = pytest.importorskip("stable_baselines3.common.env_checker")
-    sb3.check_env(gym.make("apf_physics/Navigate-v0", world=fixed20).unwrapped, warn=False)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        sb3.check_env(gym.make("apf_physics/Navigate-v0", world=fixed20).unwrapped, warn=True)
+    assert caught and all("image" in str(w.message) for w in caught), [str(w.message) for w in caught]
 
 
 def test_observation_is_the_potential_window(fixed20):

@@ -61,6 +61,11 @@ def test_readme_python_snippets_run_and_print_what_they_say(monkeypatch):
     assert names["bounded"].observation_space.low.min() == -1.0 and names["bounded"].observation_space.high.max() == 1.0
     assert names["obs"].shape == (64, 1, 11, 11)          # the vector env's last observation
 
+    # -- Stable-Baselines3: DQN and PPO train on the env as the README shows
+    source, lines = _snippet(blocks, printed, "from stable_baselines3 import DQN, PPO")
+    assert lines == ["2000 1024"] and "# 2000 1024" in source
+    assert names["dqn"].observation_space.shape == (1, 11, 11)
+
     # -- the field: prints nothing, and its expressions give what the comments say
     source, lines = _snippet(blocks, printed, "world.potential(points)")
     assert lines == []

@@ -82,9 +82,9 @@ class FormationEnv(gym.Env):
         self.chooser = StartChooser(starts, self.worlds)
         self.render_mode = render_mode
         self.action_space = spaces.Discrete(len(ACTIONS))
-        low, high = self.observer.bounds
-        self.observation_space = spaces.Box(low, high, self.observer.shape, np.float32)
         self._task = NavigationTask(self.worlds, 1, self.observer, self.weights, formation=spec, trap=trap)
+        low, high = self._task.observer.value_bounds()  # finite: from the worlds' U
+        self.observation_space = spaces.Box(low, high, self.observer.shape, np.float32)
         self.m = spec.followers + 1
         self.followed = spec.followed
 

@@ -75,11 +75,11 @@ class FormationsParallelEnv(ParallelEnv):
         (self.world,) = resolve_worlds(world)
         self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer, previous)
         self._task = CrowdTask(self.world, self.observer, reward_weights(reward), agents, max_episode_steps, trap)
+        low, high = self._task.observer.value_bounds()  # finite: from the worlds' U
+        self._observation_space = spaces.Box(low, high, self.observer.shape, np.float32)
         self.possible_agents = list(self._task.names)
         self.agents: list[str] = []
         self.render_mode = render_mode
-        low, high = self.observer.bounds
-        self._observation_space = spaces.Box(low, high, self.observer.shape, np.float32)
         self._action_space = spaces.Discrete(len(ACTIONS))
         self._index = {name: a for a, name in enumerate(self.possible_agents)}
         self.np_random, _ = seeding.np_random(None)

@@ -138,9 +138,9 @@ class NavigateEnv(gym.Env):
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         self.render_mode = render_mode
         self.action_space = spaces.Discrete(len(ACTIONS))
-        low, high = self.observer.bounds
-        self.observation_space = spaces.Box(low, high, self.observer.shape, np.float32)
         self._task = NavigationTask(self.worlds, 1, self.observer, self.weights, trap=trap)
+        low, high = self._task.observer.value_bounds()  # finite: from the worlds' U
+        self.observation_space = spaces.Box(low, high, self.observer.shape, np.float32)
         self._trail: list[np.ndarray] = []
         self._steps = 0
 

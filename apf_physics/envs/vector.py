@@ -71,12 +71,12 @@ class NavigateVectorEnv(VectorEnv):
         self.max_episode_steps = int(max_episode_steps)
         self.render_mode = render_mode
         self.single_action_space = spaces.Discrete(len(ACTIONS))
-        low, high = self.observer.bounds
+        self._task = NavigationTask(self.worlds, self.num_envs, self.observer, self.weights,
+                                    max_steps=self.max_episode_steps, trap=trap)
+        low, high = self._task.observer.value_bounds()  # finite: from the worlds' U
         self.single_observation_space = spaces.Box(low, high, self.observer.shape, np.float32)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self._task = NavigationTask(self.worlds, self.num_envs, self.observer, self.weights,
-                                    max_steps=self.max_episode_steps, trap=trap)
         self._rngs = [seeding.np_random(None)[0] for _ in range(self.num_envs)]
         self._uniforms = np.zeros((self.num_envs, _BLOCK, 4))
         self._drawn = np.full(self.num_envs, _BLOCK)
