@@ -15,6 +15,7 @@ from apf_physics.models.files import SavedModel, load_model, observer_of
 from apf_physics.models.mapnet import MapNetwork, move_features, sample_values
 from apf_physics.models.network import QNetwork
 from apf_physics.observation import MapView, ObserverConfig
+from apf_physics.transforms import signed_log
 from apf_physics.world import Moment, World
 
 
@@ -215,7 +216,7 @@ def potential_change(where: Moment | World, positions: np.ndarray, moves: np.nda
     positions = np.asarray(positions, float).reshape(-1, 2)
     ends = (positions[:, None, :] + moves[None]).reshape(-1, 2)
     d = where.potential(ends).reshape(len(positions), -1) - where.potential(positions)[:, None]
-    return np.sign(d) * np.log1p(np.abs(d)) / 4.0
+    return signed_log(d) / 4.0
 
 
 def map_scores(network: MapNetwork, view: MapView, v: torch.Tensor, positions: np.ndarray, moves: np.ndarray,
