@@ -77,6 +77,8 @@ class Learner(abc.ABC):
 
     updates: int
     """Gradient updates made."""
+    epsilon: Optional[float] = None
+    """The exploration rate of the latest step, for the progress display (None: the learner does not explore)."""
 
     @abc.abstractmethod
     def begin(self, worlds: Sequence[World], phase: Phase, seed: tuple[int, int]) -> None:

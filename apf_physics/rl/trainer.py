@@ -252,7 +252,7 @@ def _train(config: TrainConfig, phases: list[Phase], run: Optional[RunDir], resu
                     next_log = next_multiple(c.global_step, config.run.log_every)
                     history.append(log_row(run, config, c, phase, learner, summary, shown, evals.latest))
                 if shown is not None:
-                    shown.update(c, phase, getattr(learner, "epsilon", None), evals.latest)
+                    shown.update(c, phase, learner.epsilon, evals.latest)
                 reason = stop_reason(config, phases, c, c.wall_time)
                 if reason is not None or phase_over or redraw or c.global_step >= next_checkpoint:
                     break
@@ -268,7 +268,7 @@ def _train(config: TrainConfig, phases: list[Phase], run: Optional[RunDir], resu
                 save_best(run, learner, config, phases, c, evals.best)
             history.append(log_row(run, config, c, phase, learner, summary, shown, evals.latest))
             if shown is not None:
-                shown.update(c, phase, getattr(learner, "epsilon", None), evals.latest)
+                shown.update(c, phase, learner.epsilon, evals.latest)
         c.wall_time = elapsed_before + time.perf_counter() - start
         save_checkpoint(run, config, phases, learner, c, rng, evals)
     except KeyboardInterrupt:
