@@ -290,8 +290,7 @@ def _check_what_parsed(check: Checker, parts: Any, size, robot_radius, goal_tole
     obstacles that parsed, so one report lists every problem (each named by its index in the file)."""
     if size is None or robot_radius is None or goal_tolerance is None or parts.params is None or parts.formations:
         return
-    if any(p.startswith(f"{check.source}: {key}:") for p in check.problems
-           for key in ("size", "robot_radius", "goal_tolerance", "field", "grid")):
+    if check.keys & {"size", "robot", "robot_radius", "goal_tolerance", "field", "grid"}:
         return                                  # the map or the robot itself is wrong: placement would mislead
     index: dict[str, list[int]] = {}
     if obstacles is None:

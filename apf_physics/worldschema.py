@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import re
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence, TypeVar
@@ -91,6 +92,8 @@ class Checker:
         self.source = source
         self.problems: list[str] = []
         self.stopped = False
+        self.keys: set[str] = set()
+        """The top-level keys that have a problem (``starts`` for ``starts[2][0]``)."""
         self.partial: dict[str, tuple[list[Any], list[int]]] = {}
         """For a list with a problem in some entries (``starts``, ``targets``, ``obstacles``): the
         entries that parsed and their indices in the file, so that their placement can still be
@@ -99,6 +102,7 @@ class Checker:
     def bad(self, key: str, problem: str) -> Invalid:
         """Record a problem and return the exception that skips what depends on the value."""
         self.problems.append(f"{self.source}: {key}: {problem}" if key else f"{self.source}: {problem}")
+        self.keys.add(re.split(r"[.\[]", key, maxsplit=1)[0])
         if len(self.problems) >= MAX_PROBLEMS:
             self.stopped = True
             raise TooMany
