@@ -95,6 +95,8 @@ class PolygonObstacle:
 
     vertices: np.ndarray  # (M, 2)
     motion: Motion | None = None
+    name: str | None = None
+    """The world file's optional ``name:`` (error messages and figures use it)."""
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -103,7 +105,7 @@ class PolygonObstacle:
 
     def moved(self, offset: np.ndarray) -> "PolygonObstacle":
         """The same shape translated by ``offset``, without motion."""
-        return PolygonObstacle(self.vertices + np.asarray(offset, float))
+        return PolygonObstacle(self.vertices + np.asarray(offset, float), name=self.name)
 
     def signed_distance(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Signed distance of ``(N, 2)`` points to the boundary (negative inside) and the nearest boundary point."""
@@ -120,6 +122,8 @@ class PolygonObstacle:
 
     def to_dict(self) -> dict[str, Any]:
         data: dict[str, Any] = {"polygon": self.vertices.tolist()}
+        if self.name is not None:
+            data["name"] = self.name
         if self.motion is not None:
             data["motion"] = self.motion.to_dict()
         return data
@@ -132,6 +136,8 @@ class CircleObstacle:
     center: np.ndarray  # (2,)
     radius: float
     motion: Motion | None = None
+    name: str | None = None
+    """The world file's optional ``name:`` (error messages and figures use it)."""
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -140,7 +146,7 @@ class CircleObstacle:
 
     def moved(self, offset: np.ndarray) -> "CircleObstacle":
         """The same disc translated by ``offset``, without motion."""
-        return CircleObstacle(self.center + np.asarray(offset, float), self.radius)
+        return CircleObstacle(self.center + np.asarray(offset, float), self.radius, name=self.name)
 
     def signed_distance(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Signed distance of ``(N, 2)`` points to the rim (negative inside) and the nearest rim point."""
@@ -153,6 +159,8 @@ class CircleObstacle:
 
     def to_dict(self) -> dict[str, Any]:
         data: dict[str, Any] = {"circle": {"center": self.center.tolist(), "radius": self.radius}}
+        if self.name is not None:
+            data["name"] = self.name
         if self.motion is not None:
             data["motion"] = self.motion.to_dict()
         return data

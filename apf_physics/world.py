@@ -663,6 +663,8 @@ def _obstacle_to_file(obstacle: Obstacle, frame: Frame) -> dict[str, Any]:
         data: dict[str, Any] = {"circle": {"center": frame.to_file(moved.center).tolist(), "radius": moved.radius * u}}
     else:
         data = {"polygon": frame.to_file(moved.vertices).tolist()}
+    if getattr(obstacle, "name", None) is not None:
+        data["name"] = obstacle.name
     if obstacle.motion is not None:
         motion = obstacle.motion.to_dict()
         motion["path"] = (np.asarray(motion["path"], float) * u).tolist()

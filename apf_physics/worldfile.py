@@ -210,7 +210,8 @@ def _nearest_obstacle(world: World, point: np.ndarray, index: Sequence[int] | No
     k = int(np.argmin(distances))
     if isinstance(placed[k], GridObstacle):
         return "the grid map's occupied cells"
-    return f"obstacles[{index[k] if index is not None else k}]"
+    name = getattr(world.obstacles[k], "name", None)
+    return f"obstacles[{index[k] if index is not None else k}]" + (f" {name!r}" if name is not None else "")
 
 
 def _check_formations(check: Checker, world: World) -> None:
@@ -347,8 +348,8 @@ def world_from_dict(data: Any, source: str = "<dict>") -> World:
     """Validate a world-file mapping and build the :class:`World`.
 
     Raises:
-        WorldError: one line per problem (at most :data:`MAX_PROBLEMS`), each naming
-            ``source``, the key and what is wrong.
+        WorldError: one line per problem (the first :data:`MAX_PROBLEMS`, then how many
+            more), each naming ``source``, the key and what is wrong.
     """
     check = Checker(source)
     try:

@@ -5,7 +5,8 @@ key: unknown keys (with a did-you-mean), missing ones, types, ranges and the lim
 each checked before the work it protects. It returns the values in the file's own units
 (:class:`FileWorld`); :func:`apf_physics.worldfile.world_from_dict` converts them and builds the
 world. A :class:`Checker` records every problem, one line each (``<file>: <key>: <what is
-wrong>``, values shortened), up to :data:`MAX_PROBLEMS`; a value with a problem raises
+wrong>``, values shortened): the first :data:`MAX_PROBLEMS`, then how many more (counted up to
+:data:`MAX_COUNTED`, where the check stops); a value with a problem raises
 :class:`Invalid`, which skips only what depends on it.
 """
 
@@ -57,7 +58,10 @@ MAX_POTENTIAL = 1e12
 MAX_NAME_CHARS = 200
 """Longest world name [characters]."""
 MAX_PROBLEMS = 20
-"""Problems reported from one file before the check stops."""
+"""Problems listed from one file; the rest are counted."""
+MAX_COUNTED = 1000
+"""Problems counted in one file before the check stops (a file of a million bad entries is
+not read to its end)."""
 
 _TOP_KEYS = {"name", "size", "grid", "robot", "robot_radius", "goal_tolerance", "field", "obstacles", "targets", "starts",
              "formation", "formations"}
@@ -82,7 +86,7 @@ class Invalid(Exception):
 
 
 class TooMany(Exception):
-    """:data:`MAX_PROBLEMS` problems recorded: stop checking."""
+    """:data:`MAX_COUNTED` problems found: stop checking."""
 
 
 class Checker:
@@ -91,6 +95,9 @@ class Checker:
     def __init__(self, source: str):
         self.source = source
         self.problems: list[str] = []
+        """The first :data:`MAX_PROBLEMS` problems, one line each."""
+        self.found = 0
+        """How many problems were found (listed or only counted)."""
         self.stopped = False
         self.keys: set[str] = set()
         """The top-level keys that have a problem (``starts`` for ``starts[2][0]``)."""
@@ -101,9 +108,11 @@ class Checker:
 
     def bad(self, key: str, problem: str) -> Invalid:
         """Record a problem and return the exception that skips what depends on the value."""
-        self.problems.append(f"{self.source}: {key}: {problem}" if key else f"{self.source}: {problem}")
+        self.found += 1
+        if len(self.problems) < MAX_PROBLEMS:
+            self.problems.append(f"{self.source}: {key}: {problem}" if key else f"{self.source}: {problem}")
         self.keys.add(re.split(r"[.\[]", key, maxsplit=1)[0])
-        if len(self.problems) >= MAX_PROBLEMS:
+        if self.found >= MAX_COUNTED:
             self.stopped = True
             raise TooMany
         return Invalid()
@@ -117,8 +126,12 @@ class Checker:
 
     def error(self) -> WorldError:
         lines = list(self.problems)
+        more = self.found - len(self.problems)
         if self.stopped:
-            lines.append(f"{self.source}: stopped after {MAX_PROBLEMS} problems")
+            lines.append(f"{self.source}: and {more:,} more problems (the check stopped after {MAX_COUNTED:,})")
+        elif more:
+            lines.append(f"{self.source}: and {more:,} more problem{'s' if more > 1 else ''} "
+                         f"({self.found:,} in all; the first {MAX_PROBLEMS} are listed)")
         return WorldError("\n".join(lines))
 
     def number(self, value: Any, key: str, *, positive: bool = False, nonnegative: bool = False) -> float:
@@ -188,13 +201,13 @@ def _parse_size(check: Checker, value: Any) -> tuple[float, float]:
     return sides[0], sides[1]
 
 
-def _parse_name(check: Checker, value: Any) -> str:
+def _parse_name(check: Checker, value: Any, key: str = "name") -> str:
     if not isinstance(value, str) or not value:
-        raise check.bad("name", f"expected a non-empty string, got {_kind(value)}")
+        raise check.bad(key, f"expected a non-empty string, got {_kind(value)}")
     if len(value) > MAX_NAME_CHARS:
-        raise check.bad("name", f"at most {MAX_NAME_CHARS} characters, got {len(value):,}")
+        raise check.bad(key, f"at most {MAX_NAME_CHARS} characters, got {len(value):,}")
     if not value.isprintable():
-        raise check.bad("name", f"must be printable on one line, got {shortened(value)}")
+        raise check.bad(key, f"must be printable on one line, got {shortened(value)}")
     return value
 
 
@@ -262,7 +275,8 @@ def _parse_motion(check: Checker, value: Any, key: str) -> Motion:
 
 def _parse_obstacle(check: Checker, value: Any, key: str, box: tuple[np.ndarray, np.ndarray] | None) -> Obstacle:
     problems = len(check.problems)
-    body = check.mapping(value, key, {"polygon", "circle", "motion"})
+    body = check.mapping(value, key, {"polygon", "circle", "motion", "name"})
+    name = check.attempt(_parse_name, check, body["name"], f"{key}.name") if "name" in body else None
     shapes = [k for k in ("polygon", "circle") if k in body]
     if len(shapes) != 1:
         if len(check.problems) == problems:
@@ -285,7 +299,7 @@ def _parse_obstacle(check: Checker, value: Any, key: str, box: tuple[np.ndarray,
             raise check.bad(k, f"polygon {outside}" + (" on its route" if motion is not None else ""))
         if len(check.problems) > problems:
             raise Invalid
-        return PolygonObstacle(vertices if area > 0 else vertices[::-1].copy(), motion)
+        return PolygonObstacle(vertices if area > 0 else vertices[::-1].copy(), motion, name)
     k = f"{key}.circle"
     circle = check.mapping(body["circle"], k, {"center", "radius"}, required=("center", "radius"))
     center = check.attempt(check.point, circle["center"], f"{k}.center") if "center" in circle else None
@@ -296,7 +310,7 @@ def _parse_obstacle(check: Checker, value: Any, key: str, box: tuple[np.ndarray,
     outside = _outside(box, c - radius + reach[0], c + radius + reach[1])
     if outside:
         raise check.bad(k, f"circle {outside}" + (" on its route" if motion is not None else ""))
-    return CircleObstacle(c, radius, motion)
+    return CircleObstacle(c, radius, motion, name)
 
 
 def _parse_obstacles(check: Checker, value: Any, box: tuple[np.ndarray, np.ndarray] | None) -> tuple[Obstacle, ...]:
@@ -311,6 +325,14 @@ def _parse_obstacles(check: Checker, value: Any, box: tuple[np.ndarray, np.ndarr
     if vertices > MAX_VERTICES:
         raise check.bad("obstacles", f"at most {MAX_VERTICES:,} polygon vertices in all, got {vertices:,}")
     parsed = [check.attempt(_parse_obstacle, check, o, f"obstacles[{i}]", box) for i, o in enumerate(value)]
+    first: dict[str, int] = {}
+    for i, o in enumerate(value):   # a name picks out one obstacle in messages: no two alike
+        name = o.get("name") if isinstance(o, Mapping) else None
+        if isinstance(name, str) and name in first:
+            parsed[i] = None
+            check.bad(f"obstacles[{i}].name", f"{shortened(name)} is already the name of obstacles[{first[name]}]")
+        elif isinstance(name, str):
+            first[name] = i
     if any(o is None for o in parsed):
         check.partial["obstacles"] = ([o for o in parsed if o is not None],
                                       [i for i, o in enumerate(parsed) if o is not None])
@@ -478,7 +500,7 @@ def parse_world(check: Checker, data: Any, source: str) -> FileWorld | None:
         recorded in ``check``), or None when ``data`` is not a mapping.
 
     Raises:
-        TooMany: :data:`MAX_PROBLEMS` problems are recorded.
+        TooMany: :data:`MAX_COUNTED` problems are found.
     """
     if not isinstance(data, Mapping):
         check.bad("", f"a world file must be a mapping of keys, got {_kind(data)}")

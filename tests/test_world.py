@@ -10,7 +10,7 @@ import yaml
 
 from apf_physics import WorldError, load_world, world_from_dict
 from apf_physics.errors import UserError
-from apf_physics.worldfile import dump_world_yaml, load_worlds
+from apf_physics.worldfile import dump_world_yaml, load_worlds, save_world
 from conftest import simple_world_dict
 
 
@@ -328,13 +328,18 @@ def test_every_problem_is_reported_one_line_each_with_did_you_mean(tmp_path):
     assert "did you mean 'robot_radius'?" in lines[0]
 
 
-def test_problems_stop_at_a_cap(tmp_path):
-    from apf_physics.worldfile import MAX_PROBLEMS
+def test_problems_are_listed_to_a_cap_then_counted(tmp_path):
+    from apf_physics.worldschema import MAX_COUNTED, MAX_PROBLEMS
 
     with pytest.raises(WorldError) as err:
         world_from_dict(simple_world_dict(starts=[["x", "y"]] * 100), "w.yaml")
     lines = str(err.value).split("\n")
-    assert len(lines) == MAX_PROBLEMS + 1 and lines[-1] == f"w.yaml: stopped after {MAX_PROBLEMS} problems"
+    assert len(lines) == MAX_PROBLEMS + 1
+    assert lines[-1] == f"w.yaml: and 180 more problems (200 in all; the first {MAX_PROBLEMS} are listed)"
+    with pytest.raises(WorldError) as err:   # a file of endless mistakes is not read to its end
+        world_from_dict(simple_world_dict(starts=[["x", "y"]] * 1000), "w.yaml")
+    lines = str(err.value).split("\n")
+    assert lines[-1] == f"w.yaml: and {MAX_COUNTED - MAX_PROBLEMS:,} more problems (the check stopped after {MAX_COUNTED:,})"
 
 
 def test_values_are_shortened_in_messages():
@@ -377,7 +382,7 @@ def test_moving_obstacles_round_trip_and_their_routes_stay_inside_the_map():
 def test_a_file_with_five_mistakes_gets_one_report_naming_all_five(tmp_path):
     """Schema problems and placement problems together: the entries that parsed are still placed."""
     data = simple_world_dict()
-    data["obstacles"] = [{"polygon": [[1, 1], [3, 1], [3, 3], [1, 3]]},
+    data["obstacles"] = [{"polygon": [[1, 1], [3, 1], [3, 3], [1, 3]], "name": "wall_b"},
                          {"circle": {"center": [10, 10], "radius": 2}},
                          {"cirle": {"center": [15, 15], "radius": 1}}]                     # 1: a typo
     data["starts"] = [[2, 2],                                                               # 2: inside obstacles[0]
@@ -389,10 +394,28 @@ def test_a_file_with_five_mistakes_gets_one_report_naming_all_five(tmp_path):
         load_world(path)
     lines = str(err.value).splitlines()
     expected = ["obstacles[2].cirle: unknown key (did you mean 'circle'?",
-                "starts[0]: [2.0, 2.0] is inside obstacles[0]",
+                "starts[0]: [2.0, 2.0] is inside obstacles[0] 'wall_b'",
                 "starts[1][0]: expected a number",
                 "starts[2]: [12.2, 10.0] is closer than the robot radius",
                 "starts[3]: [30.0, 3.0] is outside the map"]
     assert len(lines) == 5 and all(str(path) in line for line in lines)
     for words in expected:
         assert sum(words in line for line in lines) == 1, words
+
+
+def test_obstacle_names_are_checked_and_kept(tmp_path):
+    data = simple_world_dict()
+    data["obstacles"][0]["name"] = "pillar"
+    data["obstacles"][1]["name"] = "pillar"
+    with pytest.raises(WorldError) as err:
+        world_from_dict(data, "w.yaml")
+    assert str(err.value) == "w.yaml: obstacles[1].name: 'pillar' is already the name of obstacles[0]"
+    data["obstacles"][1]["name"] = 7
+    with pytest.raises(WorldError, match=r"obstacles\[1\]\.name: expected a non-empty string, got int"):
+        world_from_dict(data, "w.yaml")
+    data["obstacles"][1]["name"] = "post"
+    world = world_from_dict(data, "w.yaml")
+    assert [o.name for o in world.obstacles] == ["pillar", "post"]
+    path = tmp_path / "named.yaml"
+    save_world(world, path)
+    assert [o.name for o in load_world(path).obstacles] == ["pillar", "post"]
