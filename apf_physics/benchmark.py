@@ -16,7 +16,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from apf_physics.errors import UserError
-from apf_physics.evaluate import Evaluation, evaluate, figures
+from apf_physics.evaluate import Episode, Evaluation, evaluate, figures
 from apf_physics.mapfiles import Scenario, read_movingai_map, read_movingai_scen, scenario_points
 from apf_physics.planners.base import Planner
 from apf_physics.world import World
@@ -86,7 +86,7 @@ def scenario_trials(map_path: str | Path, scen_path: str | Path, buckets: tuple[
 
 
 def evaluate_trials(planner: Planner, trials: Sequence[Trial],
-                    progress: Callable[[World], None] | None = None) -> Evaluation:
+                    progress: Callable[[World, list[Episode]], None] | None = None) -> Evaluation:
     """Run ``planner`` on every trial, each with its own step limit (:attr:`Trial.max_steps`)."""
     episodes = []
     for trial in trials:

@@ -147,7 +147,7 @@ class Evaluation:
 
 def evaluate(planner: Planner, worlds: Sequence[World], starts: dict[str, np.ndarray] | None = None,
              max_steps: int | None = None, formation: bool = False,
-             progress: Callable[[World], None] | None = None) -> Evaluation:
+             progress: Callable[[World, list[Episode]], None] | None = None) -> Evaluation:
     """Run ``planner`` from every start of every world (or from ``starts[world.name]``).
 
     Args:
@@ -156,17 +156,18 @@ def evaluate(planner: Planner, worlds: Sequence[World], starts: dict[str, np.nda
         starts: Starts per world name, instead of the worlds' own.
         max_steps: Step limit per episode (default: :func:`~apf_physics.rollout.default_max_steps`).
         formation: Run each world's formation (its followers behind each leader).
-        progress: Called with each world once its episodes are done.
+        progress: Called with each world and its episodes once they are done.
     """
     episodes: list[Episode] = []
     for world in worlds:
         if formation and world.formations:   # several formations at once, each to its own target
-            episodes.extend(rollout_formations(world, planner, max_steps=max_steps))
+            done = rollout_formations(world, planner, max_steps=max_steps)
         else:
             s = world.starts if starts is None else starts[world.name]
-            episodes.extend(rollout(world, planner, s, max_steps=max_steps, formation=formation))
+            done = rollout(world, planner, s, max_steps=max_steps, formation=formation)
+        episodes.extend(done)
         if progress is not None:
-            progress(world)
+            progress(world, done)
     return Evaluation(f"{planner.name}+formation" if formation else planner.name, episodes)
 
 

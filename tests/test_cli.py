@@ -1,8 +1,15 @@
 """The command line: help, and errors as one message without a traceback."""
 
+import io
+
 import pytest
 
 from apf_physics.cli import main
+from apf_physics.commands.eval import EvalProgress
+from apf_physics.evaluate import evaluate
+from apf_physics.planners import make_planner
+from apf_physics.worldfile import world_from_dict
+from conftest import simple_world_dict
 
 
 def test_help_lists_the_commands(capsys):
@@ -54,3 +61,19 @@ def test_help_texts_are_plain_text_not_markup(capsys):
             main([name, "--help"])
         text = capsys.readouterr().out
         assert "``" not in text and not re.search(r":(class|func|mod|attr):`", text), name
+
+
+def test_a_long_evaluation_prints_plain_progress_lines_without_a_terminal():
+    """Under nohup, CI or a notebook: one plain line per tenth of the worlds, no carriage return."""
+    simple_world = world_from_dict(simple_world_dict())
+    stream = io.StringIO()
+    worlds = [simple_world] * 20
+    progress = EvalProgress("gradient", len(worlds), 2 * len(worlds), stream=stream, quiet=0.0)
+    evaluation = evaluate(make_planner("gradient"), worlds, progress=progress)
+    lines = stream.getvalue().splitlines()
+    assert "\r" not in stream.getvalue() and len(lines) == 10
+    successes = sum(e.success for e in evaluation.episodes)
+    assert lines[-1].startswith(f"eval: gradient: world 20/20, episodes 40/40, success {successes / 40:.1%}, ")
+    quiet = io.StringIO()   # a short evaluation prints nothing
+    evaluate(make_planner("gradient"), worlds, progress=EvalProgress("gradient", 20, 40, stream=quiet))
+    assert quiet.getvalue() == ""

@@ -4,18 +4,65 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
+import time
 from pathlib import Path
+from typing import TextIO
+
+from tqdm import tqdm
 
 import numpy as np
 
 from apf_physics.benchmark import evaluate_trials, format_bucket_table, parse_buckets, scenario_trials, trials_json
 from apf_physics.campaign import evaluate_on_ray
 from apf_physics.errors import UserError
-from apf_physics.evaluate import evaluate, format_table, write_json, write_text_atomic
+from apf_physics.evaluate import Episode, evaluate, format_table, write_json, write_text_atomic
 from apf_physics.planners import make_planner
 from apf_physics.safefile import check_writable
 from apf_physics.render.page import PAGE, write_results
 from apf_physics.worldfile import MAX_STARTS, load_worlds
+
+
+class EvalProgress:
+    """What a long evaluation shows while it runs: a bar on a terminal, else plain lines.
+
+    On a terminal, a tqdm bar over the episodes on stderr, with the success so far. Anywhere
+    else (``nohup``, CI, a notebook cell, a pipe) there is no bar and no carriage return: one
+    plain line after a tenth of the worlds or ``every`` seconds, whichever comes first, and one
+    at the end, as the training's progress does; an evaluation done within ``quiet`` seconds
+    prints none.
+    """
+
+    def __init__(self, planner: str, worlds: int, episodes: int, enabled: bool = True,
+                 stream: TextIO | None = None, every: float = 30.0, quiet: float = 5.0):
+        self.stream = sys.stderr if stream is None else stream
+        self.planner, self.worlds, self.total, self.every = planner, worlds, episodes, every
+        self.enabled, self.quiet = enabled, quiet
+        self.done_worlds = self.done = self.successes = 0
+        self.start = self.last = time.perf_counter()
+        self.bar = (tqdm(total=episodes, desc=planner, unit="episode", file=self.stream, leave=False,
+                         dynamic_ncols=True) if enabled and self.stream.isatty() else None)
+
+    def __call__(self, world: object, episodes: list[Episode]) -> None:
+        self.done_worlds += 1
+        self.done += len(episodes)
+        self.successes += sum(e.success for e in episodes)
+        share = f"{self.successes / self.done:.1%}" if self.done else "-"
+        if self.bar is not None:
+            self.bar.set_postfix_str(f"success {share}", refresh=False)
+            self.bar.update(len(episodes))
+            return
+        now = time.perf_counter()
+        tenth = max(1, self.worlds // 10)
+        if self.enabled and now - self.start >= self.quiet and (self.done_worlds % tenth == 0 or now - self.last >= self.every
+                             or self.done_worlds == self.worlds):
+            self.last = now
+            print(f"eval: {self.planner}: world {self.done_worlds:,}/{self.worlds:,}, episodes {self.done:,}/"
+                  f"{self.total:,}, success {share}, {now - self.start:.0f} s", file=self.stream, flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -40,6 +87,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--cell", type=float, default=1.0,
                    help="with --scen: world units (robot steps) per map cell (default 1)")
     p.add_argument("--json", metavar="OUT", help="write the episodes and summary as JSON")
+    p.add_argument("--no-progress", action="store_true",
+                   help="show no progress (default: a bar when stderr is a terminal, else a plain line per tenth "
+                        "of the worlds or per 30 s)")
     p.add_argument("--html", metavar="DIR",
                    help="write a results page DIR/index.html: the table, a field figure and a video per planner "
                         "and world (viewable offline; DIR is created)")
@@ -109,7 +159,14 @@ def run(args: argparse.Namespace) -> int:
         evaluations = []
         for name in names:
             planner = make_planner(name, model=args.model)
-            evaluations.append(evaluate(planner, worlds, starts, max_steps=args.max_steps, formation=args.formation))
+            count = sum(len(w.formations) if args.formation and w.formations
+                        else len(w.starts if starts is None else starts[w.name]) for w in worlds)
+            progress = EvalProgress(planner.name, len(worlds), count, enabled=not args.no_progress)
+            try:
+                evaluations.append(evaluate(planner, worlds, starts, max_steps=args.max_steps,
+                                            formation=args.formation, progress=progress))
+            finally:
+                progress.close()
     print(format_table(evaluations))
     if args.json:
         write_json(evaluations, args.json)
@@ -117,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
     if args.html:
 
         page = write_results(args.html, evaluations, worlds, title=f"apf-physics eval: {', '.join(names)}",
-                             progress=not getattr(args, "no_progress", False))
+                             progress=not args.no_progress)
         print(f"wrote {page} (open it in a browser)")
     return 0
 
@@ -137,7 +194,14 @@ def run_scenarios(args: argparse.Namespace) -> int:
         check_writable(args.json, create_parent=True)
     trials = scenario_trials(args.worlds[0], args.scen, parse_buckets(args.buckets), args.limit, cell=args.cell)
     names = [n.strip() for n in args.planner.split(",") if n.strip()]
-    evaluations = [evaluate_trials(make_planner(name, model=args.model), trials) for name in names]
+    evaluations = []
+    for name in names:
+        planner = make_planner(name, model=args.model)
+        progress = EvalProgress(planner.name, len(trials), len(trials), enabled=not args.no_progress)
+        try:
+            evaluations.append(evaluate_trials(planner, trials, progress=progress))
+        finally:
+            progress.close()
     print(f"{args.worlds[0]}: {len(trials)} scenarios")
     print(format_bucket_table(evaluations, trials))
     if args.json:
