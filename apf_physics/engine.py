@@ -184,6 +184,10 @@ class Stepper:
         self._moving = any(w.moving for w in self.worlds)
         self.last_distance = np.full(self.num_slots, np.inf)
         """Each leader's distance to its nearest target, after the last start or step."""
+        self.scalar = self.num_slots == 1 and self.robots_per_slot == 1
+        """A batch of one robot (``Navigate-v0``, ``eval``'s rollouts): stepped in Python scalars
+        (the same episodes as the array path, to the last bit; False: the array path, for tests)."""
+        self._yes, self._no = _constant(True), _constant(False)
 
     @property
     def running(self) -> np.ndarray:
@@ -268,6 +272,8 @@ class Stepper:
         """
         if gave_up is not None and gave_up.any():
             self.finish(np.flatnonzero(gave_up), Outcome.TRAPPED)
+        if self.scalar and self.outcome[0] == RUNNING:
+            return self._step_one(commands)
         moved = self.outcome == RUNNING
         everyone = moved.all()
         commands = np.asarray(commands, float).reshape(-1, 2)
@@ -306,3 +312,36 @@ class Stepper:
             self._unreported[:] = False
         self.last_distance = distance
         return StepReport(self.positions, contacts, moved, collided, reached, ended, distance)
+
+    def _step_one(self, commands: np.ndarray) -> StepReport:
+        """:meth:`step` for a batch of one running robot: the same rules on the same numbers,
+        decided in Python scalars instead of arrays of one (most of a single step's cost was the
+        fixed cost of small numpy calls). ``tests/test_single_path.py`` checks that both give
+        the same episodes to the last bit."""
+        if self._moving:
+            self.physics.set_time(self.steps)
+        contacts = self.physics.step(np.asarray(commands, float).reshape(1, 2))
+        self.positions = self.physics.positions.reshape(1, 1, 2)
+        self.steps += 1
+        distance = self.distance()
+        collided = bool(contacts.touched and contacts.any[0])
+        reached = not collided and distance[0] <= self._slot_tolerance[0]
+        outcome = COLLISION if collided else REACHED if reached else RUNNING
+        if outcome == RUNNING and self._watch is not None:
+            slot = np.zeros(1, np.intp)
+            if self._watch.record(slot, self.positions[:, 0], self._leader_potential(slot))[0]:
+                outcome = TRAPPED
+        if outcome == RUNNING and self.max_steps is not None and self.steps[0] >= self.max_steps:
+            outcome = TIMEOUT
+        self.outcome[0] = outcome
+        self.last_distance = distance
+        yes, no = self._yes, self._no
+        return StepReport(self.positions, contacts, yes, yes if collided else no, yes if reached else no,
+                          no if outcome == RUNNING else yes, distance)
+
+
+def _constant(value: bool) -> np.ndarray:
+    """A read-only (1,) bool array (reports of a batch of one share them)."""
+    out = np.full(1, value)
+    out.flags.writeable = False
+    return out

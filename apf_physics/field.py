@@ -321,8 +321,18 @@ class Atlas:
 
         if self._image is None:
             self._build()
+        points = np.asarray(points, dtype=float).reshape(-1, 2)
+        if offsets is not None and len(points) == 1:
+            # one window (a single robot): its corner in Python floats, then the same float32 maps
+            # as below (a fixed cost of five small array operations less)
+            (x, y), = points.tolist()
+            sx, sy = self._shift[np.reshape(ids, -1)[0]].tolist()
+            scaled = self._scaled_offsets(offsets)
+            map_x = scaled[0] + np.float32(x * self.resolution + sx)
+            map_y = scaled[1] + np.float32(y * self.resolution + sy)
+            return cv2.remap(self._image, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         # image coordinates, in float32 (what remap takes)
-        index = (np.asarray(points, dtype=float).reshape(-1, 2) * self.resolution + self._shift[ids]).astype(np.float32)
+        index = (points * self.resolution + self._shift[ids]).astype(np.float32)
         if not len(index):  # no points (e.g. a batch step where every slot is restarting): remap refuses empty maps
             return np.zeros(0 if offsets is None else (0, len(offsets)), np.float32)
         if offsets is None:   # one two-channel map: (N, 1, 2)

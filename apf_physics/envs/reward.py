@@ -85,3 +85,15 @@ def reward_terms(weights: RewardWeights, collided: np.ndarray, reached: np.ndarr
     if moved is not None:
         terms[5] = weights.length * moved
     return terms
+
+
+def reward_terms_one(weights: RewardWeights, collided: bool, reached: bool, u_before: float, u_after: float,
+                     revisits: float | None = None, moved: float | None = None) -> list[float]:
+    """:func:`reward_terms` of one robot, as a list of Python floats (the same arithmetic, without
+    the fixed cost of arrays of one: the single environment's step)."""
+    return [weights.w1 if collided else 0.0,
+            weights.w2 if reached and not collided else 0.0,
+            weights.w3,
+            weights.beta * (weights.potential_discount * u_after - u_before),
+            weights.revisit * revisits if revisits is not None else 0.0,
+            weights.length * moved if moved is not None else 0.0]

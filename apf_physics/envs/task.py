@@ -9,15 +9,16 @@ is a batch of one, :class:`~apf_physics.envs.vector.NavigateVectorEnv` a batch o
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Sequence, Union
 
 import numpy as np
 
 from apf_physics.actions import ACTIONS
-from apf_physics.engine import TIMEOUT, TRAPPED, Stepper, TrapDetector
+from apf_physics.engine import RUNNING, TIMEOUT, TRAPPED, Stepper, TrapDetector
 from apf_physics.errors import UserError
-from apf_physics.envs.reward import RewardWeights, reward_terms
+from apf_physics.envs.reward import RewardWeights, reward_terms, reward_terms_one
 from apf_physics.formation import FormationCrowd, FormationTeam
 from apf_physics.observation import Observer, ObserverConfig
 from apf_physics.world import FormationSpec, World
@@ -62,6 +63,16 @@ def trap_detector(trap: TrapOption) -> TrapDetector | None:
     if isinstance(trap, str) and trap in TRAP_RULES:
         return TrapDetector(trap)
     raise UserError(f"trap must be None, one of {', '.join(TRAP_RULES)} or a TrapDetector, got {trap!r}")
+
+
+def _flag(value: bool) -> np.ndarray:
+    out = np.full(1, value)
+    out.flags.writeable = False   # shared by every step of a batch of one
+    return out
+
+
+_flags = {False: _flag(False), True: _flag(True)}
+"""Read-only (1,) bool arrays: the flags of a batch of one's :class:`TaskStep`."""
 
 
 def _ends(ended: np.ndarray, outcome: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -155,6 +166,8 @@ class NavigationTask:
 
     def step(self, actions: np.ndarray) -> TaskStep:
         """Advance every running slot by its action (slots not running do not move)."""
+        if self.stepper.scalar and self.team is None and self.stepper.outcome[0] == RUNNING:
+            return self._step_one(int(np.asarray(actions).reshape(-1)[0]))
         moves = ACTIONS[np.asarray(actions, dtype=np.intp).reshape(self.num)]
         before = self.stepper.positions[:, 0]
         if self.team is None:
@@ -185,6 +198,34 @@ class NavigationTask:
             else ended & False
         return TaskStep(self._obs, reward, terminated, truncated, terms, report.reached, report.collided, moved,
                         robot_contact, trapped)
+
+    def _step_one(self, action: int) -> TaskStep:
+        """:meth:`step` of a batch of one running robot alone (``Navigate-v0``): the same
+        numbers, with the reward and the episode's end decided in Python scalars
+        (``tests/test_single_path.py`` checks them against the batch path to the last bit)."""
+        (x0, y0), = self.stepper.positions[:, 0].tolist()
+        report = self.stepper.step(ACTIONS[action].reshape(1, 1, 2))
+        leaders = report.positions[:, 0]
+        revisits = None
+        if self.observer.memory is not None:
+            revisits = float(self.observer.visit(leaders)[0])
+        u_before = float(self._u[0])
+        self._observe(None)
+        walked = None
+        if self.weights.length:
+            (x1, y1), = leaders.tolist()
+            walked = math.sqrt((x1 - x0) ** 2 + (y1 - y0) ** 2)
+        collided, reached, ended = bool(report.collided[0]), bool(report.reached[0]), bool(report.ended[0])
+        terms = reward_terms_one(self.weights, collided, reached, u_before, float(self._u[0]),
+                                 revisits if self.weights.revisit else None, walked)
+        outcome = int(self.stepper.outcome[0])
+        trapped = ended and outcome == TRAPPED
+        truncated = trapped or (ended and outcome == TIMEOUT)
+        robot_contact = bool(report.contacts.touched and report.contacts.robot[0])
+        flag = _flags
+        return TaskStep(self._obs, np.array([sum(terms)]), flag[ended and not truncated], flag[truncated],
+                        np.array(terms)[:, None], report.reached, report.collided, report.moved, flag[robot_contact],
+                        flag[trapped])
 
     def distance(self) -> np.ndarray:
         """(N,) each leader's distance to the nearest target of its world, after the last start or step."""
