@@ -58,6 +58,8 @@ CLEARANCE_RESOLUTION = 8  # nodes per unit of the clearance rasters that decide 
 CLEARANCE_CAP = 4.0  # clearance beyond this is not measured (it exceeds any move plus a radius)
 _FEW = 4  # up to this many proxies, per-body attribute access beats pymunk.batch's fixed cost
 _PROXY_GROUP = 1  # collision group of proxies of single-robot slots: they never touch each other
+SETTLE_OBSTACLE = 0.005  # a robot ending a step farther than this inside an obstacle or the edge is pushed out [units]
+SETTLE_ROBOT = 0.01  # two robots ending a step overlapping more than this are pushed apart [units]
 _THIRDS = np.array([0.0, 0.5, 1.0])[None, :, None]  # where a move's clearance is sampled
 
 
@@ -113,8 +115,13 @@ class Physics:
         self._min_radius = min(w.robot_radius for w in every)
         obstacle_speed = max((w.obstacles[i].motion.speed for w in every for i in w.moving), default=0.0)
         relative = self.max_speed + obstacle_speed / self.control_dt
+        if self.robots_per_slot > 1 or self._crowd_robots:
+            relative = max(relative, 2 * self.max_speed)   # robots that meet close in on each other at twice the speed
         self.substeps = int(substeps) if substeps is not None else substeps_for(self._min_radius, relative)
         self.dt = self.control_dt / self.substeps
+        # how far pymunk may take a robot in one step, its own move and pushes by others included (a
+        # generous bound: twice the fastest move), for the free-move test of robots that meet others
+        self._reach = 2 * self.max_speed * self.control_dt
 
         self.space = pymunk.Space()
         self.space.iterations = 10
@@ -402,10 +409,13 @@ class Physics:
         """(N,) bool: robots whose ``moves`` this step might bring them into contact with anything.
 
         Conservative: False guarantees that the robot's disc keeps more than
-        :data:`CONTACT_MARGIN` from every obstacle, the map's edge and the robots of its slot
-        during the whole move (each moving straight and uniformly), so that it moves exactly
-        as a free pymunk disc would. Moving obstacles are taken where the slots' steps
-        (:meth:`set_time`) put them.
+        :data:`CONTACT_MARGIN` from every obstacle, the map's edge and the robots it meets
+        during the whole move, so that it moves exactly as a free pymunk disc would. Against
+        the robots it meets, this is judged against what they can do, not what they were told:
+        the robots that go to pymunk are closed under "may touch one that goes to pymunk"
+        (anywhere within a generous reach of its start: it may be blocked or pushed), and the
+        others move straight and uniformly as commanded. Moving obstacles are taken where the
+        slots' steps (:meth:`set_time`) put them.
         """
         # Clearance at the start, the middle and the end of each move: a 1-Lipschitz function
         # sampled at both ends of a piece of length L/2 is at least (c_a + c_b − L/2) / 2 on it,
@@ -414,19 +424,18 @@ class Physics:
         c = self._atlas.sample(samples, self._sample_atlas).reshape(-1, 3)
         needs = c[:, 1] + np.minimum(c[:, 0], c[:, 2]) - 0.5 * np.hypot(moves[:, 0], moves[:, 1]) < self._free_twice
         m = self.robots_per_slot
-        if m > 1:
+        if m > 1:   # robots of one slot: closed under "may touch a robot that goes to pymunk"
             p = self._positions.reshape(-1, m, 2)
             dp = moves.reshape(-1, m, 2)
-            close = _closest_approach(p, dp) < 2 * self._slot_radius[:, None, None] + CONTACT_MARGIN
-            close &= self.present.reshape(-1, m)[:, None, :]
-            close[:, np.arange(m), np.arange(m)] = False
-            needs |= close.any(axis=2).ravel()
-        for group in self._crowd_robots:   # robots of several slots that meet: every pair near each other
+            present = self.present.reshape(-1, m)
+            both_free, near_held = _may_touch(p, dp, self._slot_radius[:, None, None], present, self._reach)
+            needs = _close_under_touch(needs.reshape(-1, m), both_free, near_held).ravel()
+        for group in self._crowd_robots:   # robots of several slots that meet: the same over the crowd
             group = group[self.present[group]]
-            close = _closest_approach(self._positions[group][None], moves[group][None])[0]
-            close = close < 2 * self._slot_radius[group // m][:, None] + CONTACT_MARGIN
-            np.fill_diagonal(close, False)
-            needs[group] |= close.any(axis=1)
+            radius = self._slot_radius[group // m][None, :, None]
+            both_free, near_held = _may_touch(self._positions[group][None], moves[group][None], radius,
+                                              np.ones((1, len(group)), bool), self._reach)
+            needs[group] = _close_under_touch(needs[group][None], both_free, near_held)[0]
         if not self._any_moving:
             return needs
         self._movers_needed = []
@@ -508,7 +517,110 @@ class Physics:
         free = ~simulate
         self._positions[free] += moves[free]
         self._proxy_held = bool(len(robots))
-        return self._touch_free if pairs is None or not len(pairs) else self._log(pairs)
+        if pairs is None or not len(pairs):
+            return self._touch_free
+        log = self._log(pairs)
+        self._settle(np.flatnonzero(log.any))
+        return log
+
+    def _settle(self, touched: np.ndarray) -> None:
+        """Resolve, before the step ends, the overlaps that pymunk leaves at its last substep.
+
+        Chipmunk finds an overlap after the substep that made it and pushes it out in the
+        substeps after: a robot that met an obstacle in the last substep ends the step up to
+        one substep's travel inside it, and robots that met each other up to twice that. Every
+        robot that touched something (``touched``) and ends more than :data:`SETTLE_OBSTACLE`
+        inside an obstacle or past the map's edge, or more than :data:`SETTLE_ROBOT` into a
+        robot it meets, is pushed out (with the robots it meets: its whole slot or crowd), in
+        moves that never cross anything (:meth:`_push_apart`); its proxy follows.
+        """
+        if not len(touched):
+            return
+        m = self.robots_per_slot
+        slots = np.unique(touched // m)
+        meet = self._shared[slots] | (m > 1)
+        batches = []   # (world, time, robots, group of each robot: robots of one group meet)
+        alone = slots[~meet]
+        if len(alone):
+            keys = [(id(self.worlds[s]), float(self._slot_time[s]) if self._slot_moving[s] else 0.0)
+                    for s in alone.tolist()]
+            for key in dict.fromkeys(keys):
+                mine = alone[[k == key for k in keys]]
+                batches.append((self.worlds[int(mine[0])], key[1], mine, None))
+        for crowd in np.unique(self.crowd[slots[meet]]).tolist():
+            members = np.flatnonzero(self.crowd == crowd)
+            robots = (members[:, None] * m + np.arange(m)).ravel()
+            robots = robots[self.present[robots]]
+            batches.append((self.worlds[int(members[0])], float(self._slot_time[members[0]]), robots, True))
+        for world, t, robots, together in batches:
+            moving = bool(world.moving)
+            after = self._push_apart(world, t + 1.0 if moving else None, self._positions[robots], together)
+            if after is None:
+                continue
+            self._positions[robots] = after
+            held = self._robot_proxy[robots] >= 0
+            proxies = self._robot_proxy[robots[held]]
+            self._proxy_target[proxies] = after[held] + self._tiles.offset[self._slot_tile[robots[held] // m]]
+            self._proxy_moved[proxies] = True
+
+    def _push_apart(self, world: World, t: float | None, p: np.ndarray, together: bool | None,
+                    rounds: int = 40) -> np.ndarray | None:
+        """Robots at ``p`` (all in ``world``, at step ``t``; None: no moving obstacles) moved out
+        of the obstacles, the map's edge and, when ``together``, each other, or None when
+        none overlaps more than the tolerances.
+
+        Each round pushes every overlapping robot by its whole overlap (and 0.001 more): along
+        the clearance's gradient off an obstacle or the edge, half of it each along the line
+        of centres off a robot. A push is taken whole, or a half or a quarter of it, whichever
+        is longest among those whose path keeps the robot's clearance (sampled every 0.01), so
+        nothing is ever crossed; pushes against a wall therefore go to the robot on the free
+        side. Rounds repeat until nothing overlaps more than the tolerances.
+        """
+        r = world.robot_radius
+        k = len(p)
+        moment = world if t is None else world.at(t)
+        clearance = moment.clearance(p)
+        changed = False
+        for _ in range(rounds):
+            edge = r - clearance
+            overlap = np.zeros((k, k))
+            if together and k > 1:
+                diff = p[:, None, :] - p[None, :, :]
+                d = np.hypot(diff[..., 0], diff[..., 1])
+                np.fill_diagonal(d, np.inf)
+                overlap = np.clip(2 * r - d, 0.0, None)
+            if edge.max() <= SETTLE_OBSTACLE and overlap.max(initial=0.0) <= SETTLE_ROBOT:
+                break
+            push = np.zeros_like(p)
+            if overlap.any():
+                unit = diff / np.maximum(d, 1e-9)[..., None]
+                push += 0.5 * np.sum(np.where(overlap > 0, overlap + 1e-3, 0.0)[..., None] * unit, axis=1)
+            # robots alone in their slots settle each on its own (as it would in a batch of one)
+            off = np.flatnonzero(edge > 0 if together else edge > SETTLE_OBSTACLE)
+            if len(off):
+                h = 1e-4
+                q = p[off]
+                g = moment.clearance(np.concatenate([q + [h, 0], q - [h, 0], q + [0, h], q - [0, h]])).reshape(4, -1)
+                grad = np.stack([g[0] - g[1], g[2] - g[3]], -1) / (2 * h)
+                grad /= np.maximum(np.hypot(grad[:, 0], grad[:, 1]), 1e-12)[:, None]
+                push[off] += (edge[off] + 1e-3)[:, None] * grad
+            moved = np.flatnonzero(np.any(push != 0, axis=1))
+            scales = np.array([0.25, 0.5, 1.0])
+            a = np.tile(p[moved], (3, 1))
+            b = a + np.repeat(scales, len(moved))[:, None] * np.tile(push[moved], (3, 1))
+            if t is None:
+                along = world.path_clearance(a, b, 0.01)
+            else:
+                along = world.path_clearance(a, b, 0.01, t=t, during=False)
+            ok = along.reshape(3, -1) >= np.minimum(r, clearance[moved])[None] - 1e-9
+            best = np.where(ok[2], 1.0, np.where(ok[1], 0.5, np.where(ok[0], 0.25, 0.0)))
+            if not best.any():
+                break
+            p = p.copy()
+            p[moved] += best[:, None] * push[moved]
+            clearance = moment.clearance(p)
+            changed = True
+        return p if changed else None
 
     def _undo_crossings(self, robots: np.ndarray, before: np.ndarray) -> None:
         """Put back any of ``robots`` whose move this step passed through a static obstacle.
@@ -635,3 +747,42 @@ def _closest_approach(p: np.ndarray, dp: np.ndarray) -> np.ndarray:
     t = np.clip(np.where(a > 0, -np.sum(r0 * dr, axis=-1) / np.where(a > 0, a, 1.0), 0.0), 0.0, 1.0)
     closest = r0 + t[..., None] * dr
     return np.sqrt(np.sum(closest * closest, axis=-1))
+
+
+def _segment_point_distance(p: np.ndarray, dp: np.ndarray) -> np.ndarray:
+    """(S, m, m) least distance between robot i's straight move and robot j's start, in each slot."""
+    r0 = p[:, None, :, :] - p[:, :, None, :]                      # from i's start to j's
+    a = np.sum(dp * dp, axis=-1)[:, :, None]
+    t = np.clip(np.sum(r0 * dp[:, :, None, :], axis=-1) / np.where(a > 0, a, 1.0), 0.0, 1.0)
+    closest = r0 - t[..., None] * dp[:, :, None, :]
+    return np.sqrt(np.sum(closest * closest, axis=-1))
+
+
+def _may_touch(p: np.ndarray, dp: np.ndarray, radius: np.ndarray, present: np.ndarray,
+               reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """Which robots of each slot may touch which, both ``(S, m, m)`` bool (never i with itself,
+    never an absent robot):
+
+    - ``both_free[s, i, j]``: if both move as commanded (straight and uniformly), they come
+      within touching distance and the margin;
+    - ``near_held[s, i, j]``: robot i's commanded move comes that near anywhere robot j could
+      be if pymunk moved it (within ``reach`` of its start, however it was blocked or pushed).
+    """
+    touch = 2 * radius + CONTACT_MARGIN
+    both_free = _closest_approach(p, dp) < touch
+    near_held = _segment_point_distance(p, dp) < touch + reach
+    others = present[:, None, :] & present[:, :, None] & ~np.eye(p.shape[1], dtype=bool)[None]
+    return both_free & others, near_held & others
+
+
+def _close_under_touch(needs: np.ndarray, both_free: np.ndarray, near_held: np.ndarray) -> np.ndarray:
+    """(S, m) the robots that go to pymunk: those that ``needs`` already, those that may touch
+    another one moving as commanded, and then every robot that may touch one of these, until
+    none is added (at most m rounds). A robot left out moves exactly as commanded and nothing
+    that pymunk moves can reach it."""
+    needs = needs | both_free.any(axis=2)
+    while True:
+        more = needs | np.any(near_held & needs[:, None, :], axis=2)
+        if (more == needs).all():
+            return needs
+        needs = more
