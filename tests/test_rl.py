@@ -140,8 +140,8 @@ def test_thesis_presets_stay_as_written():
         64, 64, "huber", True, "soft", 0.01)
     assert (fast.dqn.reward_scale, fast.network.obs_transform, fast.env.train_starts, fast.schedule.target_success) == (
         1e-3, "relative-log", "reachable", 0.99)
-    # validated on 200 seeded random free starts never trained on: they pick best.pt and stop the run
-    assert fast.evaluation.eval_random_starts == 200 and fast.evaluation.select == ("random_success", "success")
+    # validated on 1,000 seeded random free starts never trained on: they pick best.pt and stop the run
+    assert fast.evaluation.eval_random_starts == 1000 and fast.evaluation.select == ("random_success", "success")
     assert not fast.evaluation.eval_shield
 
 

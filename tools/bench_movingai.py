@@ -47,7 +47,7 @@ def main() -> None:
     parser.add_argument("--limit", type=int, default=10, help="scenarios per map (default 10)")
     parser.add_argument("--planners", default="dqn,dqn-unshielded,astar")
     parser.add_argument("--maps", help="names, separated by commas (default: the table's 14)")
-    parser.add_argument("--json", type=Path, help="write every episode and summary here")
+    parser.add_argument("--json", type=Path, help="write every episode and summary here, and the totals per planner")
     args = parser.parse_args()
     chosen = [(f, n) for f, n in MAPS if args.maps is None or n in args.maps.split(",")]
     names = [p.strip() for p in args.planners.split(",")]
@@ -77,6 +77,7 @@ def main() -> None:
             totals[planner] += [(e, t.scenario.optimal) for e, t in zip(ev.episodes, trials)]
         out.append({"family": family, "map": name, "results": trials_json(evaluations, trials)})
     rows.append("-" * len(header))
+    summary = {}
     for planner, entries in totals.items():
         if not entries:
             continue
@@ -84,9 +85,12 @@ def main() -> None:
         ratio = float("nan") if scored.path_over_optimal is None else scored.path_over_optimal
         rows.append(f"{'all':<10} {'':<24} {'':>9} {planner:<15} {scored.successes:>4}/{scored.episodes:<4} "
                     f"{scored.collisions:>8} {ratio:>9.3f}")
+        summary[planner] = {"episodes": scored.episodes, "successes": scored.successes, "collisions": scored.collisions,
+                            "path_over_optimal": None if scored.path_over_optimal is None
+                            else round(scored.path_over_optimal, 4)}
     print("\n".join(rows))
     if args.json:
-        write_text(args.json, json.dumps(out, indent=1))
+        write_text(args.json, json.dumps({"maps": out, "totals": summary}, indent=1))
 
 
 if __name__ == "__main__":

@@ -1,0 +1,277 @@
+"""The README's figures: each made by a command, kept in a results file, and written into the README from it.
+
+    python tools/figures.py run [ROW ...] [--data DIR] [--movingai DIR]   # run the commands, write tools/results/
+    python tools/figures.py show ROW                                      # print a row's commands
+    python tools/figures.py readme                                        # rewrite the README's table from the results
+    python tools/figures.py check                                         # exit 1 if the README's table differs
+
+Every row of the README's "What works, in figures" table is one :class:`Row`: the shell commands
+that measure it (they write ``tools/results/<row>.json``) and a function that turns that file
+into the row's text. The table between the README's ``figures`` markers is written by
+``readme`` and nothing else, and ``tests/test_readme.py`` checks that it matches the results
+files, so a figure in the README cannot go stale: to change one, re-run its row and ``readme``.
+
+Held-out worlds are generated into ``--data`` (default ``/tmp/apf-figures``) by the row's own
+``apf-physics generate`` command, with the seed no training or validation used. The MovingAI
+row needs the benchmark's maps, fetched by the user (``--movingai DIR``; sources in
+BENCHMARKS.md, "Real maps"); nothing is downloaded.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "tools" / "results"
+README = ROOT / "README.md"
+BEGIN = "<!-- figures: written by `python tools/figures.py readme` from tools/results/; do not edit by hand -->"
+END = "<!-- /figures -->"
+
+
+@dataclass(frozen=True)
+class Row:
+    """One row of the table: what it is, how it is measured, and how its file reads."""
+
+    key: str
+    commands: tuple[str, ...]
+    """Shell commands, run from the repository's root; ``{data}``, ``{movingai}`` and ``{out}``
+    (this row's results file) are filled in."""
+    what: Callable[[dict], str]
+    result: Callable[[dict], str]
+
+    @property
+    def path(self) -> Path:
+        return RESULTS / f"{self.key}.json"
+
+
+def _pct(x: float) -> str:
+    return f"{100 * x:.1f} %"
+
+
+def _range(values: list[Any]) -> str:
+    lo, hi = min(values), max(values)
+    return f"{lo}" if lo == hi else f"{lo}–{hi}"
+
+
+def _eval(data: dict, planner: str) -> dict:
+    """The summary of one planner in an ``apf-physics eval --json`` file."""
+    for entry in data["evaluations"]:
+        if entry["planner"] == planner:
+            return entry["summary"]
+    raise KeyError(f"no planner {planner!r} in the results")
+
+
+def _fixed20(data: dict) -> str:
+    g, d = _eval(data, "gradient"), _eval(data, "dqn")
+    trapped = round(g["trapped_rate"] * g["episodes"])
+    return (f"gradient descent {g['successes']}/{g['episodes']} ({trapped} trapped); shipped DQN "
+            f"**{d['successes']}/{d['episodes']}**, {round(d['collision_rate'] * d['episodes'])} collisions "
+            f"(thesis: 37/40)")
+
+
+def _fixed20_random(data: dict) -> str:
+    g, d, u = _eval(data, "gradient"), _eval(data, "dqn"), _eval(data, "dqn-unshielded")
+    return (f"gradient {g['successes']}/{g['episodes']}; shipped DQN **{d['successes']}/{d['episodes']}** "
+            f"({_pct(d['success_rate'])}), {round(d['collision_rate'] * d['episodes'])} collisions; "
+            f"unshielded {u['successes']}/{u['episodes']}")
+
+
+def _train(data: dict) -> str:
+    runs = data["runs"]
+    random = [r for run in runs for r in run["random"]]
+    n = random[0]["episodes"]
+    collisions = sum(round(r["collision_rate"] * r["episodes"]) for r in random)
+    own = [run["starts"]["successes"] for run in runs]
+    minutes = [run["train_seconds"] / 60 for run in runs]
+    seeds = [run["seed"] for run in runs]
+    return (f"seeds {_range(seeds)}: **{_range([r['successes'] for r in random])} of {n}** random free starts "
+            f"it never trained or validated on ({len(random) // len(runs)} draws each; median "
+            f"{_pct(data['median_random_success'])}), {collisions} collisions, {_range(own)}/"
+            f"{runs[0]['starts']['episodes']} of the thesis's starts; {min(minutes):.0f}–{max(minutes):.0f} min "
+            f"of training each")
+
+
+def _formation(data: dict) -> str:
+    s = _eval(data, "dqn+formation")
+    links = " and ".join(_pct(v) for v in s.get("link_in_range", [s["links_in_range"]]))
+    return (f"**{s['successes']}/{s['episodes']}**, {round(s['collision_rate'] * s['episodes'])} collisions; links "
+            f"in range {links} of steps ({s['episodes_all_links_99']} of {s['episodes']} episodes ≥ 99 % on every "
+            f"link) (thesis: 8/8)")
+
+
+def _general_what(data: dict) -> str:
+    s = data["gradient"]
+    return (f"general worlds (generated, held out, {s['starts']} starts, "
+            f"{round(100 * s['trap_starts'] / s['starts'])} % traps)")
+
+
+def _general(data: dict) -> str:
+    g, e, a = data["gradient"], data["escape"], data["astar"]
+    w, m, mu = data["dqn:general"], data["dqn:map"], data["dqn-unshielded:map"]
+    return (f"gradient {_pct(g['success_rate'])}, escape (wall following) {_pct(e['success_rate'])}, A* "
+            f"{_pct(a['success_rate'])}; the window network `general.pt` (memory of visited cells, shielded) "
+            f"**{_pct(w['success_rate'])}**, {w['collisions']} collisions, paths {w['length_ratio_vs_astar']:.2f}× A*; "
+            f"`map.pt` {_pct(m['success_rate'])} ({_pct(mu['success_rate'])} unshielded)")
+
+
+def _thesis_test(data: dict) -> str:
+    g, m, w = data["gradient"], data["dqn:map"], data["dqn:general"]
+    return (f"the `dqn` default (`map.pt`) **{m['successes']} of {m['starts']} starts** (the window network: "
+            f"{w['successes']} of {w['starts']}; thesis: 3 of 4 worlds), gradient descent {g['successes']} of {g['starts']}")
+
+
+def _structures_what(data: dict) -> str:
+    s = data["gradient"]
+    return (f"worlds unlike the training (held out, {s['starts']} starts, "
+            f"{round(100 * s['trap_starts'] / s['starts'])} % traps, a third 100×100): rooms, mazes, nested cups, "
+            f"narrow gaps, dense clutter")
+
+
+def _structures(data: dict) -> str:
+    g, e, w, m, mu = (data[k] for k in ("gradient", "escape", "dqn:general", "dqn:map", "dqn-unshielded:map"))
+    return (f"gradient {_pct(g['success_rate'])}, escape {_pct(e['success_rate'])}, the window network "
+            f"{_pct(w['success_rate'])}; the map network (`map.pt`, the `dqn` default for Table 4's field) "
+            f"**{_pct(m['success_rate'])}**, {m['collisions']} collisions, paths {m['length_ratio_vs_astar']:.2f}× A*; "
+            f"{_pct(mu['success_rate'])} with no shield")
+
+
+def _moving_what(data: dict) -> str:
+    return f"moving obstacles (held out, {data['astar']['starts']} starts)"
+
+
+def _moving(data: dict) -> str:
+    a, m = data["astar"], data["dqn:moving"]
+    return (f"replanning A* {_pct(a['success_rate'])} with {a['collisions']} collisions; `moving.pt` (trained with "
+            f"them) **{_pct(m['success_rate'])}**, {m['collisions']} collisions")
+
+
+def _movingai_what(data: dict) -> str:
+    return (f"real maps never seen (MovingAI: {len(data['maps'])} maps of Dragon Age, rooms, mazes, random, street, "
+            f"warehouse; 32 to 512 cells a side, {data['totals']['dqn']['episodes']} scenarios)")
+
+
+def _movingai(data: dict) -> str:
+    d, u, a = (data["totals"][k] for k in ("dqn", "dqn-unshielded", "astar"))
+    return (f"the `dqn` default (`map.pt`) **{d['successes']}/{d['episodes']}**, {d['collisions']} collisions, "
+            f"paths **{d['path_over_optimal']:.3f}×** the optimal length; the network alone {u['successes']}/"
+            f"{u['episodes']}; A* {a['successes']}/{a['episodes']}, {a['path_over_optimal']:.3f}×")
+
+
+def _crossing_what(data: dict) -> str:
+    return f"several formations crossing (held out, {_eval(data, 'dqn+formation')['worlds']} worlds)"
+
+
+def _crossing(data: dict) -> str:
+    s = _eval(data, "dqn+formation")
+    return (f"every formation arrived in **{s['worlds_all_arrived']}/{s['worlds']}** worlds (leaders: `general.pt`, "
+            f"their default), {s['robot_robot_collisions']} robot–robot collisions, links in range "
+            f"{_pct(s['links_in_range'])} of steps")
+
+
+EVAL_GENERAL = "python tools/eval_general.py"
+ROWS = [
+    Row("fixed20", ("apf-physics eval worlds/fixed20.yaml --planner gradient,dqn --json {out} --no-progress",),
+        lambda d: "fixed 20×20 world, 40 starts", _fixed20),
+    Row("train_fixed20", ("python tools/train_seeds.py worlds/fixed20.yaml --seeds 0 1 2 --out {data}/train_fixed20 "
+                          "--json {out}",),
+        lambda d: "training on it from scratch (`apf-physics train --world worlds/fixed20.yaml`, its defaults)",
+        _train),
+    Row("fixed20_random", ("apf-physics eval worlds/fixed20.yaml --planner gradient,dqn,dqn-unshielded "
+                           "--random-starts 200 --seed 1 --json {out} --no-progress",),
+        lambda d: "same world, 200 random free starts", _fixed20_random),
+    Row("formation", ("apf-physics eval worlds/fixed20.yaml --planner dqn --formation --json {out} --no-progress",),
+        lambda d: "formation (leader + 2 followers) on the 40 starts", _formation),
+    Row("general", ("apf-physics generate --family point,line,two_points,concave,bent_line,clutter --count 60 "
+                    "--seed 100 --starts 5 --out {data}/heldout --force",
+                    f"{EVAL_GENERAL} {{data}}/heldout --planners gradient,escape,astar,dqn,dqn-unshielded "
+                    "--model general=general --model map=map --json {out}"),
+        _general_what, _general),
+    Row("thesis_test", (f"{EVAL_GENERAL} worlds/thesis/test1.yaml worlds/thesis/test2.yaml worlds/thesis/test3.yaml "
+                        "worlds/thesis/test4.yaml --planners gradient,dqn --model general=general --model map=map "
+                        "--json {out}",),
+        lambda d: "the thesis's four general test worlds", _thesis_test),
+    Row("structures", ("apf-physics generate --family rooms,maze,nested_cups,narrow_gap,dense_clutter --count 50 "
+                       "--seed 2027 --starts 4 --out {data}/h12_50 --force",
+                       "apf-physics generate --family rooms,maze,nested_cups,narrow_gap,dense_clutter,mixed --count 25 "
+                       "--size 100 --seed 2028 --starts 4 --out {data}/h12_100 --force",
+                       f"{EVAL_GENERAL} {{data}}/h12_50 {{data}}/h12_100 --planners gradient,escape,dqn,dqn-unshielded "
+                       "--model general=general --model map=map --json {out}"),
+        _structures_what, _structures),
+    Row("moving", ("apf-physics generate --family moving --count 60 --seed 313 --starts 5 --out {data}/mv_heldout --force",
+                   f"{EVAL_GENERAL} {{data}}/mv_heldout --planners astar,dqn --model moving=moving --json {{out}}"),
+        _moving_what, _moving),
+    Row("movingai", ("python tools/bench_movingai.py {movingai} --planners dqn,dqn-unshielded,astar --json {out}",),
+        _movingai_what, _movingai),
+    Row("crossing", ("apf-physics generate --family crossing --count 60 --seed 314 --out {data}/crossing --no-label --force",
+                     "apf-physics eval {data}/crossing --planner dqn --formation --json {out} --no-progress"),
+        _crossing_what, _crossing),
+]
+BY_KEY = {row.key: row for row in ROWS}
+
+
+def load(row: Row) -> dict:
+    """A row's results file; ``apf-physics eval --json``'s list becomes ``{"evaluations": [...]}``."""
+    data = json.loads(row.path.read_text())
+    return {"evaluations": data} if isinstance(data, list) else data
+
+
+def table() -> str:
+    """The README's table, from the results files."""
+    lines = ["| | result | made by |", "|---|---|---|"]
+    for row in ROWS:
+        data = load(row)
+        lines.append(f"| {row.what(data)} | {row.result(data)} | `python tools/figures.py run {row.key}` |")
+    return "\n".join(lines)
+
+
+def readme_block(text: str) -> str:
+    """The table as the README holds it (between the markers)."""
+    if BEGIN not in text or END not in text:
+        raise SystemExit(f"{README}: no figures block (the lines {BEGIN!r} and {END!r})")
+    return text.split(BEGIN, 1)[1].split(END, 1)[0].strip("\n")
+
+
+def commands(row: Row, data: str, movingai: str) -> list[str]:
+    out = shlex.quote(str(row.path.relative_to(ROOT)))
+    return [c.format(data=data, movingai=movingai, out=out) for c in row.commands]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("action", choices=("run", "show", "readme", "check"))
+    parser.add_argument("rows", nargs="*", metavar="ROW", help=f"rows (default: all): {', '.join(BY_KEY)}")
+    parser.add_argument("--data", default="/tmp/apf-figures", help="where held-out worlds and runs are made")
+    parser.add_argument("--movingai", default="maps/movingai", help="the MovingAI maps and scenarios, fetched by you")
+    args = parser.parse_args(argv)
+    unknown = [k for k in args.rows if k not in BY_KEY]
+    if unknown:
+        parser.error(f"unknown row {unknown[0]!r}; choose from {', '.join(BY_KEY)}")
+    rows = [BY_KEY[k] for k in args.rows] or ROWS
+    if args.action in ("run", "show"):
+        for row in rows:
+            for command in commands(row, args.data, args.movingai):
+                print(f"$ {command}", flush=True)
+                if args.action == "run":
+                    subprocess.run(command, shell=True, check=True, cwd=ROOT)
+        return 0
+    text = README.read_text()
+    if args.action == "check":
+        same = readme_block(text) == table()
+        print("the README's figures match tools/results/" if same else
+              "the README's figures differ from tools/results/: run `python tools/figures.py readme`")
+        return 0 if same else 1
+    before, rest = text.split(BEGIN, 1)
+    README.write_text(f"{before}{BEGIN}\n{table()}\n{END}{rest.split(END, 1)[1]}")
+    print(f"wrote the figures into {README}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
