@@ -138,6 +138,23 @@ def touching_pairs(space: pymunk.Space, buffer: pymunk.batch.Buffer) -> np.ndarr
     return np.frombuffer(buffer.int_buf(), dtype=np.uintp).reshape(-1, 2).copy()
 
 
+def touching_depths(space: pymunk.Space, buffer: pymunk.batch.Buffer) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pairs touching now, as :func:`touching_pairs`, with how they touch.
+
+    Returns:
+        ``(ids (K, 2), normal (K, 2), distance (K,))``: body ids ``(a, b)``, the contact normal
+        from ``a`` to ``b``, and the signed distance of their contact point (negative: ``a``
+        and ``b`` overlap by that much). A robot's disc meets a shape at one point.
+    """
+    buffer.clear()
+    fields = (pymunk.batch.ArbiterFields.BODY_A_ID | pymunk.batch.ArbiterFields.BODY_B_ID
+              | pymunk.batch.ArbiterFields.NORMAL | pymunk.batch.ArbiterFields.DISTANCE_1)
+    pymunk.batch.get_space_arbiters(space, fields, buffer)
+    ids = np.frombuffer(buffer.int_buf(), dtype=np.uintp).reshape(-1, 2).copy()
+    values = np.frombuffer(buffer.float_buf(), dtype=np.float64).reshape(-1, 3)
+    return ids, values[:, :2].copy(), values[:, 2].copy()
+
+
 def contact_log(rows: np.ndarray, num_robots: int) -> ContactLog:
     """The contact log of the rows ``(robot, kind, other)`` (:func:`contact_rows`)."""
     flags = np.zeros((len(KINDS), num_robots), bool)

@@ -44,7 +44,8 @@ import pymunk
 import pymunk.batch
 
 from apf_physics.contacts import (FEW_PAIRS, MOVING, BodyLabels, CollisionType, ContactLog, contact_log, contact_rows,
-                                  contact_rows_few, count_touching, touching_pairs)
+                                  contact_rows_few, count_touching, touching_depths,
+                                  touching_pairs)
 from apf_physics.contacts import KINDS, Contact  # noqa: F401 (public here too)
 from apf_physics.errors import UserError
 from apf_physics.field import Atlas
@@ -178,6 +179,7 @@ class Physics:
         self._rows_dirty = True
         self._touch_free = ContactLog.nothing(self.num_robots)   # the log of a step without contacts
         self._movers_needed: list = []
+        self._depths = None   # the last substep's touching pairs, normals and distances (touching_depths)
 
     # -- worlds and tiles ------------------------------------------------------------------
     def _lane(self, slot: int, world: World) -> int:
@@ -512,117 +514,104 @@ class Physics:
         self._lend_movers(active)
         before = self._positions[robots].copy()
         pairs = self._simulate(robots, v) if len(robots) or self._proxy_dirty.any() else None
+        undone = np.zeros(0, np.intp)
         if len(robots) and (self.robots_per_slot > 1 or self._crowd_robots):
-            self._undo_crossings(robots, before)
+            undone = self._undo_crossings(robots, before)
         free = ~simulate
         self._positions[free] += moves[free]
         self._proxy_held = bool(len(robots))
         if pairs is None or not len(pairs):
             return self._touch_free
-        log = self._log(pairs)
-        self._settle(np.flatnonzero(log.any))
-        return log
+        self._settle(undone)
+        return self._log(pairs)
 
-    def _settle(self, touched: np.ndarray) -> None:
+    def _settle(self, undone: np.ndarray) -> None:
         """Resolve, before the step ends, the overlaps that pymunk leaves at its last substep.
 
         Chipmunk finds an overlap after the substep that made it and pushes it out in the
         substeps after: a robot that met an obstacle in the last substep ends the step up to
-        one substep's travel inside it, and robots that met each other up to twice that. Every
-        robot that touched something (``touched``) and ends more than :data:`SETTLE_OBSTACLE`
-        inside an obstacle or past the map's edge, or more than :data:`SETTLE_ROBOT` into a
-        robot it meets, is pushed out (with the robots it meets: its whole slot or crowd), in
-        moves that never cross anything (:meth:`_push_apart`); its proxy follows.
+        one substep's travel inside it, and robots that met each other up to twice that. The
+        arbiters of the last substep say how deep each pair overlaps and along which normal
+        (:func:`~apf_physics.contacts.touching_depths`); :func:`_project_out` moves the
+        robots out of each other and of the static shapes by exactly that much (0.001 more),
+        whenever an overlap exceeds :data:`SETTLE_OBSTACLE` (obstacles, moving obstacles and
+        the map's edge) or :data:`SETTLE_ROBOT` (two robots). The proxies follow.
+
+        ``undone``: robots put back where they started the step (:meth:`_undo_crossings`);
+        their contacts with static shapes are no longer there.
         """
-        if not len(touched):
+        if self._depths is None:
             return
+        ids, normal, distance = self._depths
+        deep = distance < -min(SETTLE_OBSTACLE, SETTLE_ROBOT)
+        if not deep.any():
+            return
+        ids, normal, depth = ids[deep], normal[deep], -distance[deep]
+        proxy = self._proxy_order[np.clip(np.searchsorted(self._proxy_ids[self._proxy_order], ids), 0,
+                                          len(self._proxy_ids) - 1)]
+        robot = np.where(self._proxy_ids[proxy] == ids, self._proxy_robot[proxy], -1)   # (K, 2): -1 not a robot
+        a_robot, b_robot = robot[:, 0] >= 0, robot[:, 1] >= 0
+        pairs = a_robot & b_robot
+        # a robot and a static shape: the robot's way out is against the normal if it is a, along it if b
+        static_robot = np.concatenate([robot[a_robot & ~b_robot, 0], robot[b_robot & ~a_robot, 1]])
+        static_normal = np.concatenate([-normal[a_robot & ~b_robot], normal[b_robot & ~a_robot]])
+        static_depth = np.concatenate([depth[a_robot & ~b_robot], depth[b_robot & ~a_robot]])
+        keep = ~np.isin(static_robot, undone)
+        static_robot, static_normal, static_depth = static_robot[keep], static_normal[keep], static_depth[keep]
+        pair_robots = robot[pairs]
+        anchor = self._positions[static_robot]
         m = self.robots_per_slot
-        slots = np.unique(touched // m)
-        meet = self._shared[slots] | (m > 1)
-        batches = []   # (world, time, robots, group of each robot: robots of one group meet)
-        alone = slots[~meet]
-        if len(alone):
-            keys = [(id(self.worlds[s]), float(self._slot_time[s]) if self._slot_moving[s] else 0.0)
-                    for s in alone.tolist()]
-            for key in dict.fromkeys(keys):
-                mine = alone[[k == key for k in keys]]
-                batches.append((self.worlds[int(mine[0])], key[1], mine, None))
-        for crowd in np.unique(self.crowd[slots[meet]]).tolist():
-            members = np.flatnonzero(self.crowd == crowd)
-            robots = (members[:, None] * m + np.arange(m)).ravel()
-            robots = robots[self.present[robots]]
-            batches.append((self.worlds[int(members[0])], float(self._slot_time[members[0]]), robots, True))
-        for world, t, robots, together in batches:
-            moving = bool(world.moving)
-            after = self._push_apart(world, t + 1.0 if moving else None, self._positions[robots], together)
-            if after is None:
-                continue
-            self._positions[robots] = after
-            held = self._robot_proxy[robots] >= 0
-            proxies = self._robot_proxy[robots[held]]
-            self._proxy_target[proxies] = after[held] + self._tiles.offset[self._slot_tile[robots[held] // m]]
+        for _ in range(6):
+            involved = np.unique(np.concatenate([static_robot, pair_robots.ravel()]))
+            local = np.searchsorted(involved, static_robot), np.searchsorted(involved, pair_robots)
+            p = _project_out(self._positions[involved], self._slot_radius[involved // m], local[0], anchor,
+                             static_normal, static_depth, local[1])
+            moved = np.any(p != self._positions[involved], axis=1)
+            robots = involved[moved]
+            if not len(robots):
+                return
+            self._positions[robots] = p[moved]
+            proxies = self._robot_proxy[robots]   # only robots that pymunk moved touch anything
+            self._proxy_target[proxies] = p[moved] + self._tiles.offset[self._slot_tile[robots // m]]
             self._proxy_moved[proxies] = True
+            # a robot pushed out of one shape may have been pushed into another: ask pymunk again, and
+            # keep the shapes already met (a robot in a corner settles against both sides at once)
+            more_robot, more_normal, more_depth, more_pairs = self._overlaps_at(robots)
+            if not len(more_robot) and not len(more_pairs):
+                return
+            pair_robots = np.concatenate([pair_robots, more_pairs])
+            static_robot = np.concatenate([static_robot, more_robot])
+            anchor = np.concatenate([anchor, self._positions[more_robot]])
+            static_normal = np.concatenate([static_normal, more_normal])
+            static_depth = np.concatenate([static_depth, more_depth])
 
-    def _push_apart(self, world: World, t: float | None, p: np.ndarray, together: bool | None,
-                    rounds: int = 40) -> np.ndarray | None:
-        """Robots at ``p`` (all in ``world``, at step ``t``; None: no moving obstacles) moved out
-        of the obstacles, the map's edge and, when ``together``, each other, or None when
-        none overlaps more than the tolerances.
+    def _overlaps_at(self, robots: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """What the proxies of ``robots``, put where the robots are now, overlap by more than the
+        settling tolerances (pymunk's shape queries): ``(robot (K,), way out (K, 2), depth (K,),
+        pairs of robots (L, 2))``, as :meth:`_settle` reads them from the arbiters."""
+        bodies = [self._proxy_body[k] for k in self._robot_proxy[robots].tolist()]
+        for body, (x, y) in zip(bodies, self._proxy_target[self._robot_proxy[robots]].tolist()):
+            body.position = (x, y)
+            self.space.reindex_shapes_for_body(body)
+        static_robot, static_normal, static_depth, pairs = [], [], [], []
+        tolerance = min(SETTLE_OBSTACLE, SETTLE_ROBOT)
+        for robot, body in zip(robots.tolist(), bodies):
+            for info in self.space.shape_query(next(iter(body.shapes))):
+                points = info.contact_point_set.points
+                if not points or points[0].distance >= -tolerance:
+                    continue
+                other = self._proxy_of_id.get(info.shape.body.id)
+                if other is None:   # a static shape (or a moving obstacle): out against the normal
+                    normal = info.contact_point_set.normal
+                    static_robot.append(robot)
+                    static_normal.append((-normal.x, -normal.y))
+                    static_depth.append(-points[0].distance)
+                elif self._proxy_robot[other] >= 0:
+                    pairs.append((robot, int(self._proxy_robot[other])))
+        return (np.array(static_robot, np.intp), np.array(static_normal, float).reshape(-1, 2),
+                np.array(static_depth, float), np.array(pairs, np.intp).reshape(-1, 2))
 
-        Each round pushes every overlapping robot by its whole overlap (and 0.001 more): along
-        the clearance's gradient off an obstacle or the edge, half of it each along the line
-        of centres off a robot. A push is taken whole, or a half or a quarter of it, whichever
-        is longest among those whose path keeps the robot's clearance (sampled every 0.01), so
-        nothing is ever crossed; pushes against a wall therefore go to the robot on the free
-        side. Rounds repeat until nothing overlaps more than the tolerances.
-        """
-        r = world.robot_radius
-        k = len(p)
-        moment = world if t is None else world.at(t)
-        clearance = moment.clearance(p)
-        changed = False
-        for _ in range(rounds):
-            edge = r - clearance
-            overlap = np.zeros((k, k))
-            if together and k > 1:
-                diff = p[:, None, :] - p[None, :, :]
-                d = np.hypot(diff[..., 0], diff[..., 1])
-                np.fill_diagonal(d, np.inf)
-                overlap = np.clip(2 * r - d, 0.0, None)
-            if edge.max() <= SETTLE_OBSTACLE and overlap.max(initial=0.0) <= SETTLE_ROBOT:
-                break
-            push = np.zeros_like(p)
-            if overlap.any():
-                unit = diff / np.maximum(d, 1e-9)[..., None]
-                push += 0.5 * np.sum(np.where(overlap > 0, overlap + 1e-3, 0.0)[..., None] * unit, axis=1)
-            # robots alone in their slots settle each on its own (as it would in a batch of one)
-            off = np.flatnonzero(edge > 0 if together else edge > SETTLE_OBSTACLE)
-            if len(off):
-                h = 1e-4
-                q = p[off]
-                g = moment.clearance(np.concatenate([q + [h, 0], q - [h, 0], q + [0, h], q - [0, h]])).reshape(4, -1)
-                grad = np.stack([g[0] - g[1], g[2] - g[3]], -1) / (2 * h)
-                grad /= np.maximum(np.hypot(grad[:, 0], grad[:, 1]), 1e-12)[:, None]
-                push[off] += (edge[off] + 1e-3)[:, None] * grad
-            moved = np.flatnonzero(np.any(push != 0, axis=1))
-            scales = np.array([0.25, 0.5, 1.0])
-            a = np.tile(p[moved], (3, 1))
-            b = a + np.repeat(scales, len(moved))[:, None] * np.tile(push[moved], (3, 1))
-            if t is None:
-                along = world.path_clearance(a, b, 0.01)
-            else:
-                along = world.path_clearance(a, b, 0.01, t=t, during=False)
-            ok = along.reshape(3, -1) >= np.minimum(r, clearance[moved])[None] - 1e-9
-            best = np.where(ok[2], 1.0, np.where(ok[1], 0.5, np.where(ok[0], 0.25, 0.0)))
-            if not best.any():
-                break
-            p = p.copy()
-            p[moved] += best[:, None] * push[moved]
-            clearance = moment.clearance(p)
-            changed = True
-        return p if changed else None
-
-    def _undo_crossings(self, robots: np.ndarray, before: np.ndarray) -> None:
+    def _undo_crossings(self, robots: np.ndarray, before: np.ndarray) -> np.ndarray:
         """Put back any of ``robots`` whose move this step passed through a static obstacle.
 
         The substeps keep a robot's own move from tunnelling, but robots that touch each other
@@ -631,9 +620,13 @@ class Physics:
         static obstacles (sampled every half radius: a segment through even a zero-thickness
         wall has a sample within a quarter radius of it, which no allowed move comes near)
         finds such a crossing; the robot then stays where it was, against the obstacle.
+
+        Returns:
+            The robots put back.
         """
         after = self._positions[robots]
         slots = robots // self.robots_per_slot
+        undone = []
         for slot in np.unique(slots).tolist():
             world = self.worlds[slot]
             mine = np.flatnonzero(slots == slot)
@@ -642,10 +635,12 @@ class Physics:
             crossed = mine[clear < 0.5 * r]
             if not len(crossed):
                 continue
+            undone.append(robots[crossed])
             self._positions[robots[crossed]] = before[crossed]
             proxies = self._robot_proxy[robots[crossed]]
             self._proxy_target[proxies] = before[crossed] + self._tiles.offset[self._slot_tile[slots[crossed]]]
             self._proxy_moved[proxies] = True
+        return np.concatenate(undone) if undone else np.zeros(0, np.intp)
 
     def _lend_movers(self, active: np.ndarray | None) -> None:
         """Put a kinematic copy of each moving obstacle that a robot needing physics comes near
@@ -706,11 +701,15 @@ class Physics:
         self._proxy_moved[:] = False
         touched = []
         touching = self._touching
-        for _ in range(self.substeps):
+        self._depths = None
+        for k in range(self.substeps):
             self.space.step(self.dt)
             if not touching[0]:
                 continue   # no shapes touch: no arbiters to read
-            ids = touching_pairs(self.space, self._arbiters)
+            if k < self.substeps - 1:
+                ids = touching_pairs(self.space, self._arbiters)
+            else:   # the last substep: how deep they touch too, for _settle
+                ids, normal, distance = self._depths = touching_depths(self.space, self._arbiters)
             if len(ids):
                 touched.append(ids)
         self._proxy_dirty[:] = False
@@ -786,3 +785,58 @@ def _close_under_touch(needs: np.ndarray, both_free: np.ndarray, near_held: np.n
         if (more == needs).all():
             return needs
         needs = more
+
+
+def _project_out(p: np.ndarray, radius: np.ndarray, static_robot: np.ndarray, anchor: np.ndarray,
+                 static_normal: np.ndarray, static_depth: np.ndarray, pairs: np.ndarray, rounds: int = 20) -> np.ndarray:
+    """Robots at ``p`` moved out of the static shapes and each other that they overlap.
+
+    Args:
+        p: (n, 2) positions; ``radius`` (n,) their radii.
+        static_robot, anchor, static_normal, static_depth: (K,) a robot overlapping a static shape,
+            where it was then, its way out (unit) and how deep; the shape's boundary is taken as
+            the plane there.
+        pairs: (L, 2) robots that overlap each other (their overlap is measured from ``p``).
+
+    Each round first pushes every pair that overlaps by more than :data:`SETTLE_ROBOT` apart,
+    half each along the line of centres (0.001 beyond touching), and then every robot that
+    overlaps a shape by more than :data:`SETTLE_OBSTACLE` out of the one it overlaps most (0.001
+    beyond its boundary), until none does. A round thus ends with every robot on the free side
+    of the shape it overlapped most (a robot that a pair pushed into a wall is pushed back, and
+    the pair's overlap goes to the other robot in the next rounds), and no robot is taken
+    farther than half its radius from where it was by pairs (what it is pushed into is then
+    found by the caller's next query, before its centre could reach it). A robot alone with its
+    shapes is settled only by its own overlaps: the same in a batch as on its own.
+    """
+    start = p
+    p = p.copy()
+    for _ in range(rounds):
+        moved = False
+        if len(pairs):
+            diff = p[pairs[:, 0]] - p[pairs[:, 1]]
+            d = np.hypot(diff[:, 0], diff[:, 1])
+            overlap = radius[pairs[:, 0]] + radius[pairs[:, 1]] - d
+            apart = overlap > SETTLE_ROBOT
+            if apart.any():
+                unit = diff[apart] / np.maximum(d[apart], 1e-9)[:, None]
+                half = 0.5 * (overlap[apart] + 1e-3)[:, None] * unit
+                push = np.zeros_like(p)
+                np.add.at(push, pairs[apart, 0], half)
+                np.add.at(push, pairs[apart, 1], -half)
+                p += push
+                away = p - start
+                far = np.hypot(away[:, 0], away[:, 1])
+                p = start + away * np.minimum(1.0, 0.5 * radius / np.maximum(far, 1e-12))[:, None]
+                moved = True
+        if len(static_robot):
+            depth = static_depth - np.sum(static_normal * (p[static_robot] - anchor), axis=1)
+            # each robot's deepest shape: the first of its rows sorted by robot, then by depth, deepest first
+            order = np.lexsort((-depth, static_robot))
+            deepest = order[np.concatenate([[True], np.diff(static_robot[order]) != 0])]
+            deepest = deepest[depth[deepest] > SETTLE_OBSTACLE]
+            if len(deepest):
+                p[static_robot[deepest]] += (depth[deepest] + 1e-3)[:, None] * static_normal[deepest]
+                moved = True
+        if not moved:
+            break
+    return p
