@@ -279,31 +279,32 @@ class Observer:
             return
         first, last, base = first[robot, shape], last[robot, shape], local[robot, shape]
         span = (last - first).max(axis=0) + 1
-        a, b = np.indices((int(span[0]), int(span[1]))).reshape(2, 1, -1)
-        dx = first[:, None, 0] + a                                                      # (pairs, S)
-        dy = first[:, None, 1] + b
-        valid = (dx <= last[:, None, 0]) & (dy <= last[:, None, 1])
-        px, py = base[:, None, 0] + dx, base[:, None, 1] + dy                           # in the shape's frame
+        a, b = np.indices((int(span[0]), int(span[1]))).reshape(2, -1)
+        # the window points of each (robot, shape) pair within its box: pair, and place in the box
+        pair, at = np.nonzero((first[:, None, 0] + a <= last[:, None, 0]) & (first[:, None, 1] + b <= last[:, None, 1]))
+        dx, dy = first[pair, 0] + a[at], first[pair, 1] + b[at]
+        px, py = base[pair, 0] + dx, base[pair, 1] + dy                                 # in the shape's frame
+        shape = shape[pair]
         # discs all at once; polygons one by one
-        d = np.hypot(px - centre[shape, 0, None], py - centre[shape, 1, None]) - radius[shape, None]
+        d = np.hypot(px - centre[shape, 0], py - centre[shape, 1]) - radius[shape]
         polygon = np.isnan(radius[shape])
         for index in (np.unique(shape[polygon]).tolist() if polygon.any() else ()):
-            pairs = shape == index
-            dist, _ = shapes[index].signed_distance(np.stack([px[pairs], py[pairs]], -1).reshape(-1, 2))
-            d[pairs] = dist.reshape(-1, dx.shape[1])
-        d = d[valid]
+            mine_ = shape == index
+            d[mine_], _ = shapes[index].signed_distance(np.stack([px[mine_], py[mine_]], -1))
         term = apf.repulsive_term(d, field.krep, field.p0, field.u_max)
-        flat = (h - dy) * k + (dx + h) if lattice else np.zeros_like(dx)                # window point [h - dy, h + dx]
-        q = values.shape[1]
-        cell = (mine[robot][:, None] * q + flat)[valid]        # index into values as one (n·Q,) row
-        cells, at = np.unique(cell, return_inverse=True)
-        row, col = np.divmod(cells, q)
-        # u_wall stays the highest reading: points inside read it, none above it
-        values[row, col] = np.minimum(values[row, col] + np.bincount(at, weights=term), world.u_wall)
+        n, q = values.shape
+        cell = mine[robot[pair]] * q + ((h - dy) * k + (dx + h) if lattice else 0)    # window point [h - dy, h + dx]
+        # each point's terms summed in the order above (bincount adds in input order), then added to
+        # U there; u_wall stays the highest reading: points inside read it, none above it
+        added = np.bincount(cell, weights=term, minlength=n * q)
+        hit = np.zeros(n * q, bool)
+        hit[cell] = True
+        assert values.flags.c_contiguous   # so that flat is a view of it
+        flat = values.reshape(-1)
+        flat[hit] = np.minimum(flat[hit] + added[hit], world.u_wall)
         inside = d <= 0
         if inside.any():
-            row, col = np.divmod(cell[inside], q)
-            values[row, col] = world.u_wall
+            flat[cell[inside]] = world.u_wall
 
     def _moving_discs(self, world: World) -> tuple[np.ndarray, np.ndarray]:
         """Centres ``(M, 2)`` and radii ``(M,)`` of the moving discs where they are written (NaN for polygons)."""

@@ -1,0 +1,86 @@
+"""Benchmark observations among moving obstacles: 8 moving discs beside the same discs frozen.
+
+    python tools/bench_moving.py [--repeats 200] [--robots 1 64 256]
+
+fixed20 with 8 discs of radius 0.5 that move back and forth across it, and the same world
+with the discs standing where they start (so they are in the observation's static raster).
+For each number of robots, µs per robot of one ``Observer.observe`` call for all of them (at
+varied steps), frozen beside moving, and their ratio (aim ≤ 2). ``Observer.observe`` is the
+one implementation of both the environments' observations and ``eval``'s (the DQN planner's).
+Frozen and moving are timed in alternating blocks; each figure is the median of its blocks.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import statistics
+import time
+
+import numpy as np
+
+import apf_physics
+from apf_physics.obstacles import CircleObstacle, Motion
+from apf_physics.observation import Observer, ObserverConfig
+
+
+def moving_world(frozen: bool):
+    """fixed20 with 8 discs moving back and forth across it (or standing where they start)."""
+    base = apf_physics.load_world("fixed20")
+    rng = np.random.default_rng(0)
+    discs = []
+    for k in range(8):
+        centre = np.array([2.0 + 2.0 * k, rng.uniform(3, 6)])
+        motion = None if frozen else Motion(np.array([[0.0, 10.0]]), float(rng.uniform(0.15, 0.6)),
+                                            phase=float(rng.uniform(0, 10)))
+        discs.append(CircleObstacle(centre, 0.5, motion))
+    return dataclasses.replace(base, obstacles=base.obstacles + tuple(discs), _cache={})
+
+
+class Case:
+    """An observer of ``robots`` robots at random free positions of ``world``, at varied steps."""
+
+    def __init__(self, world, robots: int, config: ObserverConfig):
+        self.observer = Observer(config, robots, [world])
+        rng = np.random.default_rng(1)
+        self.positions = world.random_free_positions(rng, robots)
+        self.observer.reset(np.arange(robots), self.positions, [world] * robots)
+        self.steps = rng.integers(0, 100, robots).astype(float)
+        self.robots = robots
+        self.observer.observe(self.positions, t=self.steps)   # warm up (rasters built)
+
+    def time(self, repeats: int) -> float:
+        """µs per robot of one observe call for all robots."""
+        t = time.perf_counter()
+        for k in range(repeats):
+            self.observer.observe(self.positions, t=self.steps + k)
+        return (time.perf_counter() - t) / (repeats * self.robots) * 1e6
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=200, help="calls per block")
+    parser.add_argument("--blocks", type=int, default=7)
+    parser.add_argument("--robots", type=int, nargs="+", default=[1, 64, 256])
+    parser.add_argument("--previous", action="store_true", help="with the 'previous' channel (the field a step earlier)")
+    args = parser.parse_args()
+    config = ObserverConfig(channels=("potential", "previous") if args.previous else ("potential",))
+    frozen_world, moving_world_ = moving_world(True), moving_world(False)
+    print(f"load average at start: {os.getloadavg()[0]:.2f}")
+    print(f"observations in fixed20 with 8 discs, channels {config.channels} (median of {args.blocks} alternating blocks)")
+    print(f"  {'robots':>6} {'frozen us/robot':>16} {'moving us/robot':>16} {'moving / frozen':>16}")
+    for n in args.robots:
+        frozen, moving = Case(frozen_world, n, config), Case(moving_world_, n, config)
+        repeats = max(20, args.repeats * 64 // max(n, 64))
+        f, m = [], []
+        for _ in range(args.blocks):
+            f.append(frozen.time(repeats))
+            m.append(moving.time(repeats))
+        f, m = statistics.median(f), statistics.median(m)
+        print(f"  {n:>6} {f:>16.2f} {m:>16.2f} {m / f:>15.2f}x   (aim <= 2)")
+    print(f"load average at end: {os.getloadavg()[0]:.2f}")
+
+
+if __name__ == "__main__":
+    main()
