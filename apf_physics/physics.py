@@ -59,6 +59,7 @@ CLEARANCE_RESOLUTION = 8  # nodes per unit of the clearance rasters that decide 
 CLEARANCE_CAP = 4.0  # clearance beyond this is not measured (it exceeds any move plus a radius)
 _FEW = 4  # up to this many proxies, per-body attribute access beats pymunk.batch's fixed cost
 _PROXY_GROUP = 1  # collision group of proxies of single-robot slots: they never touch each other
+_SOLO_FILTER = pymunk.ShapeFilter(group=_PROXY_GROUP)   # queries about them: they are not there
 SETTLE_OBSTACLE = 0.005  # a robot ending a step farther than this inside an obstacle or the edge is pushed out [units]
 SETTLE_ROBOT = 0.01  # two robots ending a step overlapping more than this are pushed apart [units]
 _THIRDS = np.array([0.0, 0.5, 1.0])[None, :, None]  # where a move's clearance is sampled
@@ -255,7 +256,7 @@ class Physics:
         shape.friction = 0.0
         shape.elasticity = 0.0
         if solo:
-            shape.filter = pymunk.ShapeFilter(group=_PROXY_GROUP)
+            shape.filter = _SOLO_FILTER
         k = len(self._proxy_body)
         body.position = self._parking(k)
         self.space.add(body, shape)
@@ -587,15 +588,29 @@ class Physics:
 
     def _overlaps_at(self, robots: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """What the proxies of ``robots``, put where the robots are now, overlap by more than the
-        settling tolerances (pymunk's shape queries): ``(robot (K,), way out (K, 2), depth (K,),
-        pairs of robots (L, 2))``, as :meth:`_settle` reads them from the arbiters."""
-        bodies = [self._proxy_body[k] for k in self._robot_proxy[robots].tolist()]
-        for body, (x, y) in zip(bodies, self._proxy_target[self._robot_proxy[robots]].tolist()):
+        settling tolerances (pymunk's queries): ``(robot (K,), way out (K, 2), depth (K,), pairs of
+        robots (L, 2))``, as :meth:`_settle` reads them from the arbiters.
+
+        A robot alone in its slot meets no robot: the shape nearest its centre is all there is to
+        know (a point query; overlaps of several shapes are found one per call, nearest first).
+        """
+        static_robot, static_normal, static_depth, pairs = [], [], [], []
+        proxies = self._robot_proxy[robots]
+        solo = self._proxy_solo[proxies]
+        radius = self._proxy_radius[proxies]
+        where = self._proxy_target[proxies].tolist()
+        for robot, (x, y), r in zip(robots[solo].tolist(), [w for w, s in zip(where, solo) if s], radius[solo].tolist()):
+            info = self.space.point_query_nearest((x, y), r - SETTLE_OBSTACLE, _SOLO_FILTER)
+            if info is not None:
+                static_robot.append(robot)
+                static_normal.append(tuple(info.gradient))
+                static_depth.append(r - info.distance)
+        bodies = [self._proxy_body[k] for k in proxies[~solo].tolist()]
+        for body, (x, y) in zip(bodies, [w for w, s in zip(where, solo) if not s]):
             body.position = (x, y)
             self.space.reindex_shapes_for_body(body)
-        static_robot, static_normal, static_depth, pairs = [], [], [], []
         tolerance = min(SETTLE_OBSTACLE, SETTLE_ROBOT)
-        for robot, body in zip(robots.tolist(), bodies):
+        for robot, body in zip(robots[~solo].tolist(), bodies):
             for info in self.space.shape_query(next(iter(body.shapes))):
                 points = info.contact_point_set.points
                 if not points or points[0].distance >= -tolerance:
