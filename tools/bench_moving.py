@@ -8,15 +8,20 @@ For each number of robots, µs per robot of one ``Observer.observe`` call for al
 varied steps), frozen beside moving, and their ratio (aim ≤ 2). ``Observer.observe`` is the
 one implementation of both the environments' observations and ``eval``'s (the DQN planner's).
 Frozen and moving are timed in alternating blocks; each figure is the median of its blocks.
+A third column times moving discs through the implementation that ``Observer._add_near``
+replaced (kept as the reference of ``tests/test_moving_observation.py``): before and after
+in one run.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib.util
 import os
 import statistics
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -38,11 +43,22 @@ def moving_world(frozen: bool):
     return dataclasses.replace(base, obstacles=base.obstacles + tuple(discs), _cache={})
 
 
+def reference_add_near():
+    """The implementation of ``Observer._add_near`` before 2026-11-25 (from the test that keeps it)."""
+    path = Path(__file__).resolve().parent.parent / "tests" / "test_moving_observation.py"
+    spec = importlib.util.spec_from_file_location("test_moving_observation", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.reference_add_near
+
+
 class Case:
     """An observer of ``robots`` robots at random free positions of ``world``, at varied steps."""
 
-    def __init__(self, world, robots: int, config: ObserverConfig):
+    def __init__(self, world, robots: int, config: ObserverConfig, add_near=None):
         self.observer = Observer(config, robots, [world])
+        if add_near is not None:
+            self.observer._add_near = add_near.__get__(self.observer)
         rng = np.random.default_rng(1)
         self.positions = world.random_free_positions(rng, robots)
         self.observer.reset(np.arange(robots), self.positions, [world] * robots)
@@ -69,16 +85,20 @@ def main() -> None:
     frozen_world, moving_world_ = moving_world(True), moving_world(False)
     print(f"load average at start: {os.getloadavg()[0]:.2f}")
     print(f"observations in fixed20 with 8 discs, channels {config.channels} (median of {args.blocks} alternating blocks)")
-    print(f"  {'robots':>6} {'frozen us/robot':>16} {'moving us/robot':>16} {'moving / frozen':>16}")
+    reference = reference_add_near()
+    print(f"  {'robots':>6} {'frozen us/robot':>16} {'moving us/robot':>16} {'moving / frozen':>16} "
+          f"{'before: moving':>15} {'before / frozen':>16}")
     for n in args.robots:
         frozen, moving = Case(frozen_world, n, config), Case(moving_world_, n, config)
+        before = Case(moving_world_, n, config, reference)
         repeats = max(20, args.repeats * 64 // max(n, 64))
-        f, m = [], []
+        f, m, b = [], [], []
         for _ in range(args.blocks):
             f.append(frozen.time(repeats))
             m.append(moving.time(repeats))
-        f, m = statistics.median(f), statistics.median(m)
-        print(f"  {n:>6} {f:>16.2f} {m:>16.2f} {m / f:>15.2f}x   (aim <= 2)")
+            b.append(before.time(repeats))
+        f, m, b = statistics.median(f), statistics.median(m), statistics.median(b)
+        print(f"  {n:>6} {f:>16.2f} {m:>16.2f} {m / f:>15.2f}x {b:>15.2f} {b / f:>15.2f}x   (aim <= 2)")
     print(f"load average at end: {os.getloadavg()[0]:.2f}")
 
 

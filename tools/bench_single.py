@@ -2,15 +2,17 @@
 
     python tools/bench_single.py [--steps 20000] [--blocks 10] [--profile]
 
-Both through ``gymnasium.make`` (wrappers included), random actions, an episode reset when
-one ends (resets included in the time). The two are timed in alternating blocks of
-``steps / blocks`` steps, so that a change of the machine's load hits both alike; the
-figure of each is the median over its blocks, and the ratio is theirs (aim ≤ 5).
+All through ``gymnasium.make`` (wrappers included), random actions, an episode reset when one
+ends (resets included in the time). They are timed in alternating blocks of ``steps /
+blocks`` steps, so that a change of the machine's load hits all alike; the figure of each is
+the median over its blocks, and the ratio is theirs (aim ≤ 5). A third line steps
+Navigate-v0's batch of one by the stepper's array path instead of its scalar path
+(``Stepper.scalar = False``): before and after in one run.
 
 Then where a Navigate step goes: the same steps again with the physics call
-(``Physics.step``), the observation (``Observer.observe``) and the reward's terms timed
-apart (per call, with ``time.perf_counter``), and the share of steps that went through
-pymunk. ``--profile`` adds a cProfile of the Navigate steps (top 25 by own time).
+(``Physics.step``, its free-move test apart, and steps with and without pymunk apart), the
+observation (``Observer.observe``) and the resets timed apart (per call, with
+``time.perf_counter``). ``--profile`` adds a cProfile of the Navigate steps (top 25 by own time).
 """
 
 from __future__ import annotations
@@ -46,18 +48,23 @@ def run(env, actions: np.ndarray) -> float:
     return time.perf_counter() - t
 
 
-def side_by_side(steps: int, blocks: int) -> tuple[float, float]:
-    """Median µs per step of CartPole-v1 and of Navigate-v0, timed in alternating blocks."""
-    cart, nav = make("CartPole-v1"), make("apf_physics/Navigate-v0")
+def side_by_side(steps: int, blocks: int) -> tuple[float, float, float]:
+    """Median µs per step of CartPole-v1, of Navigate-v0, and of Navigate-v0 with its batch of one
+    stepped by the array path (``Stepper.scalar = False``: the step before the scalar path),
+    timed in alternating blocks."""
+    cart, nav, array = make("CartPole-v1"), make("apf_physics/Navigate-v0"), make("apf_physics/Navigate-v0")
+    array.unwrapped._task.stepper.scalar = False
     rng = np.random.default_rng(0)
     per = max(1, steps // blocks)
     run(cart, rng.integers(0, 2, 500))   # warm up
     run(nav, rng.integers(0, 9, 500))
-    c, n = [], []
+    run(array, rng.integers(0, 9, 500))
+    c, n, a = [], [], []
     for _ in range(blocks):
         c.append(run(cart, rng.integers(0, 2, per)) / per * 1e6)
         n.append(run(nav, rng.integers(0, 9, per)) / per * 1e6)
-    return statistics.median(c), statistics.median(n)
+        a.append(run(array, rng.integers(0, 9, per)) / per * 1e6)
+    return statistics.median(c), statistics.median(n), statistics.median(a)
 
 
 @contextmanager
@@ -85,32 +92,37 @@ def breakdown(steps: int) -> None:
     env = make("apf_physics/Navigate-v0")
     task = env.unwrapped._task
     physics, observer = task.stepper.physics, task.observer
-    import apf_physics.envs.task as task_module
     actions = np.random.default_rng(1).integers(0, 9, steps)
     run(env, actions[:500])
-    phys, obs, rew = [], [], []
-    simulated = [0]
+    free, simulated, test, obs, starts = [], [], [], [], []
     step = physics.step
 
-    def counting(*args, **kwargs):
+    def sorting(*args, **kwargs):   # physics steps with and without pymunk, apart
+        t = time.perf_counter()
         out = step(*args, **kwargs)
-        simulated[0] += physics._proxy_held
+        (simulated if physics._proxy_held else free).append(time.perf_counter() - t)
         return out
-    physics.step = counting
+    physics.step = sorting
     try:
-        with timed(physics, "step", phys), timed(observer, "observe", obs), timed(task_module, "reward_terms", rew):
+        with timed(physics, "needs_physics", test), timed(observer, "observe", obs), \
+                timed(task, "start", starts):
             total = run(env, actions)
     finally:
         del physics.step
-    parts = {"Physics.step (free moves and pymunk)": sum(phys), "Observer.observe": sum(obs),
-             "reward_terms": sum(rew)}
+    phys = sum(free) + sum(simulated)
+    parts = {"Physics.step, all": phys,
+             "  of which the free-move test": sum(test),
+             "Observer.observe": sum(obs),
+             "resets (NavigationTask.start)": sum(starts)}
     print(f"where a Navigate step goes ({steps} steps, per-call timers add a little to each part):")
-    print(f"  {'whole step':38s} {total / steps * 1e6:7.1f} us")
+    print(f"  {'whole step (resets included)':40s} {total / steps * 1e6:7.1f} us")
     for name, seconds in parts.items():
-        print(f"  {name:38s} {seconds / steps * 1e6:7.1f} us  {seconds / total:5.1%}")
-    rest = total - sum(parts.values())
-    print(f"  {'the rest (env, task, stepper, wrappers)':38s} {rest / steps * 1e6:7.1f} us  {rest / total:5.1%}")
-    print(f"  steps through pymunk: {simulated[0] / steps:.1%}")
+        print(f"  {name:40s} {seconds / steps * 1e6:7.1f} us  {seconds / total:5.1%}")
+    rest = total - phys - sum(obs) - sum(starts)
+    print(f"  {'the rest (env, task, stepper, wrappers)':40s} {rest / steps * 1e6:7.1f} us  {rest / total:5.1%}")
+    print(f"  physics steps without pymunk: {len(free) / steps:.1%} of steps, median {np.median(free) * 1e6:.1f} us")
+    print(f"  physics steps through pymunk: {len(simulated) / steps:.1%} of steps, median "
+          f"{np.median(simulated) * 1e6:.1f} us")
 
 
 def main() -> None:
@@ -120,11 +132,11 @@ def main() -> None:
     parser.add_argument("--profile", action="store_true", help="also cProfile the Navigate steps")
     args = parser.parse_args()
     print(f"load average at start: {os.getloadavg()[0]:.2f}")
-    cart, nav = side_by_side(args.steps, args.blocks)
+    cart, nav, array = side_by_side(args.steps, args.blocks)
     print(f"single environment, random actions, through gymnasium.make (median of {args.blocks} alternating blocks)")
-    print(f"  CartPole-v1               {cart:7.1f} us/step")
-    print(f"  apf_physics/Navigate-v0   {nav:7.1f} us/step")
-    print(f"  a Navigate step costs     {nav / cart:7.1f} x a CartPole step (aim <= 5)")
+    print(f"  CartPole-v1                             {cart:7.1f} us/step")
+    print(f"  apf_physics/Navigate-v0                 {nav:7.1f} us/step   {nav / cart:5.1f} x CartPole (aim <= 5)")
+    print(f"  the same, stepped by the array path     {array:7.1f} us/step   {array / cart:5.1f} x CartPole")
     breakdown(args.steps)
     if args.profile:
         env = make("apf_physics/Navigate-v0")
