@@ -162,7 +162,7 @@ class NavigateEnv(gym.Env):
         return self._task.observation()[0], self._get_info()
 
     def step(self, action):
-        result = self._task.step(np.array([int(action)]))
+        result = self._task.step(int(action))
         self._steps += 1
         if self.render_mode is not None:  # the trail is only drawn
             self._trail.append(self.position)

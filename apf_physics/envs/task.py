@@ -164,10 +164,12 @@ class NavigationTask:
         """(N, C, k, k) the current observations (or those of ``slots``); never changed afterwards."""
         return self._obs if slots is None else self._obs[slots]
 
-    def step(self, actions: np.ndarray) -> TaskStep:
-        """Advance every running slot by its action (slots not running do not move)."""
+    def step(self, actions: np.ndarray | int) -> TaskStep:
+        """Advance every running slot by its action (slots not running do not move; a batch of
+        one may be given its action as an int)."""
         if self.stepper.scalar and self.team is None and self.stepper.outcome[0] == RUNNING:
-            return self._step_one(int(np.asarray(actions).reshape(-1)[0]))
+            return self._step_one(int(actions) if isinstance(actions, (int, np.integer))
+                                  else int(np.asarray(actions).reshape(-1)[0]))
         moves = ACTIONS[np.asarray(actions, dtype=np.intp).reshape(self.num)]
         before = self.stepper.positions[:, 0]
         if self.team is None:
