@@ -364,3 +364,200 @@ def shortest_path_length(world: World, start: np.ndarray) -> float | None:
 def reachable(world: World, start: np.ndarray) -> bool:
     """Whether a robot at ``start`` can reach a target of ``world`` (a free path exists)."""
     return _search_grid(world).reachable(np.asarray(start, float))
+
+
+# -- time: the moving obstacles as the physics moves them, and searches over a robot's moves in time --------
+
+TIME_SAMPLES = 16
+"""Samples along each move (after its start) of the searches in time below."""
+UNIT_MOVES = np.array([(0, 1), (0, -1), (-1, 0), (1, 0), (-1, 1), (-1, -1), (1, 1), (1, -1), (0, 0)], float)
+"""The nine moves of Model §2 (``apf_physics.actions.ACTIONS``, which this layer cannot import), stay last."""
+
+
+def physics_offsets(world: World, times: np.ndarray | float) -> np.ndarray:
+    """``(..., M, 2)``: each moving obstacle's route offset at (fractional) steps ``times``, as the physics moves it.
+
+    The engine puts a moving obstacle where its route has it at each whole step and moves it in a
+    straight line at constant velocity to where the route has it at the next
+    (:class:`~apf_physics.physics.Physics`): between whole steps it cuts the route's corners.
+    """
+    times = np.asarray(times, float)
+    lo = np.floor(times)
+    a = world.moving_offsets(lo)
+    b = world.moving_offsets(lo + 1.0)
+    return a + (times - lo)[..., None, None] * (b - a)
+
+
+def timed_move_clearance(world: World, starts: np.ndarray, moves: np.ndarray, t: float,
+                         samples: int = TIME_SAMPLES, strict: bool = True, moving: bool = True) -> np.ndarray:
+    """``(N, K)``: the clearance of the robot's centre along each move ``starts[i] → starts[i] + moves[k]``
+    made during step ``t → t + 1``, every obstacle where the physics has it at each moment.
+
+    Sampled at the start and ``samples`` evenly spaced moments of the move (the robot at
+    ``start + s·move``, each moving obstacle at its offset at ``t + s``). ``strict``: a lower bound
+    (the least sample lowered by half the spacing of the relative motion, as
+    :func:`~apf_physics.actions.move_clearance` does); else the least sample itself (contact
+    at a sample is certain below the robot's radius). ``moving`` False: the static obstacles alone.
+    """
+    starts = np.asarray(starts, float).reshape(-1, 2)
+    moves = np.asarray(moves, float).reshape(-1, 2)
+    n, k = len(starts), len(moves)
+    s = np.arange(samples + 1) / samples
+    points = starts[:, None, None, :] + s[None, None, :, None] * moves[None, :, None, :]      # (N, K, S, 2)
+    flat = points.reshape(-1, 2)
+    length = np.hypot(*moves.T)                                                                # (K,)
+    best = world.static_clearance(flat, near=True).reshape(n, k, -1).min(axis=2)
+    if strict:
+        best = best - 0.5 * length[None, :] / samples
+    if not moving or not world.moving or n == 0:
+        return best
+    offsets = physics_offsets(world, t + s)                                                    # (S, M, 2)
+    lo_pts, hi_pts = flat.min(axis=0), flat.max(axis=0)
+    for j, i in enumerate(world.moving):
+        obstacle = world.obstacles[i]
+        lo, hi = obstacle.bounds
+        shift = offsets[:, j]
+        reach = world.robot_radius + 3.0
+        if np.any(lo + shift.min(axis=0) - reach > hi_pts) or np.any(hi + shift.max(axis=0) + reach < lo_pts):
+            continue
+        d, _ = obstacle.signed_distance((points - shift[None, None, :, :]).reshape(-1, 2))
+        d = d.reshape(n, k, -1).min(axis=2)
+        if strict:
+            speed = float(np.max(np.hypot(*np.diff(shift, axis=0).T))) * samples
+            d = d - 0.5 * (length[None, :] + speed) / samples
+        best = np.minimum(best, d)
+    return best
+
+
+def escape_moves(world: World, position: np.ndarray, t0: int, steps: int, moves: np.ndarray = UNIT_MOVES,
+                 margin: float = 0.0, strict: bool = True, samples: int = TIME_SAMPLES) -> list[int] | None:
+    """A sequence of ``steps`` moves from ``position`` at step ``t0`` that touches nothing, or None.
+
+    A breadth-first search of the time-expanded graph of the robot's moves: the positions a robot
+    can be at after each step (``position`` plus sums of ``moves``, the same position reached by
+    two sequences kept once), a move kept when its clearance (:func:`timed_move_clearance`, the
+    moving obstacles as the physics moves them) exceeds ``robot_radius + margin`` (``strict``: as a
+    lower bound, so that the sequence returned surely touches nothing; else at every sample, so
+    that None means that every sequence touches something at a sample).
+
+    Returns:
+        The indices (into ``moves``) of one such sequence, or None when every sequence collides.
+    """
+    moves = np.asarray(moves, float).reshape(-1, 2)
+    bar = world.robot_radius + margin
+    frontier = np.asarray(position, float).reshape(1, 2)
+    parents: list[tuple[np.ndarray, np.ndarray]] = []            # per step: (parent index, move index) of each node
+    for step in range(int(steps)):
+        clear = timed_move_clearance(world, frontier, moves, t0 + step, samples, strict)
+        ok = clear >= bar if strict else clear > bar
+        parent, move = np.nonzero(ok)
+        if not len(parent):
+            return None
+        nxt = frontier[parent] + moves[move]
+        _, keep = np.unique(np.round(nxt * 1e6).astype(np.int64), axis=0, return_index=True)
+        keep = np.sort(keep)
+        frontier = nxt[keep]
+        parents.append((parent[keep], move[keep]))
+    chain, node = [], 0
+    for parent, move in reversed(parents):
+        chain.append(int(move[node]))
+        node = int(parent[node])
+    return chain[::-1]
+
+
+def timed_path(world: World, start: np.ndarray, t0: int = 0, moves: np.ndarray = UNIT_MOVES,
+               margin: float = 0.05, max_steps: int = 400, max_expansions: int = 60_000,
+               samples: int = TIME_SAMPLES) -> np.ndarray | None:
+    """A* in space and time on the known motion: the robot's positions at steps ``t0, t0 + 1, …`` to a target.
+
+    The time-expanded graph of the robot's moves (a lattice of the moves' sums through ``start``
+    × whole steps; waiting is the move ``(0, 0)``), each move kept when its lower-bound clearance
+    (:func:`timed_move_clearance`: every moving obstacle where the physics has it at each moment)
+    is at least ``robot_radius + margin``. Cost: a move's length, a wait 1 (a unit of time). The
+    heuristic is the shortest path on the same lattice around the static obstacles alone
+    (admissible: it is the cost without the moving obstacles), so that the search leaves the
+    static shortest path only where something moves across it. It is what safe-interval path
+    planning (Phillips & Likhachev 2011) computes on this graph, without its grouping of
+    steps into safe intervals.
+
+    Returns:
+        ``(T + 1, 2)`` positions, ``start`` first and the first within ``goal_tolerance`` of a
+        target last; None when no plan is found within ``max_steps`` steps and ``max_expansions``.
+    """
+    start = np.asarray(start, float).reshape(2)
+    moves = np.asarray(moves, float).reshape(-1, 2)
+    r = world.robot_radius
+    if world.distance_to_target(start[None])[0] <= world.goal_tolerance:
+        return start[None].copy()
+    w, h = world.size
+    ix = np.arange(math.ceil(-start[0] + r), math.floor(w - start[0] - r) + 1)
+    iy = np.arange(math.ceil(-start[1] + r), math.floor(h - start[1] - r) + 1)
+    if not len(ix) or not len(iy):
+        return None
+    nx, ny = len(ix), len(iy)
+    xy = np.stack(np.meshgrid(start[0] + ix, start[1] + iy, indexing="ij"), axis=-1).reshape(-1, 2)   # node = a*ny + b
+    steps = moves.astype(int)
+    static = timed_move_clearance(world, xy, moves, 0.0, samples, moving=False) >= r + margin
+    di, dj = steps[:, 0], steps[:, 1]
+    a_idx, b_idx = np.divmod(np.arange(len(xy)), ny)
+    na, nb = a_idx[:, None] + di[None, :], b_idx[:, None] + dj[None, :]
+    inside = (na >= 0) & (na < nx) & (nb >= 0) & (nb < ny)
+    static &= inside
+    target = np.flatnonzero(world.distance_to_target(xy) < world.goal_tolerance)
+    if not len(target):
+        return None
+    # Static lattice Dijkstra from the targets (moves are symmetric: u → v clear iff v → u clear).
+    length = np.hypot(*moves.T)
+    neighbour = np.where(inside, na * ny + nb, -1)
+    cost = np.full(len(xy), np.inf)
+    cost[target] = 0.0
+    heap = [(0.0, int(v)) for v in target]
+    static_l, neighbour_l = static.tolist(), neighbour.tolist()
+    while heap:
+        c, u = heapq.heappop(heap)
+        if c > cost[u]:
+            continue
+        for k, v in enumerate(neighbour_l[u]):
+            if v >= 0 and static_l[u][k] and length[k] > 0:
+                nc = c + length[k]
+                if nc < cost[v]:
+                    cost[v] = nc
+                    heapq.heappush(heap, (nc, v))
+    s0 = int(np.argmin(np.hypot(*(xy - start).T)))
+    if not math.isfinite(cost[s0]):
+        return None
+    goal = np.zeros(len(xy), bool)
+    goal[target] = True
+    wait_cost = 1.0
+    cost_l = cost.tolist()
+    g = {(s0, 0): 0.0}
+    came: dict[tuple[int, int], tuple[int, int]] = {}
+    heap = [(cost_l[s0], 0.0, s0, 0)]
+    expansions = 0
+    while heap and expansions < max_expansions:
+        f, gu, u, k = heapq.heappop(heap)
+        if gu > g.get((u, k), math.inf):
+            continue
+        if goal[u]:
+            chain = [(u, k)]
+            while chain[-1] in came:
+                chain.append(came[chain[-1]])
+            return xy[[c[0] for c in chain[::-1]]]
+        if k >= max_steps:
+            continue
+        expansions += 1
+        allowed = np.asarray(static_l[u])
+        if world.moving:
+            allowed = allowed & (timed_move_clearance(world, xy[u][None], moves, t0 + k, samples)[0] >= r + margin)
+        for m in np.flatnonzero(allowed).tolist():
+            v = neighbour_l[u][m]
+            if v < 0 or not math.isfinite(cost_l[v]):
+                continue
+            nd = gu + (length[m] if length[m] > 0 else wait_cost)
+            key = (v, k + 1)
+            if nd < g.get(key, math.inf):
+                g[key] = nd
+                came[key] = (u, k)
+                heapq.heappush(heap, (nd + cost_l[v], nd, v, k + 1))
+    return None
+

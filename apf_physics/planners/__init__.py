@@ -16,11 +16,13 @@ PLANNERS = {
     "gradient": ("apf_physics.planners.gradient:GradientPlanner", {}),
     "dqn": ("apf_physics.planners.dqn:DQNPlanner", {"shield": True}),
     "dqn-unshielded": ("apf_physics.planners.dqn:DQNPlanner", {"shield": False}),
+    "dqn-known": ("apf_physics.planners.dqn:DQNPlanner", {"shield": True, "prediction": "known"}),
     "astar": ("apf_physics.planners.astar:AStarPlanner", {}),
+    "sipp": ("apf_physics.planners.astar:SIPPPlanner", {}),
     "escape": ("apf_physics.planners.escape:EscapePlanner", {}),
 }
 """Command-line name → (``module:class``, keyword arguments)."""
-LEARNED = ("dqn", "dqn-unshielded")
+LEARNED = ("dqn", "dqn-unshielded", "dqn-known")
 """Planners that take a model file."""
 
 
@@ -32,7 +34,8 @@ def make_planner(name: str, model: str | None = None) -> Planner:
         model: For ``dqn`` and ``dqn-unshielded``: a model file; the shipped model for the
             world's field is used when None. ``dqn`` never picks a move that would touch an
             obstacle (:class:`~apf_physics.planners.dqn.DQNPlanner`'s shield);
-            ``dqn-unshielded`` takes the network's choice as it is.
+            ``dqn-unshielded`` takes the network's choice as it is; ``dqn-known`` is ``dqn`` whose
+            shield knows the moving obstacles' motion instead of predicting it.
 
     Raises:
         UserError: An unknown name.

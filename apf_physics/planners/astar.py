@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from apf_physics.planners.base import Planner
-from apf_physics.search import LOS_MARGIN, LOS_SPACING, SearchGrid
+from apf_physics.search import LOS_MARGIN, LOS_SPACING, SearchGrid, timed_path
 from apf_physics.world import Moment, World
 
 HORIZON = 4.0
@@ -102,3 +102,44 @@ class AStarPlanner(Planner):
                 self.paths[i] = new
                 self._waypoint[i] = 1
         return waiting
+
+
+class SIPPPlanner(Planner):
+    """The oracle that knows the future: a plan in space and time on the known motion, executed through the physics.
+
+    At the start of each episode, one search per robot (:func:`~apf_physics.search.timed_path`: A*
+    over the time-expanded graph of the nine unit moves, waiting included, every moving obstacle
+    where the physics will have it at each moment of each step, with a margin of
+    :data:`MARGIN` beyond the robot's radius). Each control step the robot makes its plan's next
+    move (toward the plan's next position, should it be off it). A robot for which no plan is
+    found waits where it is (reported by :meth:`stuck`). The learned planner never consults it.
+    """
+
+    name = "sipp"
+    trap_rule = "oscillation"
+    trap_window = 1000   # waiting for an obstacle to pass is part of a plan, not being trapped
+    MARGIN = 0.05
+    """Clearance kept beyond the robot's radius by a plan's moves [units]."""
+
+    def reset(self, world: World, positions: np.ndarray) -> None:
+        super().reset(world, positions)
+        positions = np.asarray(positions, float).reshape(-1, 2)
+        limit = int(4 * (world.size[0] + world.size[1]))
+        self.plans = [timed_path(world, p, 0, margin=self.MARGIN, max_steps=limit) for p in positions]
+        self._no_plan = np.array([p is None for p in self.plans], bool)
+
+    def stuck(self) -> np.ndarray:
+        """Robots for which no plan was found."""
+        return self._no_plan
+
+    def act(self, positions: np.ndarray, active: np.ndarray, moment: Moment | None = None) -> np.ndarray:
+        positions = np.asarray(positions, float).reshape(-1, 2)
+        k = int(self._moment(moment).t)
+        step = np.zeros_like(positions)
+        for i in np.flatnonzero(active).tolist():
+            plan = self.plans[i]
+            if plan is None or len(plan) < 2:
+                continue
+            d = plan[min(k + 1, len(plan) - 1)] - positions[i]
+            step[i] = d / max(1.0, float(np.max(np.abs(d))))
+        return step

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from apf_physics.actions import ACTIONS, SAFETY, move_clearance
+from apf_physics.actions import ACTIONS, HORIZON, PREDICTIONS, shield_over_time, shielded_argmax
 from apf_physics.models import DQNPolicy, MapPolicy, load_policy, resolve_model, shipped_model_for
 from apf_physics.models.policy import move_inputs
 from apf_physics.observation import Observer
@@ -27,9 +27,18 @@ class DQNPlanner(Planner):
         model: A model file, or a shipped model's name (``general``, ``moving``, ...); by
             default the shipped model trained for the world's field.
         shield: Choose only among the moves that keep the robot :data:`~apf_physics.actions.SAFETY`
-            clear of every obstacle and the map's edge all along the move
-            (:func:`~apf_physics.actions.move_clearance`); when no move is, the one with the
-            most room. False: the network's choice as it is (planner name ``dqn-unshielded``).
+            clear of every obstacle and the map's edge all along the move, the moving obstacles
+            where they are predicted at each moment of it, and that some continuation keeps
+            clear for :data:`~apf_physics.actions.HORIZON` steps
+            (:func:`~apf_physics.actions.shield_over_time`); when no move is, the one that puts
+            contact off longest. Among static obstacles alone it is the shield of one step
+            (:func:`~apf_physics.actions.move_clearance`). False: the network's choice as it is
+            (planner name ``dqn-unshielded``).
+        prediction: How the shield predicts the moving obstacles (:data:`~apf_physics.actions.PREDICTIONS`):
+            ``velocity`` (default: constant velocity from the last two steps, within
+            :data:`~apf_physics.actions.SENSING_RADIUS`) or ``known`` (the world file's motion:
+            planner name ``dqn-known``).
+        horizon: Steps the shield looks ahead.
         policy: An in-memory policy to use instead of a model file (e.g. a network while it
             trains); its field is not checked against the world's.
 
@@ -46,10 +55,15 @@ class DQNPlanner(Planner):
     """Trap window of a planner with a visit memory (control steps)."""
 
     def __init__(self, model: str | Path | None = None, shield: bool = True,
-                 policy: DQNPolicy | MapPolicy | None = None):
+                 policy: DQNPolicy | MapPolicy | None = None, prediction: str = "velocity",
+                 horizon: int = HORIZON):
+        if prediction not in PREDICTIONS:
+            raise ValueError(f"unknown prediction {prediction!r} (known: {', '.join(PREDICTIONS)})")
         self.model_path = resolve_model(model) if model is not None else None
         self.shield = bool(shield)
-        self.name = "dqn" if self.shield else "dqn-unshielded"
+        self.prediction = prediction
+        self.horizon = int(horizon)
+        self.name = ("dqn" if prediction == "velocity" else f"dqn-{prediction}") if self.shield else "dqn-unshielded"
         self._policy = policy
         self._loaded = None if policy is None else "given"
 
@@ -80,8 +94,8 @@ class DQNPlanner(Planner):
         obs = self.observer.observe(positions, t=moment.t, discs=moment.world.crowd)
         if not self.shield:
             return ACTIONS[self._policy.act(obs)] * active[:, None]
-        room = move_clearance(moment, positions) - (self.world.robot_radius + SAFETY)
-        return ACTIONS[shielded_argmax(self._policy.q_values(obs), room)] * active[:, None]
+        chosen = shield_over_time(moment, positions, ACTIONS, self._policy.q_values(obs), self.prediction, self.horizon)
+        return ACTIONS[chosen] * active[:, None]
 
 
     def _act_on_map(self, positions: np.ndarray, active: np.ndarray, moment: Moment) -> np.ndarray:
@@ -90,12 +104,11 @@ class DQNPlanner(Planner):
         moves = policy.moves
         room, du = move_inputs(moment, positions, moves)
         q = policy.q_values(self.world, positions, room, du)
-        chosen = shielded_argmax(q, room) if self.shield else q.argmax(axis=1)
-        return moves[chosen] * active[:, None]
+        if not self.shield:
+            return moves[q.argmax(axis=1)] * active[:, None]
+        if not self.world.moving:
+            return moves[shielded_argmax(q, room)] * active[:, None]
+        return moves[shield_over_time(moment, positions, moves, q, self.prediction, self.horizon)] * active[:, None]
 
 
-def shielded_argmax(q: np.ndarray, room: np.ndarray) -> np.ndarray:
-    """(N,) indices of the highest ``q`` among the moves with ``room >= 0``; rows without any: the most room."""
-    safe = room >= 0
-    best = np.where(safe, q, -np.inf).argmax(axis=1)
-    return np.where(safe.any(axis=1), best, room.argmax(axis=1))
+__all__ = ["DQNPlanner", "shielded_argmax"]
