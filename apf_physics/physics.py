@@ -544,22 +544,30 @@ class Physics:
         if self._depths is None:
             return
         ids, normal, distance = self._depths
-        deep = distance < -min(SETTLE_OBSTACLE, SETTLE_ROBOT)
-        if not deep.any():
+        deep = np.flatnonzero(distance < -min(SETTLE_OBSTACLE, SETTLE_ROBOT))
+        if not len(deep):
             return
-        ids, normal, depth = ids[deep], normal[deep], -distance[deep]
-        proxy = self._proxy_order[np.clip(np.searchsorted(self._proxy_ids[self._proxy_order], ids), 0,
-                                          len(self._proxy_ids) - 1)]
-        robot = np.where(self._proxy_ids[proxy] == ids, self._proxy_robot[proxy], -1)   # (K, 2): -1 not a robot
-        a_robot, b_robot = robot[:, 0] >= 0, robot[:, 1] >= 0
-        pairs = a_robot & b_robot
-        # a robot and a static shape: the robot's way out is against the normal if it is a, along it if b
-        static_robot = np.concatenate([robot[a_robot & ~b_robot, 0], robot[b_robot & ~a_robot, 1]])
-        static_normal = np.concatenate([-normal[a_robot & ~b_robot], normal[b_robot & ~a_robot]])
-        static_depth = np.concatenate([depth[a_robot & ~b_robot], depth[b_robot & ~a_robot]])
-        keep = ~np.isin(static_robot, undone)
-        static_robot, static_normal, static_depth = static_robot[keep], static_normal[keep], static_depth[keep]
-        pair_robots = robot[pairs]
+        # a few pairs: read by dicts (as contact_rows_few); a robot and a static shape: the robot's way
+        # out is against the normal if it is a, along it if b
+        robot_of = self._proxy_robot
+        skip = set(undone.tolist())
+        static_robot, static_normal, static_depth, pairs = [], [], [], []
+        for (a, b), (nx, ny), d in zip(ids[deep].tolist(), normal[deep].tolist(), distance[deep].tolist()):
+            ka, kb = self._proxy_of_id.get(a), self._proxy_of_id.get(b)
+            ra = -1 if ka is None else int(robot_of[ka])
+            rb = -1 if kb is None else int(robot_of[kb])
+            if ra >= 0 and rb >= 0:
+                pairs.append((ra, rb))
+            elif ra >= 0 or rb >= 0:
+                r, sign = (ra, -1.0) if ra >= 0 else (rb, 1.0)
+                if r not in skip:
+                    static_robot.append(r)
+                    static_normal.append((sign * nx, sign * ny))
+                    static_depth.append(-d)
+        static_robot = np.array(static_robot, np.intp)
+        static_normal = np.array(static_normal, float).reshape(-1, 2)
+        static_depth = np.array(static_depth, float)
+        pair_robots = np.array(pairs, np.intp).reshape(-1, 2)
         anchor = self._positions[static_robot]
         m = self.robots_per_slot
         for _ in range(6):
