@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from apf_physics import load_world
 from apf_physics.actions import ACTIONS, HORIZON, SAFETY, assess_moves, move_clearance, predicted_offsets, shield_over_time
 from apf_physics.planners import make_planner
+from apf_physics.planners.base import Planner
 from apf_physics.planners.dqn import DQNPlanner, shielded_argmax
 from apf_physics.rollout import rollout
 from apf_physics.search import escape_moves, physics_offsets, timed_move_clearance, timed_path
@@ -168,3 +169,27 @@ def test_dqn_known_is_the_dqn_planner_with_known_motion():
     assert planner.name == "dqn-known" and planner.prediction == "known" and planner.shield
     with pytest.raises(ValueError):
         DQNPlanner(prediction="psychic")
+
+
+class Stand(Planner):
+    """Stays put."""
+
+    trap_window = 100
+
+    def act(self, positions, active, moment=None):
+        return np.zeros_like(np.asarray(positions, float))
+
+
+def test_videos_mark_the_step_of_a_collision():
+    from apf_physics.render.episodes import collision_events
+    from apf_physics.render.video import trajectory_snapshots
+
+    world = crossing_world([15, 15], 0.0, 4.0, 1.0, 0.6)
+    standing = rollout(world, Stand(), np.array([[15.0, 15.0], [15.0, 25.0]]), max_steps=12)
+    hit = [e for e in standing if e.outcome == "collision"]
+    assert hit, [e.outcome for e in standing]
+    events = collision_events(standing)
+    assert [step for step, _ in events] == [e.steps for e in hit]
+    lines = [s.overlay for s in trajectory_snapshots(np.zeros((hit[0].steps + 2, 2)), events=events)]
+    assert not any("COLLISION" in line for line in lines[hit[0].steps - 1])
+    assert any(f"COLLISION at step {hit[0].steps}" in line for line in lines[hit[0].steps])

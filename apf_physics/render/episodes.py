@@ -24,15 +24,15 @@ def write_episode_video(world, episodes: Sequence, out: str | Path, png: str | P
     """
     image = FieldImage.from_world(world, size)
     hold_frames = max(0, int(round(hold * fps)))
-    clips = list(episode_clips(episodes, overlay, formation, start_index))
-    total = sum(len(clip[0]) + hold_frames for clip in clips)
+    clips = list(zip(episode_clips(episodes, overlay, formation, start_index), clip_members(episodes, formation)))
+    total = sum(len(clip[0]) + hold_frames for clip, _ in clips)
     last: list[np.ndarray] = []
 
     def frames() -> Iterator[np.ndarray]:
         frame = None
-        for trajectory, roles, lines, final, families in clips:
+        for (trajectory, roles, lines, final, families), members in clips:
             for frame in render_trajectory(world, trajectory, roles, overlay=lines, final_overlay=final, families=families,
-                                           hold=hold_frames, image=image):
+                                           hold=hold_frames, image=image, events=collision_events(members)):
                 yield frame
         last.append(frame)
 
@@ -87,6 +87,34 @@ def episode_clips(episodes: Sequence, overlay: tuple[str, ...], formation: bool,
         lines = (*overlay, f"formation, {where}({episode.start[0]:g}, {episode.start[1]:g})")
         yield (trajectory, formation_roles(trajectory.shape[1]), lines,
                (f"outcome {episode.outcome} after {episode.steps} steps",), ())
+
+
+def clip_members(episodes: Sequence, formation: bool) -> list[list]:
+    """The episodes each clip of :func:`episode_clips` shows, in the same order."""
+    crowds: dict[str, list] = {}
+    for episode in episodes:
+        record = getattr(episode, "formation", None)
+        if getattr(record, "crowd", None) is not None:
+            crowds.setdefault(record.crowd, []).append(episode)
+    if crowds:
+        return list(crowds.values())
+    paths = [robot_positions(episode) for episode in episodes]
+    if not formation and all(p.ndim == 2 for p in paths):
+        return [list(episodes)]
+    return [[episode] for episode in episodes]
+
+
+def collision_events(episodes: Sequence) -> list[tuple[int, str]]:
+    """``(step, text)`` for each episode that ended in a collision: the frame of that step on says so."""
+    out = []
+    for k, episode in enumerate(episodes):
+        if episode.outcome == "collision":
+            where = robot_positions(episode)[-1].reshape(-1, 2)[0]
+            what = ", ".join(getattr(episode, "contacts", []) or ["something"])
+            who = f"robot {k} " if len(episodes) > 1 else ""
+            out.append((int(episode.steps), f"COLLISION at step {episode.steps}: {who}hit {what} at "
+                                           f"({where[0]:.1f}, {where[1]:.1f})"))
+    return sorted(out)
 
 
 def robot_positions(episode) -> np.ndarray:

@@ -355,6 +355,7 @@ def trajectory_snapshots(
     trails: bool = True,
     hold: int = 0,
     families: Sequence[int] = (),
+    events: Sequence[tuple[int, str]] = (),
 ) -> Iterator[Snapshot]:
     """One :class:`Snapshot` per time step of a trajectory.
 
@@ -367,6 +368,8 @@ def trajectory_snapshots(
         trails: Draw each robot's path so far.
         hold: Repeat the last frame this many extra times (a pause at the end of a video).
         families: One formation number per robot (several formations), or empty.
+        events: ``(step, text)``: a line shown from that step's frame on (e.g. a collision, marked
+            at the step it happened).
     """
     trajectory = np.asarray(trajectory, dtype=float)
     if trajectory.ndim == 2:
@@ -377,7 +380,7 @@ def trajectory_snapshots(
     roles = tuple(roles) if roles is not None else ("single",) * robots
     per_robot = np.ascontiguousarray(trajectory.transpose(1, 0, 2))  # (R, T, 2): trails are slices
     for t in range(steps):
-        lines = (f"step {t}/{steps - 1}", *overlay)
+        lines = (f"step {t}/{steps - 1}", *overlay, *(text for step, text in events if t >= step))
         if t == steps - 1:
             lines = (*lines, *final_overlay)
         snapshot = Snapshot(trajectory[t], roles, tuple(per_robot[:, : t + 1]) if trails else (), lines, t,
@@ -400,6 +403,7 @@ def render_trajectory(
     long_side: int = 512,
     image: FieldImage | None = None,
     families: Sequence[int] = (),
+    events: Sequence[tuple[int, str]] = (),
 ) -> Iterator[np.ndarray]:
     """Frames of robots moving through ``world``, one per time step (see :func:`trajectory_snapshots`).
 
@@ -415,6 +419,7 @@ def render_trajectory(
         long_side: Image size in pixels along the world's longer side.
         image: A prebuilt :class:`FieldImage` to draw on (overrides ``long_side``).
         families: One formation number per robot (several formations), or empty.
+        events: ``(step, text)`` lines shown from that step on (see :func:`trajectory_snapshots`).
 
     Yields:
         ``(H, W, 3)`` uint8 RGB frames.
@@ -423,7 +428,7 @@ def render_trajectory(
     layer: TrailLayer | None = None
     # Trails grow by one segment a step on a persistent layer: constant cost per frame.
     for snapshot in trajectory_snapshots(trajectory, roles, overlay=overlay, final_overlay=final_overlay,
-                                         trails=False, hold=hold, families=families):
+                                         trails=False, hold=hold, families=families, events=events):
         if not trails:
             yield draw_frame(image, snapshot)
             continue
