@@ -110,7 +110,7 @@ class FormationSpec:
 
 @dataclass(frozen=True, eq=False)
 class FormationTask:
-    """One of several formations of a world, each with its own start and target (issue 14's ``formations:``).
+    """One of several formations of a world, each with its own start and target (a world file's ``formations:``).
 
     Attributes:
         start: The leader's start.

@@ -42,7 +42,8 @@ class Row:
     key: str
     commands: tuple[str, ...]
     """Shell commands, run from the repository's root; ``{data}``, ``{movingai}`` and ``{out}``
-    (this row's results file) are filled in."""
+    (where the last command writes its full results) are filled in. The row's results file,
+    ``tools/results/<row>.json``, is that file without the per-episode records."""
     what: Callable[[dict], str]
     result: Callable[[dict], str]
 
@@ -53,6 +54,11 @@ class Row:
 
 def _pct(x: float) -> str:
     return f"{100 * x:.1f} %"
+
+
+def _n(count: int, word: str) -> str:
+    """``1 collision``, ``0 collisions``."""
+    return f"{count} {word}" + ("" if count == 1 else "s")
 
 
 def _range(values: list[Any]) -> str:
@@ -72,14 +78,14 @@ def _fixed20(data: dict) -> str:
     g, d = _eval(data, "gradient"), _eval(data, "dqn")
     trapped = round(g["trapped_rate"] * g["episodes"])
     return (f"gradient descent {g['successes']}/{g['episodes']} ({trapped} trapped); shipped DQN "
-            f"**{d['successes']}/{d['episodes']}**, {round(d['collision_rate'] * d['episodes'])} collisions "
+            f"**{d['successes']}/{d['episodes']}**, {_n(round(d['collision_rate'] * d['episodes']), 'collision')} "
             f"(thesis: 37/40)")
 
 
 def _fixed20_random(data: dict) -> str:
     g, d, u = _eval(data, "gradient"), _eval(data, "dqn"), _eval(data, "dqn-unshielded")
     return (f"gradient {g['successes']}/{g['episodes']}; shipped DQN **{d['successes']}/{d['episodes']}** "
-            f"({_pct(d['success_rate'])}), {round(d['collision_rate'] * d['episodes'])} collisions; "
+            f"({_pct(d['success_rate'])}), {_n(round(d['collision_rate'] * d['episodes']), 'collision')}; "
             f"unshielded {u['successes']}/{u['episodes']}")
 
 
@@ -93,7 +99,7 @@ def _train(data: dict) -> str:
     seeds = [run["seed"] for run in runs]
     return (f"seeds {_range(seeds)}: **{_range([r['successes'] for r in random])} of {n}** random free starts "
             f"it never trained or validated on ({len(random) // len(runs)} draws each; median "
-            f"{_pct(data['median_random_success'])}), {collisions} collisions, {_range(own)}/"
+            f"{_pct(data['median_random_success'])}), {_n(collisions, 'collision')}, {_range(own)}/"
             f"{runs[0]['starts']['episodes']} of the thesis's starts; {min(minutes):.0f}–{max(minutes):.0f} min "
             f"of training each")
 
@@ -101,7 +107,7 @@ def _train(data: dict) -> str:
 def _formation(data: dict) -> str:
     s = _eval(data, "dqn+formation")
     links = " and ".join(_pct(v) for v in s.get("link_in_range", [s["links_in_range"]]))
-    return (f"**{s['successes']}/{s['episodes']}**, {round(s['collision_rate'] * s['episodes'])} collisions; links "
+    return (f"**{s['successes']}/{s['episodes']}**, {_n(round(s['collision_rate'] * s['episodes']), 'collision')}; links "
             f"in range {links} of steps ({s['episodes_all_links_99']} of {s['episodes']} episodes ≥ 99 % on every "
             f"link) (thesis: 8/8)")
 
@@ -117,7 +123,7 @@ def _general(data: dict) -> str:
     w, m, mu = data["dqn:general"], data["dqn:map"], data["dqn-unshielded:map"]
     return (f"gradient {_pct(g['success_rate'])}, escape (wall following) {_pct(e['success_rate'])}, A* "
             f"{_pct(a['success_rate'])}; the window network `general.pt` (memory of visited cells, shielded) "
-            f"**{_pct(w['success_rate'])}**, {w['collisions']} collisions, paths {w['length_ratio_vs_astar']:.2f}× A*; "
+            f"**{_pct(w['success_rate'])}**, {_n(w['collisions'], 'collision')}, paths {w['length_ratio_vs_astar']:.2f}× A*; "
             f"`map.pt` {_pct(m['success_rate'])} ({_pct(mu['success_rate'])} unshielded)")
 
 
@@ -138,7 +144,7 @@ def _structures(data: dict) -> str:
     g, e, w, m, mu = (data[k] for k in ("gradient", "escape", "dqn:general", "dqn:map", "dqn-unshielded:map"))
     return (f"gradient {_pct(g['success_rate'])}, escape {_pct(e['success_rate'])}, the window network "
             f"{_pct(w['success_rate'])}; the map network (`map.pt`, the `dqn` default for Table 4's field) "
-            f"**{_pct(m['success_rate'])}**, {m['collisions']} collisions, paths {m['length_ratio_vs_astar']:.2f}× A*; "
+            f"**{_pct(m['success_rate'])}**, {_n(m['collisions'], 'collision')}, paths {m['length_ratio_vs_astar']:.2f}× A*; "
             f"{_pct(mu['success_rate'])} with no shield")
 
 
@@ -148,8 +154,8 @@ def _moving_what(data: dict) -> str:
 
 def _moving(data: dict) -> str:
     a, m = data["astar"], data["dqn:moving"]
-    return (f"replanning A* {_pct(a['success_rate'])} with {a['collisions']} collisions; `moving.pt` (trained with "
-            f"them) **{_pct(m['success_rate'])}**, {m['collisions']} collisions")
+    return (f"replanning A* {_pct(a['success_rate'])} with {_n(a['collisions'], 'collision')}; `moving.pt` (trained "
+            f"with them) **{_pct(m['success_rate'])}**, {_n(m['collisions'], 'collision')}")
 
 
 def _movingai_what(data: dict) -> str:
@@ -159,7 +165,7 @@ def _movingai_what(data: dict) -> str:
 
 def _movingai(data: dict) -> str:
     d, u, a = (data["totals"][k] for k in ("dqn", "dqn-unshielded", "astar"))
-    return (f"the `dqn` default (`map.pt`) **{d['successes']}/{d['episodes']}**, {d['collisions']} collisions, "
+    return (f"the `dqn` default (`map.pt`) **{d['successes']}/{d['episodes']}**, {_n(d['collisions'], 'collision')}, "
             f"paths **{d['path_over_optimal']:.3f}×** the optimal length; the network alone {u['successes']}/"
             f"{u['episodes']}; A* {a['successes']}/{a['episodes']}, {a['path_over_optimal']:.3f}×")
 
@@ -171,7 +177,7 @@ def _crossing_what(data: dict) -> str:
 def _crossing(data: dict) -> str:
     s = _eval(data, "dqn+formation")
     return (f"every formation arrived in **{s['worlds_all_arrived']}/{s['worlds']}** worlds (leaders: `general.pt`, "
-            f"their default), {s['robot_robot_collisions']} robot–robot collisions, links in range "
+            f"their default), {_n(s['robot_robot_collisions'], 'robot–robot collision')}, links in range "
             f"{_pct(s['links_in_range'])} of steps")
 
 
@@ -216,6 +222,15 @@ ROWS = [
 BY_KEY = {row.key: row for row in ROWS}
 
 
+def compact(data: Any) -> Any:
+    """``data`` without its per-episode records (lists under an ``episodes`` key): the summaries stay."""
+    if isinstance(data, dict):
+        return {k: compact(v) for k, v in data.items() if not (k == "episodes" and isinstance(v, list))}
+    if isinstance(data, list):
+        return [compact(v) for v in data]
+    return data
+
+
 def load(row: Row) -> dict:
     """A row's results file; ``apf-physics eval --json``'s list becomes ``{"evaluations": [...]}``."""
     data = json.loads(row.path.read_text())
@@ -238,9 +253,14 @@ def readme_block(text: str) -> str:
     return text.split(BEGIN, 1)[1].split(END, 1)[0].strip("\n")
 
 
+def full_results(row: Row, data: str) -> Path:
+    """Where the row's commands write their full results (per-episode records included)."""
+    return Path(data) / "results" / f"{row.key}.json"
+
+
 def commands(row: Row, data: str, movingai: str) -> list[str]:
-    out = shlex.quote(str(row.path.relative_to(ROOT)))
-    return [c.format(data=data, movingai=movingai, out=out) for c in row.commands]
+    out = shlex.quote(str(full_results(row, data)))
+    return [c.format(data=shlex.quote(data), movingai=shlex.quote(movingai), out=out) for c in row.commands]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -256,10 +276,17 @@ def main(argv: list[str] | None = None) -> int:
     rows = [BY_KEY[k] for k in args.rows] or ROWS
     if args.action in ("run", "show"):
         for row in rows:
+            if args.action == "run":
+                full_results(row, args.data).parent.mkdir(parents=True, exist_ok=True)
             for command in commands(row, args.data, args.movingai):
                 print(f"$ {command}", flush=True)
                 if args.action == "run":
                     subprocess.run(command, shell=True, check=True, cwd=ROOT)
+            if args.action == "run":
+                data = compact(json.loads(full_results(row, args.data).read_text()))
+                RESULTS.mkdir(parents=True, exist_ok=True)
+                row.path.write_text(json.dumps(data, indent=1) + "\n")
+                print(f"wrote {row.path.relative_to(ROOT)} (from {full_results(row, args.data)})", flush=True)
         return 0
     text = README.read_text()
     if args.action == "check":

@@ -11,7 +11,7 @@ local minima arise (thesis Fig. 1). :func:`generate_world` draws a world of any 
   static families plus 3–8 moving obstacles whose routes cross the axis.
 - :mod:`~apf_physics.generate.crossing` (:data:`FORMATION_FAMILIES`): ``crossing``, 2–4
   formations whose routes cross near the middle of the map (the world file's ``formations:``).
-- :mod:`~apf_physics.generate.structures` (:data:`STRUCTURE_FAMILIES`, issue 12): ``rooms``,
+- :mod:`~apf_physics.generate.structures` (:data:`STRUCTURE_FAMILIES`): ``rooms``,
   ``maze``, ``nested_cups``, ``narrow_gap``, ``dense_clutter``, ``mixed``: larger structures
   with every start out of the target's sight, built from the blocks of
   :mod:`~apf_physics.generate.blocks`.

@@ -1,6 +1,6 @@
 """The structure families (:data:`STRUCTURE_FAMILIES`): rooms, mazes, nested cups, a narrow gap, dense clutter, a mix.
 
-Issue 12: larger structures than the static families' (:mod:`~apf_physics.generate.static`),
+Larger structures than the static families' (:mod:`~apf_physics.generate.static`),
 for testing whether a planner generalises. They use a robot of radius 0.3
 (:data:`STRUCTURE_ROBOT_RADIUS`); every start is out of the target's sight (the straight
 segment to it comes within the robot's radius of an obstacle: the start is behind a
@@ -63,7 +63,7 @@ from apf_physics.world import World
 from apf_physics.worldfile import world_from_dict
 
 STRUCTURE_FAMILIES = ("rooms", "maze", "nested_cups", "narrow_gap", "dense_clutter", "mixed")
-"""Larger structures (issue 12): rooms, mazes, nested cups, a narrow gap, dense clutter, and a mix of them."""
+"""Larger structures: rooms, mazes, nested cups, a narrow gap, dense clutter, and a mix of them."""
 STRUCTURE_ROBOT_RADIUS = 0.3
 """The robot's radius in the structure families (the issue's measurements used 0.3)."""
 PATH_SHARE = 0.6
