@@ -102,6 +102,7 @@ def test_moving_terms_are_added_as_before(worlds_dir, scale, channels, robots):
             observer.reset(np.arange(robots), positions, [worlds[i] for i in which])
         t = rng.integers(0, 60, robots).astype(float) if trial % 2 else float(rng.integers(0, 60))
         discs = positions[:3] + 0.7 if trial == 5 else None
-        np.testing.assert_array_equal(new.observe(positions, t=t, discs=discs), old.observe(positions, t=t, discs=discs))
+        np.testing.assert_array_equal(new.observe(positions, t=t, discs=discs),
+                                      old.observe(positions, t=t, discs=discs))
         np.testing.assert_array_equal(new.potential_at(positions, t=t, discs=discs),
                                       old.potential_at(positions, t=t, discs=discs))

@@ -79,12 +79,14 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=200, help="calls per block")
     parser.add_argument("--blocks", type=int, default=7)
     parser.add_argument("--robots", type=int, nargs="+", default=[1, 64, 256])
-    parser.add_argument("--previous", action="store_true", help="with the 'previous' channel (the field a step earlier)")
+    parser.add_argument("--previous", action="store_true",
+                        help="with the 'previous' channel (the field a step earlier)")
     args = parser.parse_args()
     config = ObserverConfig(channels=("potential", "previous") if args.previous else ("potential",))
     frozen_world, moving_world_ = moving_world(True), moving_world(False)
     print(f"load average at start: {os.getloadavg()[0]:.2f}")
-    print(f"observations in fixed20 with 8 discs, channels {config.channels} (median of {args.blocks} alternating blocks)")
+    print(f"observations in fixed20 with 8 discs, channels {config.channels} "
+          f"(median of {args.blocks} alternating blocks)")
     reference = reference_add_near()
     print(f"  {'robots':>6} {'frozen us/robot':>16} {'moving us/robot':>16} {'moving / frozen':>16} "
           f"{'before: moving':>15} {'before / frozen':>16}")

@@ -101,7 +101,8 @@ def bench_ours(world, seeds, budget: float, overrides: dict) -> tuple[list[float
         rate = c.global_step / c.wall_time
         training = c.wall_time - clock.seconds["evaluations"]
         reached = None if c.time_to_target is None else round(c.time_to_target, 1)
-        print(f"ours seed {seed}: time to {config.schedule.target_success:.0%}: {reached} s, {c.global_step} env steps, "
+        print(f"ours seed {seed}: time to {config.schedule.target_success:.0%}: {reached} s, "
+              f"{c.global_step} env steps, "
               f"{result.updates} updates, {rate:.0f} env steps/s ({c.global_step / training:.0f}/s without the "
               f"evaluations); best evaluation {result.best['success']:.1%} at step {c.best_step}", flush=True)
         parts = clock.seconds
@@ -200,7 +201,8 @@ def bench_sb3(world, steps: int, seed: int, overrides: dict, num_envs: int = 16,
     model.learn(total_timesteps=2_000_000, callback=stop)
     elapsed = time.perf_counter() - stop.start
     rate = model.num_timesteps / (elapsed - stop.evaluating)
-    print(f"SB3 DQN ({num_envs} envs, batch {config.dqn.batch_size}, same network, starts and recipe): {elapsed:.1f} s, "
+    print(f"SB3 DQN ({num_envs} envs, batch {config.dqn.batch_size}, same network, starts and recipe): "
+          f"{elapsed:.1f} s, "
           f"{model.num_timesteps} env steps ({rate:.0f}/s without the evaluations, {stop.evaluating:.1f} s), "
           f"best greedy success {stop.best:.0%}", flush=True)
     return rate, stop.best
