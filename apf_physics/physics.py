@@ -61,6 +61,7 @@ _FEW = 4  # up to this many proxies, per-body attribute access beats pymunk.batc
 _PROXY_GROUP = 1  # collision group of proxies of single-robot slots: they never touch each other
 _SOLO_FILTER = pymunk.ShapeFilter(group=_PROXY_GROUP)   # queries about them: they are not there
 SETTLE_OBSTACLE = 0.005  # a robot ending a step farther than this inside an obstacle or the edge is pushed out [units]
+SETTLE_ROUNDS = 6  # rounds of pushes and queries before a robot still overlapping is put back (Physics._settle)
 SETTLE_ROBOT = 0.01  # two robots ending a step overlapping more than this are pushed apart [units]
 _THIRDS = np.array([0.0, 0.5, 1.0])[None, :, None]  # where a move's clearance is sampled
 
@@ -523,10 +524,10 @@ class Physics:
         self._proxy_held = bool(len(robots))
         if pairs is None or not len(pairs):
             return self._touch_free
-        self._settle(undone)
+        self._settle(undone, robots, before)
         return self._log(pairs)
 
-    def _settle(self, undone: np.ndarray) -> None:
+    def _settle(self, undone: np.ndarray, simulated: np.ndarray, before: np.ndarray) -> None:
         """Resolve, before the step ends, the overlaps that pymunk leaves at its last substep.
 
         Chipmunk finds an overlap after the substep that made it and pushes it out in the
@@ -538,14 +539,19 @@ class Physics:
         whenever an overlap exceeds :data:`SETTLE_OBSTACLE` (obstacles, moving obstacles and
         the map's edge) or :data:`SETTLE_ROBOT` (two robots). The proxies follow.
 
-        ``undone``: robots put back where they started the step (:meth:`_undo_crossings`);
-        their contacts with static shapes are no longer there.
+        ``undone``: robots put back where they started the step (:meth:`_undo_crossings`): what
+        they overlap there is asked of pymunk (:meth:`_overlaps_at`) instead.
+
+        A robot that pymunk wedged between two shapes nearly facing each other (a narrow V)
+        would take the pushes many rounds to leave; after :data:`SETTLE_ROUNDS` it is put back
+        where it started the step (``before``, of ``simulated``: where the step before left it).
         """
-        if self._depths is None:
+        if self._depths is None and not len(undone):
             return
-        ids, normal, distance = self._depths
+        ids, normal, distance = self._depths if self._depths is not None else (np.zeros((0, 2)), np.zeros((0, 2)),
+                                                                               np.zeros(0))
         deep = np.flatnonzero(distance < -min(SETTLE_OBSTACLE, SETTLE_ROBOT))
-        if not len(deep):
+        if not len(deep) and not len(undone):
             return
         # a few pairs: read by dicts (as contact_rows_few); a robot and a static shape: the robot's way
         # out is against the normal if it is a, along it if b
@@ -568,9 +574,23 @@ class Physics:
         static_normal = np.array(static_normal, float).reshape(-1, 2)
         static_depth = np.array(static_depth, float)
         pair_robots = np.array(pairs, np.intp).reshape(-1, 2)
+        if len(undone):
+            more_robot, more_normal, more_depth, more_pairs = self._overlaps_at(undone)
+            static_robot = np.concatenate([static_robot, more_robot])
+            static_normal = np.concatenate([static_normal, more_normal])
+            static_depth = np.concatenate([static_depth, more_depth])
+            pair_robots = np.concatenate([pair_robots, more_pairs])
         anchor = self._positions[static_robot]
         m = self.robots_per_slot
-        for _ in range(6):
+        for round_ in range(2 * SETTLE_ROUNDS):
+            if round_ == SETTLE_ROUNDS:   # still overlapping: back to the step's start, and what is there
+                back = still[np.isin(still, simulated)]
+                self._positions[back] = before[np.searchsorted(simulated, back)]
+                self._proxy_target[self._robot_proxy[back]] = (self._positions[back]
+                                                               + self._tiles.offset[self._slot_tile[back // m]])
+                self._proxy_moved[self._robot_proxy[back]] = True
+                static_robot, static_normal, static_depth, pair_robots = self._overlaps_at(back)
+                anchor = self._positions[static_robot]
             involved = np.unique(np.concatenate([static_robot, pair_robots.ravel()]))
             local = np.searchsorted(involved, static_robot), np.searchsorted(involved, pair_robots)
             p = _project_out(self._positions[involved], self._slot_radius[involved // m], local[0], anchor,
@@ -588,6 +608,7 @@ class Physics:
             more_robot, more_normal, more_depth, more_pairs = self._overlaps_at(robots)
             if not len(more_robot) and not len(more_pairs):
                 return
+            still = np.unique(np.concatenate([more_robot, more_pairs.ravel()]))
             pair_robots = np.concatenate([pair_robots, more_pairs])
             static_robot = np.concatenate([static_robot, more_robot])
             anchor = np.concatenate([anchor, self._positions[more_robot]])

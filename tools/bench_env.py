@@ -12,7 +12,11 @@ Prints, from one process:
   never falls as N grows, and ≥ 400,000 robot-steps/s at N = 1024.
 - how many robots per step needed pymunk (the others moved without it);
 - the cost of an observation in fixed20 with 8 moving discs beside the same discs frozen
-  (aim ≤ 2×).
+  (aim ≤ 2×);
+- with ``--contacts``, whether contacts hold (issue 25): robots driven at random headings
+  (each held about ten steps) among thin walls, alone in their slots and in crowds of 64 per
+  world, counting the robot-steps that end more than 0.01 inside an obstacle or past the
+  map's edge, more than 0.02 into another robot, or with a centre through another robot.
 """
 
 from __future__ import annotations
@@ -107,14 +111,89 @@ def observation_cost(world, robots: int = 256, repeats: int = 200) -> float:
     return (time.perf_counter() - t) / (repeats * robots) * 1e6
 
 
+def thin_walls(rng: np.random.Generator, count: int = 6):
+    """A 20 × 20 world with ``count`` bars 0.005–0.1 thick at random angles."""
+    obstacles = []
+    for _ in range(count):
+        c = rng.uniform(3, 17, 2)
+        angle, length, width = rng.uniform(0, np.pi), rng.uniform(2, 6), rng.uniform(0.005, 0.1)
+        u = np.array([np.cos(angle), np.sin(angle)])
+        n = np.array([-u[1], u[0]])
+        corners = [c - u * length / 2 - n * width / 2, c + u * length / 2 - n * width / 2,
+                   c + u * length / 2 + n * width / 2, c - u * length / 2 + n * width / 2]
+        obstacles.append({"polygon": np.clip(np.array(corners), 0.5, 19.5).tolist()})
+    return apf_physics.world_from_dict({"size": [20, 20], "field": "thesis-fixed", "targets": [[19.5, 19.5]],
+                                        "obstacles": obstacles})
+
+
+def contacts_hold(robots_per_slot: int, slots: int, steps: int, seed: int = 0) -> dict:
+    """Robot-steps that end too deep in an obstacle (> 0.01), in a robot (> 0.02), or through one.
+
+    Every slot in a world of thin walls of its own; robots at random headings at speed 1 or √2,
+    each heading held about ten steps. Overlaps are measured exactly (the world's clearance).
+    """
+    from apf_physics.physics import Physics
+
+    rng = np.random.default_rng(seed)
+    worlds = [thin_walls(rng) for _ in range(slots)]
+    physics = Physics(worlds, robots_per_slot=robots_per_slot)
+    m = robots_per_slot
+    for s, world in enumerate(worlds):
+        physics.place(np.arange(s * m, (s + 1) * m), world.random_free_positions(rng, m))
+    n = physics.num_robots
+    heading = rng.uniform(0, 2 * np.pi, n)
+    speed = rng.choice([1.0, np.sqrt(2)], n)
+    counts = {"obstacle": 0, "robot": 0, "through": 0, "worst obstacle": 0.0, "worst robot": 0.0}
+    elapsed = 0.0
+    for _ in range(steps):
+        change = rng.random(n) < 0.1
+        heading[change] = rng.uniform(0, 2 * np.pi, int(change.sum()))
+        before = physics.positions
+        t = time.perf_counter()
+        physics.step(np.column_stack([np.cos(heading), np.sin(heading)]) * speed[:, None])
+        elapsed += time.perf_counter() - t
+        after = physics.positions
+        for s, world in enumerate(worlds):
+            mine = slice(s * m, (s + 1) * m)
+            inside = world.robot_radius - world.clearance(after[mine])
+            counts["obstacle"] += int((inside > 0.01).sum())
+            counts["worst obstacle"] = max(counts["worst obstacle"], float(inside.max()))
+            if m > 1:
+                a, b = after[mine], before[mine]
+                d = np.hypot(*(a[:, None] - a[None]).transpose(2, 0, 1)) + np.eye(m) * 1e9
+                overlap = 2 * world.robot_radius - d
+                counts["robot"] += int((overlap.max(axis=1) > 0.02).sum())
+                counts["worst robot"] = max(counts["worst robot"], float(overlap.max()))
+                # a centre through another: the two straight paths of the step come within a radius
+                r0, dr = b[:, None] - b[None], (a - b)[:, None] - (a - b)[None]
+                aa = np.sum(dr * dr, -1)
+                u = np.clip(np.where(aa > 0, -np.sum(r0 * dr, -1) / np.where(aa > 0, aa, 1), 0), 0, 1)
+                closest = np.hypot(*(r0 + u[..., None] * dr).transpose(2, 0, 1)) + np.eye(m) * 1e9
+                counts["through"] += int((closest.min(axis=1) < world.robot_radius).sum())
+    counts["robot-steps"] = n * steps
+    counts["physics us/robot-step"] = elapsed / (n * steps) * 1e6
+    return counts
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=20000, help="single-environment steps (default 20000)")
     parser.add_argument("--vmas", action="store_true", help="also run VMAS's navigation scenario (pip install vmas)")
     parser.add_argument("--sizes", type=int, nargs="+", default=[64, 256, 1024], help="numbers of environments")
     parser.add_argument("--vector-steps", type=int, default=300, help="vector steps per size (default 300)")
+    parser.add_argument("--contacts", type=int, default=0, metavar="STEPS",
+                        help="also count contacts that do not hold over STEPS steps of random crowds (e.g. 200)")
     args = parser.parse_args()
     print(f"load average at start: {os.getloadavg()[0]:.2f}")
+    if args.contacts:
+        print("contacts (thin walls, random headings held ~10 steps): robot-steps ending > 0.01 in an obstacle, "
+              "> 0.02 in a robot, or through one")
+        for m, slots in ((1, 256), (64, 4)):
+            c = contacts_hold(m, slots, args.contacts)
+            print(f"  {m:>2} robot(s) per slot x {slots:>3} slots, {c['robot-steps']:,} robot-steps: "
+                  f"obstacle {c['obstacle']} (worst {c['worst obstacle']:.3f}), robot {c['robot']} "
+                  f"(worst {c['worst robot']:.3f}), through {c['through']}; "
+                  f"physics {c['physics us/robot-step']:.1f} us per robot-step")
     cart = single_rate("CartPole-v1", args.steps)
     ours = single_rate("apf_physics/Navigate-v0", args.steps, world="fixed20")
     print("single environment, random actions, through gymnasium.make (wrappers included)")
