@@ -17,7 +17,8 @@ Usage::
     python tools/eval_moving.py /tmp/apf-figures/mv_heldout --planners dqn,dqn-known,astar,sipp \\
         --model moving=moving [--json OUT] [--before 5] [--after 3]
 
-``--model`` applies to the learned planners (``dqn``, ``dqn-known``, ``dqn-unshielded``).
+``--model`` applies to the learned planners (``dqn``, ``dqn-known``, ``dqn-unshielded``, and
+``dqn-one-step``: the shield as it was before the shield over time, for comparison).
 """
 
 from __future__ import annotations
@@ -33,10 +34,35 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from eval_general import load_labelled, summarise  # noqa: E402
 
+from apf_physics.actions import ACTIONS, SAFETY, move_clearance, shielded_argmax  # noqa: E402
 from apf_physics.evaluate import evaluate  # noqa: E402
 from apf_physics.planners import LEARNED, make_planner  # noqa: E402
+from apf_physics.planners.dqn import DQNPlanner  # noqa: E402
 from apf_physics.safefile import write_text  # noqa: E402
 from apf_physics.search import escape_moves  # noqa: E402
+
+
+class OneStepShield(DQNPlanner):
+    """``dqn-one-step``: the DQN planner with the shield it had before the shield over time (each move
+    against the moving obstacles where they are along it, no look-ahead), for comparison."""
+
+    def act(self, positions, active, moment=None):
+        moment = self._moment(moment)
+        if self._started:
+            self.observer.visit(positions)
+        self._started = True
+        obs = self.observer.observe(positions, t=moment.t, discs=moment.world.crowd)
+        room = move_clearance(moment, positions) - (self.world.robot_radius + SAFETY)
+        return ACTIONS[shielded_argmax(self._policy.q_values(obs), room)] * active[:, None]
+
+
+def planner_named(name: str, model: str | None):
+    """A planner by its command-line name, or ``dqn-one-step`` (:class:`OneStepShield`)."""
+    if name == "dqn-one-step":
+        planner = OneStepShield(model=model)
+        planner.name = name
+        return planner
+    return make_planner(name, model=model if name in LEARNED else None)
 
 
 def avoidability(world, episode, before: int = 5, after: int = 3) -> dict:
@@ -78,7 +104,7 @@ def main(argv=None) -> int:
     print("-" * len(header))
     results = {}
     for name in [p.strip() for p in args.planners.split(",") if p.strip()]:
-        planner = make_planner(name, model=model if name in LEARNED else None)
+        planner = planner_named(name, model)
         began = time.perf_counter()
         ev = evaluate(planner, worlds, max_steps=args.max_steps)
         took = time.perf_counter() - began
