@@ -4,6 +4,7 @@ for a few steps, the avoidability search, the time-aware baseline, and no change
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import pytest
@@ -115,7 +116,7 @@ def _fatal(world, position, t, move, steps):
     return escape_moves(world, position + move, t + 1, steps, strict=False) is None
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=int(os.environ.get("APF_SHIELD_EXAMPLES", 25)), deadline=None)
 @given(heading=st.floats(0, 2 * math.pi), distance=st.floats(2.5, 7.0), radius=st.floats(0.3, 1.3),
        speed=st.floats(0.2, 1.0), phase=st.floats(0, 6), moving=st.booleans(),
        direction=st.integers(0, 7), wall=st.booleans())

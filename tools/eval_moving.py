@@ -114,11 +114,16 @@ def main(argv=None) -> int:
         count = {k: sum(c["label"] == k for c in s["collision_labels"]) for k in ("avoidable", "unavoidable", "undecided")}
         s.update({k: v for k, v in count.items()})
         s["seconds"] = took
+        s["outcomes"] = {k: sum(e.outcome == k for e in ev.episodes) for k in ("reached", "collision", "trapped", "timeout")}
+        s["not_reached"] = [{"world": e.world, "start": [round(float(v), 4) for v in e.start], "outcome": e.outcome,
+                             "steps": int(e.steps)} for e in ev.episodes if e.outcome not in ("reached", "collision")]
         results[name] = s
         print(f"{name:<16} {s['successes']:>4}/{s['starts']:<4}{s['success_rate']:>6.1%} "
               f"{s['trap_successes']:>4}/{s['trap_starts']:<4}{s['trap_success_rate']:>6.1%} "
               f"{s['collisions']:>11} {count['avoidable']:>10} {count['unavoidable']:>12} {count['undecided']:>10}"
               f" {s['spl']:>6.3f} {took:>6.0f}s", flush=True)
+        for c in s["not_reached"]:
+            print(f"    {c['world']} start {c['start']}: {c['outcome']} after {c['steps']} steps", flush=True)
         for c in s["collision_labels"]:
             print(f"    {c['world']} start {c['start']}: collision at step {c['step']} with {','.join(c['with'])}: "
                   f"{c['label']} (searched from step {c['from_step']})", flush=True)
