@@ -591,10 +591,11 @@ class Physics:
                 self._proxy_moved[self._robot_proxy[back]] = True
                 static_robot, static_normal, static_depth, pair_robots = self._overlaps_at(back)
                 anchor = self._positions[static_robot]
-            involved = np.unique(np.concatenate([static_robot, pair_robots.ravel()]))
-            local = np.searchsorted(involved, static_robot), np.searchsorted(involved, pair_robots)
-            p = _project_out(self._positions[involved], self._slot_radius[involved // m], local[0], anchor,
-                             static_normal, static_depth, local[1])
+            involved = self._with_mates(np.unique(np.concatenate([static_robot, pair_robots.ravel()])))
+            slots = involved // m
+            group = np.where(self._shared[slots], self.crowd[slots] - self.crowd.min(), -1 - slots)   # who meets whom
+            p = _project_out(self._positions[involved], self._slot_radius[slots], np.searchsorted(involved, static_robot),
+                             anchor, static_normal, static_depth, group)
             moved = np.any(p != self._positions[involved], axis=1)
             robots = involved[moved]
             if not len(robots):
@@ -614,6 +615,18 @@ class Physics:
             anchor = np.concatenate([anchor, self._positions[more_robot]])
             static_normal = np.concatenate([static_normal, more_normal])
             static_depth = np.concatenate([static_depth, more_depth])
+
+    def _with_mates(self, robots: np.ndarray) -> np.ndarray:
+        """``robots`` and every robot that pymunk moved this step and that meets one of them (its
+        slot's robots, its crowd's), sorted: robots pushed apart are pushed among all they meet."""
+        m = self.robots_per_slot
+        if m == 1 and not self._crowd_robots:
+            return robots
+        held = np.flatnonzero(self._robot_proxy >= 0)
+        slots, held_slots = robots // m, held // m
+        crowds = self.crowd[slots[self._shared[slots]]]
+        mates = np.isin(held_slots, slots) | (self._shared[held_slots] & np.isin(self.crowd[held_slots], crowds))
+        return np.union1d(robots, held[mates])
 
     def _overlaps_at(self, robots: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """What the proxies of ``robots``, put where the robots are now, overlap by more than the
@@ -832,7 +845,7 @@ def _close_under_touch(needs: np.ndarray, both_free: np.ndarray, near_held: np.n
 
 
 def _project_out(p: np.ndarray, radius: np.ndarray, static_robot: np.ndarray, anchor: np.ndarray,
-                 static_normal: np.ndarray, static_depth: np.ndarray, pairs: np.ndarray, rounds: int = 20) -> np.ndarray:
+                 static_normal: np.ndarray, static_depth: np.ndarray, group: np.ndarray, rounds: int = 50) -> np.ndarray:
     """Robots at ``p`` moved out of the static shapes and each other that they overlap.
 
     Args:
@@ -840,34 +853,36 @@ def _project_out(p: np.ndarray, radius: np.ndarray, static_robot: np.ndarray, an
         static_robot, anchor, static_normal, static_depth: (K,) a robot overlapping a static shape,
             where it was then, its way out (unit) and how deep; the shape's boundary is taken as
             the plane there.
-        pairs: (L, 2) robots that overlap each other (their overlap is measured from ``p``).
+        group: (n,) robots of one group meet each other (their overlaps are measured from ``p``).
 
-    Each round first pushes every pair that overlaps by more than :data:`SETTLE_ROBOT` apart,
-    half each along the line of centres (0.001 beyond touching), and then every robot that
-    overlaps a shape by more than :data:`SETTLE_OBSTACLE` out of the one it overlaps most (0.001
-    beyond its boundary), until none does. A round thus ends with every robot on the free side
-    of the shape it overlapped most (a robot that a pair pushed into a wall is pushed back, and
-    the pair's overlap goes to the other robot in the next rounds), and no robot is taken
-    farther than half its radius from where it was by pairs (what it is pushed into is then
-    found by the caller's next query, before its centre could reach it). A robot alone with its
-    shapes is settled only by its own overlaps: the same in a batch as on its own.
+    Each round first pushes every pair of a group that overlaps by more than
+    :data:`SETTLE_ROBOT` apart, half each along the line of centres (0.001 beyond touching), and
+    then every robot that overlaps a shape by more than :data:`SETTLE_OBSTACLE` out of the one it
+    overlaps most (0.001 beyond its boundary), until none does. A round thus ends with every
+    robot on the free side of the shape it overlapped most (a robot that a pair pushed into a
+    wall is pushed back, and the pair's overlap goes to the other robot in the next rounds), and
+    no robot is taken farther than half its radius from where it was by pairs (what it is
+    pushed into is then found by the caller's next query, before its centre could reach it). A
+    robot alone in its group is settled only by its own overlaps: the same in a batch as on its
+    own.
     """
     start = p
     p = p.copy()
+    n = len(p)
+    together = len(np.unique(group)) < n
+    if together:
+        meets = (group[:, None] == group[None, :]) & ~np.eye(n, dtype=bool)
+        touching = (radius[:, None] + radius[None, :])
     for _ in range(rounds):
         moved = False
-        if len(pairs):
-            diff = p[pairs[:, 0]] - p[pairs[:, 1]]
-            d = np.hypot(diff[:, 0], diff[:, 1])
-            overlap = radius[pairs[:, 0]] + radius[pairs[:, 1]] - d
+        if together:
+            diff = p[:, None, :] - p[None, :, :]
+            d = np.hypot(diff[..., 0], diff[..., 1])
+            overlap = np.where(meets, touching - d, 0.0)
             apart = overlap > SETTLE_ROBOT
             if apart.any():
-                unit = diff[apart] / np.maximum(d[apart], 1e-9)[:, None]
-                half = 0.5 * (overlap[apart] + 1e-3)[:, None] * unit
-                push = np.zeros_like(p)
-                np.add.at(push, pairs[apart, 0], half)
-                np.add.at(push, pairs[apart, 1], -half)
-                p += push
+                unit = diff / np.maximum(d, 1e-9)[..., None]
+                p += 0.5 * np.sum(np.where(apart, overlap + 1e-3, 0.0)[..., None] * unit, axis=1)
                 away = p - start
                 far = np.hypot(away[:, 0], away[:, 1])
                 p = start + away * np.minimum(1.0, 0.5 * radius / np.maximum(far, 1e-12))[:, None]

@@ -10,8 +10,10 @@ ROBOT_OVERLAP = 0.02      # at most this much overlap of two robots, at the end 
 def overlaps(physics, before, t_end=None):
     """``(obstacle (N,), robot (N,), crossed (N,))`` after a step of ``physics`` from ``before``:
     each robot's overlap with obstacles and the map's edge, its largest overlap with a robot it
-    meets, and whether its straight path from ``before`` came within one radius of another's
-    (a centre through another robot)."""
+    meets, and whether its straight path from ``before`` came within half a radius of another's
+    (a centre through another robot; robots that slide around each other within one step can
+    come within a radius of each other on straight paths, but not within half of one unless they
+    turn about each other by more than 150° in one step)."""
     m = physics.robots_per_slot
     after = physics.positions
     n = physics.num_robots
@@ -47,7 +49,7 @@ def overlaps(physics, before, t_end=None):
         s_ = np.clip(np.where(aa > 0, -np.sum(r0 * dr, -1) / np.where(aa > 0, aa, 1), 0), 0, 1)
         c = np.hypot(*(r0 + s_[..., None] * dr).transpose(2, 0, 1))
         np.fill_diagonal(c, np.inf)
-        crossed[robots] = np.any(c < r[:, None], axis=1)
+        crossed[robots] = np.any(c < 0.5 * r[:, None], axis=1)
     return obstacle, robot, crossed
 
 

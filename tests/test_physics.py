@@ -17,6 +17,7 @@ from apf_physics.physics import Physics
 from apf_physics.geometry import triangulate
 from apf_physics.geometry import polygon_area
 from conftest import simple_world_dict
+from contacts_check import assert_contacts_hold
 
 
 def test_free_motion_is_exact():
@@ -286,8 +287,10 @@ def test_a_crowd_pressed_onto_a_thin_wall_never_pushes_through(seed, thickness):
     physics = Physics([world], robots_per_slot=n)
     physics.place(np.arange(n), np.column_stack([rng.uniform(1, 19, n), rng.uniform(10.4, 14, n)]))
     for _ in range(40):
+        before = physics.positions
         physics.step(np.column_stack([rng.uniform(-0.3, 0.3, n), np.full(n, -1.4)]))
         assert np.all(physics.positions[:, 1] > 10 + thickness), "a robot pushed through the wall"
+        assert_contacts_hold(physics, before)   # and none ends a step in the wall or another robot
 
 
 def test_skipping_arbiter_reads_on_untouched_substeps_changes_nothing():

@@ -164,12 +164,12 @@ def contacts_hold(robots_per_slot: int, slots: int, steps: int, seed: int = 0) -
                 overlap = 2 * world.robot_radius - d
                 counts["robot"] += int((overlap.max(axis=1) > 0.02).sum())
                 counts["worst robot"] = max(counts["worst robot"], float(overlap.max()))
-                # a centre through another: the two straight paths of the step come within a radius
+                # a centre through another: the two straight paths of the step come within half a radius
                 r0, dr = b[:, None] - b[None], (a - b)[:, None] - (a - b)[None]
                 aa = np.sum(dr * dr, -1)
                 u = np.clip(np.where(aa > 0, -np.sum(r0 * dr, -1) / np.where(aa > 0, aa, 1), 0), 0, 1)
                 closest = np.hypot(*(r0 + u[..., None] * dr).transpose(2, 0, 1)) + np.eye(m) * 1e9
-                counts["through"] += int((closest.min(axis=1) < world.robot_radius).sum())
+                counts["through"] += int((closest.min(axis=1) < 0.5 * world.robot_radius).sum())
     counts["robot-steps"] = n * steps
     counts["physics us/robot-step"] = elapsed / (n * steps) * 1e6
     return counts
