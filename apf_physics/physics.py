@@ -172,6 +172,7 @@ class Physics:
         self._proxy_ids = np.zeros(0, np.uintp)      # their body ids
         self._proxy_of_id: dict[int, int] = {}        # the same as a dict
         self._proxy_target = np.zeros((0, 2))         # where a proxy is to be put before pymunk next steps
+        self._proxy_parking = np.zeros((0, 2))        # where each waits when parked (_parking)
         self._proxy_moved = np.zeros(0, bool)         # ... for those that must be put there
         self._robot_proxy = np.full(self.num_robots, -1, np.intp)
         self._proxy_held = False                     # some robot holds a proxy
@@ -269,6 +270,7 @@ class Physics:
         self._proxy_ids = np.append(self._proxy_ids, np.uintp(body.id))
         self._proxy_of_id[body.id] = k
         self._proxy_target = np.vstack([self._proxy_target, self._parking(k)])
+        self._proxy_parking = np.vstack([self._proxy_parking, self._parking(k)])
         self._proxy_moved = np.append(self._proxy_moved, False)
         self._rows_dirty = True
         return k
@@ -284,7 +286,7 @@ class Physics:
         proxies = proxies[proxies >= 0]
         if not len(proxies):
             return
-        self._proxy_target[proxies] = [self._parking(k) for k in proxies.tolist()]
+        self._proxy_target[proxies] = self._proxy_parking[proxies]
         self._proxy_moved[proxies] = True
         self._robot_proxy[self._proxy_robot[proxies]] = -1
         self._proxy_robot[proxies] = -1
