@@ -518,16 +518,18 @@ class Physics:
         self._lend_movers(active)
         before = self._positions[robots].copy()
         pairs = self._simulate(robots, v) if len(robots) or self._proxy_dirty.any() else None
-        undone = np.zeros(0, np.intp)
-        if len(robots) and (self.robots_per_slot > 1 or self._crowd_robots):
-            undone = self._undo_crossings(robots, before)
         free = ~simulate
         self._positions[free] += moves[free]
         self._proxy_held = bool(len(robots))
         if pairs is None or not len(pairs):
             return self._touch_free
+        log = self._log(pairs)
+        undone = np.zeros(0, np.intp)
+        pushed = log.robot[robots]   # only a robot that touched a robot can have been pushed faster than told
+        if pushed.any():
+            undone = self._undo_crossings(robots[pushed], before[pushed])
         self._settle(undone, robots, before)
-        return self._log(pairs)
+        return log
 
     def _settle(self, undone: np.ndarray, simulated: np.ndarray, before: np.ndarray) -> None:
         """Resolve, before the step ends, the overlaps that pymunk leaves at its last substep.
@@ -674,7 +676,8 @@ class Physics:
         """Put back any of ``robots`` whose move this step passed through a static obstacle.
 
         The substeps keep a robot's own move from tunnelling, but robots that touch each other
-        (a formation, a crowd) can push one another faster than they were commanded, and the
+        (a formation, a crowd: ``robots`` are those that touched a robot) can push one another
+        faster than they were commanded, and the
         solver's pushes are not bounded. An exact check of each moved segment against the
         static obstacles (sampled every half radius: a segment through even a zero-thickness
         wall has a sample within a quarter radius of it, which no allowed move comes near)
@@ -847,7 +850,7 @@ def _close_under_touch(needs: np.ndarray, both_free: np.ndarray, near_held: np.n
 
 
 def _project_out(p: np.ndarray, radius: np.ndarray, static_robot: np.ndarray, anchor: np.ndarray,
-                 static_normal: np.ndarray, static_depth: np.ndarray, group: np.ndarray, rounds: int = 50) -> np.ndarray:
+                 static_normal: np.ndarray, static_depth: np.ndarray, group: np.ndarray, rounds: int = 20) -> np.ndarray:
     """Robots at ``p`` moved out of the static shapes and each other that they overlap.
 
     Args:
@@ -871,21 +874,24 @@ def _project_out(p: np.ndarray, radius: np.ndarray, static_robot: np.ndarray, an
     start = p
     p = p.copy()
     n = len(p)
-    together = len(np.unique(group)) < n
-    if together:
-        meets = (group[:, None] == group[None, :]) & ~np.eye(n, dtype=bool)
-        touching = (radius[:, None] + radius[None, :])
+    i = j = np.zeros(0, np.intp)
+    if len(np.unique(group)) < n:   # robots that meet: the pairs of a group near enough to overlap in this call
+        diff = p[:, None, :] - p[None, :, :]
+        near = np.hypot(diff[..., 0], diff[..., 1]) < radius[:, None] + radius[None, :] + 2 * radius.max()
+        i, j = np.nonzero(np.triu(near & (group[:, None] == group[None, :]), 1))
     for _ in range(rounds):
         moved = False
-        if together:
-            diff = p[:, None, :] - p[None, :, :]
-            d = np.hypot(diff[..., 0], diff[..., 1])
-            overlap = np.where(meets, touching - d, 0.0)
+        if len(i):
+            diff = p[i] - p[j]
+            d = np.hypot(diff[:, 0], diff[:, 1])
+            overlap = radius[i] + radius[j] - d
             apart = overlap > SETTLE_ROBOT
             if apart.any():
-                unit = diff / np.maximum(d, 1e-9)[..., None]
-                p += 0.5 * np.sum(np.where(apart, overlap + 1e-3, 0.0)[..., None] * unit, axis=1)
-                away = p - start
+                half = 0.5 * (overlap[apart] + 1e-3)[:, None] * diff[apart] / np.maximum(d[apart], 1e-9)[:, None]
+                push = np.zeros_like(p)
+                np.add.at(push, i[apart], half)
+                np.add.at(push, j[apart], -half)
+                away = p + push - start
                 far = np.hypot(away[:, 0], away[:, 1])
                 p = start + away * np.minimum(1.0, 0.5 * radius / np.maximum(far, 1e-12))[:, None]
                 moved = True
