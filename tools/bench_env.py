@@ -8,7 +8,8 @@ Prints, from one process:
   ``gymnasium.make`` (wrappers included) with random actions, and their ratio (aim ≤ 5);
 - robot-steps per second of ``NavigateVectorEnv`` on fixed20 (random starts and actions) at
   each N, and with ``--vmas`` VMAS's ``navigation`` scenario (CPU, one agent per env,
-  continuous random actions, one torch thread) at the same N, and their ratio. Aims: ours
+  continuous random actions, one torch thread) at the same N, stepped in alternating blocks,
+  and their ratio by the wall clock and by this process's CPU time. Aims: ours
   never falls as N grows, and ≥ 400,000 robot-steps/s at N = 1024.
 - how many robots per step needed pymunk (the others moved without it);
 - the cost of an observation in fixed20 with 8 moving discs beside the same discs frozen
@@ -47,41 +48,74 @@ def single_rate(env_id: str, steps: int, **kwargs) -> float:
     return steps / (time.perf_counter() - t)
 
 
-def vector_rate(num_envs: int, steps: int) -> tuple[float, float]:
-    """Robot-steps per second, and the share of robot-steps that went through pymunk."""
-    env = NavigateVectorEnv(world="fixed20", num_envs=num_envs, starts="random")
-    env.reset(seed=0)
-    physics = env._task.stepper.physics
-    actions = np.random.default_rng(0).integers(0, 9, (steps, num_envs))
-    for a in actions[:10]:   # warm up (proxies created, rows indexed)
-        env.step(a)
-    t = time.perf_counter()
-    for a in actions:
-        env.step(a)
-    rate = steps * num_envs / (time.perf_counter() - t)
-    simulated = 0
-    for a in actions[:50]:   # counted apart: robots holding a pymunk proxy after the step
-        env.step(a)
-        simulated += int((physics._robot_proxy >= 0).sum())
-    return rate, simulated / (50 * num_envs)
+class OursVector:
+    """``NavigateVectorEnv`` on fixed20, random starts and actions, stepped in blocks."""
+
+    def __init__(self, num_envs: int, steps: int):
+        self.env = NavigateVectorEnv(world="fixed20", num_envs=num_envs, starts="random")
+        self.env.reset(seed=0)
+        self.actions = np.random.default_rng(0).integers(0, 9, (steps, num_envs))
+        for a in self.actions[:10]:   # warm up (proxies created, rows indexed)
+            self.env.step(a)
+
+    def run(self, block: slice) -> None:
+        for a in self.actions[block]:
+            self.env.step(a)
+
+    def via_pymunk(self) -> float:
+        """The share of robot-steps that go through pymunk (robots holding a proxy after a step)."""
+        physics = self.env._task.stepper.physics
+        simulated = 0
+        for a in self.actions[:50]:
+            self.env.step(a)
+            simulated += int((physics._robot_proxy >= 0).sum())
+        return simulated / (50 * self.env.num_envs)
 
 
-def vmas_rate(num_envs: int, steps: int) -> float:
-    import torch
-    import vmas
+class VmasVector:
+    """VMAS's ``navigation`` scenario (CPU, one agent per env, continuous random actions, one torch thread)."""
 
-    torch.set_num_threads(1)
-    env = vmas.make_env("navigation", num_envs=num_envs, device="cpu", continuous_actions=True, n_agents=1, seed=0)
-    env.reset()
-    agents = env.agents
-    generator = torch.Generator().manual_seed(0)
-    actions = [[torch.rand(num_envs, 2, generator=generator) * 2 - 1 for _ in agents] for _ in range(steps)]
-    for a in actions[:10]:
-        env.step(a)
-    t = time.perf_counter()
-    for a in actions:
-        env.step(a)
-    return steps * num_envs / (time.perf_counter() - t)
+    def __init__(self, num_envs: int, steps: int):
+        import torch
+        import vmas
+
+        torch.set_num_threads(1)
+        self.env = vmas.make_env("navigation", num_envs=num_envs, device="cpu", continuous_actions=True, n_agents=1,
+                                 seed=0)
+        self.env.reset()
+        generator = torch.Generator().manual_seed(0)
+        self.actions = [[torch.rand(num_envs, 2, generator=generator) * 2 - 1 for _ in self.env.agents]
+                        for _ in range(steps)]
+        for a in self.actions[:10]:
+            self.env.step(a)
+
+    def run(self, block: slice) -> None:
+        for a in self.actions[block]:
+            self.env.step(a)
+
+
+def vector_rates(num_envs: int, steps: int, vmas: bool, block: int = 25) -> dict:
+    """Robot-steps per second of ours (and VMAS's), wall clock and CPU time of this process.
+
+    The two are stepped in alternating blocks of ``block`` steps, so that a machine whose load
+    changes during the run slows both alike; the CPU-time rate is the steadier of the two on a
+    shared machine (it does not count the time the process waits for a core).
+    """
+    runners = {"ours": OursVector(num_envs, steps)}
+    if vmas:
+        runners["vmas"] = VmasVector(num_envs, steps)
+    wall = dict.fromkeys(runners, 0.0)
+    cpu = dict.fromkeys(runners, 0.0)
+    for first in range(0, steps, block):
+        for name, runner in runners.items():
+            w, c = time.perf_counter(), time.process_time()
+            runner.run(slice(first, first + block))
+            wall[name] += time.perf_counter() - w
+            cpu[name] += time.process_time() - c
+    out = {f"{name} wall": steps * num_envs / wall[name] for name in runners}
+    out.update({f"{name} cpu": steps * num_envs / cpu[name] for name in runners})
+    out["via pymunk"] = runners["ours"].via_pymunk()
+    return out
 
 
 def moving_world(frozen: bool):
@@ -202,16 +236,17 @@ def main() -> None:
     print(f"  a Navigate step costs      {cart / ours:10.1f} x a CartPole step (aim <= 5)")
     header = f"  {'N':>5} {'ours robot-steps/s':>20} {'via pymunk':>11}"
     if args.vmas:
-        header += f" {'VMAS navigation':>17} {'ours / VMAS':>12}"
+        header += f" {'VMAS navigation':>17} {'ours / VMAS':>12} {'(CPU time)':>11}"
     print("vectorised: NavigateVectorEnv on fixed20 (random starts and actions)"
-          + (" beside VMAS 'navigation' (CPU, 1 agent, 1 torch thread)" if args.vmas else ""))
+          + (" beside VMAS 'navigation' (CPU, 1 agent, 1 torch thread), in alternating blocks of 25 steps"
+             if args.vmas else ""))
     print(header)
     for n in args.sizes:
-        rate, simulated = vector_rate(n, args.vector_steps)
-        line = f"  {n:>5} {rate:>20,.0f} {simulated:>10.1%}"
+        r = vector_rates(n, args.vector_steps, args.vmas)
+        line = f"  {n:>5} {r['ours wall']:>20,.0f} {r['via pymunk']:>10.1%}"
         if args.vmas:
-            theirs = vmas_rate(n, args.vector_steps)
-            line += f" {theirs:>17,.0f} {rate / theirs:>12.2f}"
+            line += (f" {r['vmas wall']:>17,.0f} {r['ours wall'] / r['vmas wall']:>12.2f}"
+                     f" {r['ours cpu'] / r['vmas cpu']:>11.2f}")
         print(line)
     frozen, moving = observation_cost(moving_world(True)), observation_cost(moving_world(False))
     print("observations (256 robots, one call) in fixed20 with 8 discs")
