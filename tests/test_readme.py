@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import ast
 import contextlib
+import importlib.util
 import io
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -80,3 +82,31 @@ def test_readme_python_snippets_run_and_print_what_they_say(monkeypatch):
     assert lines == ["(21.6, 21.6) 0.25", "[[1.65 0.55]]", str(["reached"] * 5)]
     assert "# (21.6, 21.6) in steps; 0.25 m per step" in source and "# [[1.65 0.55]]" in source
     assert "# 5 x 'reached'" in source
+
+
+def _figures_tool():
+    spec = importlib.util.spec_from_file_location("apf_figures_tool", ROOT / "tools" / "figures.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module   # its dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_readme_figures_are_the_results_files_figures():
+    """The table of figures is written from tools/results/ by its commands (tools/figures.py): an edit by
+    hand, or a results file re-measured without rewriting the README, fails here."""
+    figures = _figures_tool()
+    text = (ROOT / "README.md").read_text()
+    assert figures.readme_block(text) == figures.table()
+    for row in figures.ROWS:   # each row names the command that makes its figures
+        assert row.path.is_file(), row.path
+        assert f"`python tools/figures.py run {row.key}`" in figures.readme_block(text)
+
+
+def test_the_figures_check_catches_a_stale_figure(monkeypatch):
+    figures = _figures_tool()
+    stale = figures.load(figures.BY_KEY["fixed20"])
+    stale["evaluations"][1]["summary"]["successes"] -= 1    # one episode re-measured
+    original = figures.load
+    monkeypatch.setattr(figures, "load", lambda row: stale if row.key == "fixed20" else original(row))
+    assert figures.readme_block((ROOT / "README.md").read_text()) != figures.table()
