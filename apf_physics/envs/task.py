@@ -65,16 +65,6 @@ def trap_detector(trap: TrapOption) -> TrapDetector | None:
     raise UserError(f"trap must be None, one of {', '.join(TRAP_RULES)} or a TrapDetector, got {trap!r}")
 
 
-def _flag(value: bool) -> np.ndarray:
-    out = np.full(1, value)
-    out.flags.writeable = False   # shared by every step of a batch of one
-    return out
-
-
-_flags = {False: _flag(False), True: _flag(True)}
-"""Read-only (1,) bool arrays: the flags of a batch of one's :class:`TaskStep`."""
-
-
 def _ends(ended: np.ndarray, outcome: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(terminated, truncated, trapped)`` of the episodes that ``ended``, from their outcome:
     reached or collided terminate; the step limit and the trap detector truncate."""
@@ -224,10 +214,10 @@ class NavigationTask:
         trapped = ended and outcome == TRAPPED
         truncated = trapped or (ended and outcome == TIMEOUT)
         robot_contact = bool(report.contacts.touched and report.contacts.robot[0])
-        flag = _flags
-        return TaskStep(self._obs, np.array([sum(terms)]), flag[ended and not truncated], flag[truncated],
-                        np.array(terms)[:, None], report.reached, report.collided, report.moved, flag[robot_contact],
-                        flag[trapped])
+        # fresh arrays: the vector env hands them out, and a caller may change its own
+        return TaskStep(self._obs, np.array([sum(terms)]), np.array([ended and not truncated]), np.array([truncated]),
+                        np.array(terms)[:, None], np.array([reached]), np.array([collided]), np.array([True]),
+                        np.array([robot_contact]), np.array([trapped]))
 
     def distance(self) -> np.ndarray:
         """(N,) each leader's distance to the nearest target of its world, after the last start or step."""
