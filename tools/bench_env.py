@@ -183,9 +183,9 @@ def contacts_hold(robots_per_slot: int, slots: int, steps: int, seed: int = 0) -
         change = rng.random(n) < 0.1
         heading[change] = rng.uniform(0, 2 * np.pi, int(change.sum()))
         before = physics.positions
-        t = time.perf_counter()
+        t = time.process_time()   # CPU time: steadier than the wall clock on a shared machine
         physics.step(np.column_stack([np.cos(heading), np.sin(heading)]) * speed[:, None])
-        elapsed += time.perf_counter() - t
+        elapsed += time.process_time() - t
         after = physics.positions
         for s, world in enumerate(worlds):
             mine = slice(s * m, (s + 1) * m)
@@ -227,7 +227,7 @@ def main() -> None:
             print(f"  {m:>2} robot(s) per slot x {slots:>3} slots, {c['robot-steps']:,} robot-steps: "
                   f"obstacle {c['obstacle']} (worst {c['worst obstacle']:.3f}), robot {c['robot']} "
                   f"(worst {c['worst robot']:.3f}), through {c['through']}; "
-                  f"physics {c['physics us/robot-step']:.1f} us per robot-step")
+                  f"physics {c['physics us/robot-step']:.1f} us (CPU) per robot-step")
     cart = single_rate("CartPole-v1", args.steps)
     ours = single_rate("apf_physics/Navigate-v0", args.steps, world="fixed20")
     print("single environment, random actions, through gymnasium.make (wrappers included)")
