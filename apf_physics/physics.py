@@ -541,7 +541,9 @@ class Physics:
         (:func:`~apf_physics.contacts.touching_depths`); :func:`_project_out` moves the
         robots out of each other and of the static shapes by exactly that much (0.001 more),
         whenever an overlap exceeds :data:`SETTLE_OBSTACLE` (obstacles, moving obstacles and
-        the map's edge) or :data:`SETTLE_ROBOT` (two robots). The proxies follow.
+        the map's edge) or :data:`SETTLE_ROBOT` (two robots). The proxies follow. Robots alone
+        in their slots (most of them) are settled one by one in plain floats by the same rule
+        (:meth:`_settle_alone`).
 
         ``undone``: robots put back where they started the step (:meth:`_undo_crossings`): what
         they overlap there is asked of pymunk (:meth:`_overlaps_at`) instead.
@@ -562,6 +564,7 @@ class Physics:
         robot_of = self._proxy_robot
         skip = set(undone.tolist())
         static_robot, static_normal, static_depth, pairs = [], [], [], []
+        alone: dict[int, list] = {}   # robots alone in their slots: settled one by one (_settle_alone)
         for (a, b), (nx, ny), d in zip(ids[deep].tolist(), normal[deep].tolist(), distance[deep].tolist()):
             ka, kb = self._proxy_of_id.get(a), self._proxy_of_id.get(b)
             ra = -1 if ka is None else int(robot_of[ka])
@@ -569,11 +572,17 @@ class Physics:
             if ra >= 0 and rb >= 0:
                 pairs.append((ra, rb))
             elif ra >= 0 or rb >= 0:
-                r, sign = (ra, -1.0) if ra >= 0 else (rb, 1.0)
-                if r not in skip:
+                r, sign, k = (ra, -1.0, ka) if ra >= 0 else (rb, 1.0, kb)
+                if self._proxy_solo[k]:
+                    alone.setdefault(r, []).append((sign * nx, sign * ny, -d))
+                elif r not in skip:
                     static_robot.append(r)
                     static_normal.append((sign * nx, sign * ny))
                     static_depth.append(-d)
+        if alone:
+            self._settle_alone(alone, simulated, before)
+        if not static_robot and not pairs and not len(undone):
+            return
         static_robot = np.array(static_robot, np.intp)
         static_normal = np.array(static_normal, float).reshape(-1, 2)
         static_depth = np.array(static_depth, float)
@@ -620,6 +629,41 @@ class Physics:
             static_normal = np.concatenate([static_normal, more_normal])
             static_depth = np.concatenate([static_depth, more_depth])
 
+    def _settle_alone(self, alone: dict[int, list], simulated: np.ndarray, before: np.ndarray) -> None:
+        """:meth:`_settle` for robots alone in their slots, one by one in plain floats (a robot
+        alone meets no robot, and there are a few a step; the rule is :func:`_project_out`'s).
+
+        ``alone``: each robot's overlaps with static shapes at the last substep, ``(way out x,
+        y, depth)``. A robot is pushed out of the shape it overlaps most until none by more than
+        :data:`SETTLE_OBSTACLE`, then pymunk is asked for the shape nearest its centre (a point
+        query); one overlapped there is added, and so on; after :data:`SETTLE_ROUNDS` a robot
+        still overlapping goes back to where it started the step.
+        """
+        for robot, found in alone.items():
+            k = int(self._robot_proxy[robot])
+            r = float(self._proxy_radius[k])
+            ox, oy = self._tiles.offset[self._slot_tile[robot]].tolist()
+            x, y = self._positions[robot].tolist()
+            planes = [(nx, ny, depth, x, y) for nx, ny, depth in found]   # way out, depth, where measured
+            for round_ in range(2 * SETTLE_ROUNDS):
+                if round_ == SETTLE_ROUNDS:   # still overlapping: back to the step's start, and what is there
+                    x, y = before[np.searchsorted(simulated, robot)].tolist()
+                    planes = []
+                for _ in range(20):
+                    if not planes:
+                        break
+                    depth, nx, ny = max((d - nx * (x - ax) - ny * (y - ay), nx, ny) for nx, ny, d, ax, ay in planes)
+                    if depth <= SETTLE_OBSTACLE:
+                        break
+                    x, y = x + (depth + 1e-3) * nx, y + (depth + 1e-3) * ny
+                info = self.space.point_query_nearest((x + ox, y + oy), r - SETTLE_OBSTACLE, _SOLO_FILTER)
+                if info is None:
+                    break
+                planes.append((info.gradient.x, info.gradient.y, r - info.distance, x, y))
+            self._positions[robot] = (x, y)
+            self._proxy_target[k] = (x + ox, y + oy)
+            self._proxy_moved[k] = True
+
     def _with_mates(self, robots: np.ndarray) -> np.ndarray:
         """``robots`` and every robot that pymunk moved this step and that meets one of them (its
         slot's robots, its crowd's), sorted: robots pushed apart are pushed among all they meet."""
@@ -633,30 +677,18 @@ class Physics:
         return np.union1d(robots, held[mates])
 
     def _overlaps_at(self, robots: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """What the proxies of ``robots``, put where the robots are now, overlap by more than the
-        settling tolerances (pymunk's queries): ``(robot (K,), way out (K, 2), depth (K,), pairs of
-        robots (L, 2))``, as :meth:`_settle` reads them from the arbiters.
-
-        A robot alone in its slot meets no robot: the shape nearest its centre is all there is to
-        know (a point query; overlaps of several shapes are found one per call, nearest first).
-        """
+        """What the proxies of ``robots`` (robots that meet others), put where the robots are now,
+        overlap by more than the settling tolerances (pymunk's shape queries): ``(robot (K,), way
+        out (K, 2), depth (K,), pairs of robots (L, 2))``, as :meth:`_settle` reads them from the
+        arbiters."""
         static_robot, static_normal, static_depth, pairs = [], [], [], []
         proxies = self._robot_proxy[robots]
-        solo = self._proxy_solo[proxies]
-        radius = self._proxy_radius[proxies]
-        where = self._proxy_target[proxies].tolist()
-        for robot, (x, y), r in zip(robots[solo].tolist(), [w for w, s in zip(where, solo) if s], radius[solo].tolist()):
-            info = self.space.point_query_nearest((x, y), r - SETTLE_OBSTACLE, _SOLO_FILTER)
-            if info is not None:
-                static_robot.append(robot)
-                static_normal.append(tuple(info.gradient))
-                static_depth.append(r - info.distance)
-        bodies = [self._proxy_body[k] for k in proxies[~solo].tolist()]
-        for body, (x, y) in zip(bodies, [w for w, s in zip(where, solo) if not s]):
+        bodies = [self._proxy_body[k] for k in proxies.tolist()]
+        for body, (x, y) in zip(bodies, self._proxy_target[proxies].tolist()):
             body.position = (x, y)
             self.space.reindex_shapes_for_body(body)
         tolerance = min(SETTLE_OBSTACLE, SETTLE_ROBOT)
-        for robot, body in zip(robots[~solo].tolist(), bodies):
+        for robot, body in zip(robots.tolist(), bodies):
             for info in self.space.shape_query(next(iter(body.shapes))):
                 points = info.contact_point_set.points
                 if not points or points[0].distance >= -tolerance:
