@@ -116,8 +116,10 @@ def shield_over_time(moment: Moment, positions: np.ndarray, moves: np.ndarray, q
     is where the physics will put it; with ``velocity`` prediction (:data:`TURN_AWARE`) the move
     itself is checked against every heading the obstacle may take over the step at the fastest
     speed it was seen at over the last two steps (it may reach the end of its route and turn
-    back, or round a corner, at any moment: the disc it can reach grows by that speed), its
-    continuation against constant velocity. Staying put is a move like the others. When no move is admitted the robot
+    back, or round a corner, at any moment: the disc it can reach grows by that speed); each
+    later step of the continuation as the shield will judge it when it comes: every heading
+    from where the obstacle will be at that step's start at constant velocity (a continuation
+    judged by constant velocity alone could lead where the next step's check admits nothing). Staying put is a move like the others. When no move is admitted the robot
     takes the move whose best continuation keeps it out of contact (clearance below its radius)
     the longest, the most room among those.
 
@@ -228,8 +230,18 @@ def assess_moves(moment: Moment, positions: np.ndarray, moves: np.ndarray, predi
         else:
             d1, _ = shape.signed_distance((first[rows] - path[None, None, :len(s1)]).reshape(-1, 2))
             d1 = d1.reshape(len(rows), m, len(s1)) - 0.5 * (step_move[None, :, None] + v1) / k
-        d2, _ = shape.signed_distance((later[rows] - path[None, None, None, len(s1):]).reshape(-1, 2))
-        d2 = d2.reshape(len(rows), m, len(cont), len(s2)) - 0.5 * (step_cont[None, None, :, None] + v2) / k
+        if prediction == "velocity" and TURN_AWARE:
+            # each later step as the shield will judge it then, if the obstacle keeps its velocity
+            # until that step starts: against every heading from where it will be at that start
+            v = max(v2, sensed_speed[j])
+            base = np.ceil(s2 - 1e-9) - 1.0                                       # the step each sample is in
+            at_start = path[np.searchsorted(np.concatenate([s1, s2]), base)]      # (S2, 2) predicted at that step's start
+            d2, _ = shape.signed_distance((later[rows] - at_start[None, None, None]).reshape(-1, 2))
+            d2 = (d2.reshape(len(rows), m, len(cont), len(s2)) - v * (s2 - base)[None, None, None, :]
+                  - 0.5 * (step_cont[None, None, :, None] + v) / k)
+        else:
+            d2, _ = shape.signed_distance((later[rows] - path[None, None, None, len(s1):]).reshape(-1, 2))
+            d2 = d2.reshape(len(rows), m, len(cont), len(s2)) - 0.5 * (step_cont[None, None, :, None] + v2) / k
         first_samples[rows] = np.minimum(first_samples[rows], d1)
         later_samples[rows] = np.minimum(later_samples[rows], d2)
     first_room = first_samples.min(axis=2)                                           # (W, M)

@@ -36,6 +36,7 @@ from eval_general import load_labelled, summarise  # noqa: E402
 
 from apf_physics.actions import ACTIONS, SAFETY, move_clearance, shielded_argmax  # noqa: E402
 from apf_physics.evaluate import evaluate  # noqa: E402
+from apf_physics.models.policy import move_inputs  # noqa: E402
 from apf_physics.planners import LEARNED, make_planner  # noqa: E402
 from apf_physics.planners.dqn import DQNPlanner  # noqa: E402
 from apf_physics.safefile import write_text  # noqa: E402
@@ -48,6 +49,10 @@ class OneStepShield(DQNPlanner):
 
     def act(self, positions, active, moment=None):
         moment = self._moment(moment)
+        if self.observer is None:          # a map network: its own room input was the one-step shield's
+            room, du = move_inputs(moment, positions, self._policy.moves)
+            q = self._policy.q_values(self.world, positions, room, du)
+            return self._policy.moves[shielded_argmax(q, room)] * active[:, None]
         if self._started:
             self.observer.visit(positions)
         self._started = True
