@@ -1,0 +1,289 @@
+"""Tracking: holonomic plans driven by unicycle robots (issue 27), vectorised over robots.
+
+Every planner of the package (``gradient``, ``escape``, ``astar``, ``dqn``) decides a
+displacement per control step for a robot that can move in any direction. A unicycle robot
+(:mod:`apf_physics.kinematics`) cannot: this module turns such plans into ``(v, ω)`` commands
+within its :class:`~apf_physics.kinematics.UnicycleLimits`.
+
+- :func:`pursue`: pure pursuit of one waypoint per robot. The robot drives the circular arc
+  that leaves along its heading and passes through the waypoint (curvature ``2 sin α / L``
+  for a waypoint at distance ``L`` and bearing ``α``), as far along it as the limits allow in
+  one step and never past the waypoint; a waypoint more than ``turn_in_place`` off its heading
+  is first turned to on the spot.
+- :func:`track_moves`: a planner's moves ``(N, 2)`` as waypoints (where the holonomic robot
+  would be after the step): the planner replans every step from where the unicycle is.
+- :class:`PathFollower`: pure pursuit along whole paths ``(N, P, 2)`` with a lookahead
+  distance (a path of unit moves, an A* path): what :func:`cross_track_error` measures against.
+- :class:`UnicycleFollowers`: the thesis's follower rule (Model §3) for wheeled robots. The
+  holonomic rule (:class:`~apf_physics.formation.FollowerController`) chooses each follower's
+  safe neighbouring position given the leader's move (for a unicycle leader, the chord of the
+  arc it drives); that position is the follower's waypoint, tracked by :func:`pursue`.
+  :func:`slot_points` gives the slots of a wedge or offsets formation relative to the leader's
+  actual heading θ.
+
+Units: lengths in units, time in control steps, angles in radians (counter-clockwise), as in
+:mod:`apf_physics.kinematics`. States are ``(N, 5)`` ``(x, y, θ, v, ω)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from apf_physics.formation import FollowerController, link_lengths
+from apf_physics.kinematics import UnicycleLimits, arc_displacement, arc_points, to_robot_frame
+from apf_physics.world import FormationSpec, World
+
+ARRIVE = 1e-3
+"""A waypoint this close to the robot [units] is reached: the robot stops."""
+TURN_IN_PLACE = np.pi / 4
+"""A waypoint farther off the heading than this [rad] is turned to on the spot before driving."""
+LOOKAHEAD = 0.75
+"""Default lookahead of :class:`PathFollower` along its path [units]."""
+LINK_MARGIN = 0.75
+"""How far within the communication range :meth:`UnicycleFollowers.leader_cap` stops the leader [units]."""
+CHECK_SAMPLES = 16
+"""Points (after the start) at which :class:`UnicycleFollowers` checks each follower's arc."""
+
+
+def pursue(state: np.ndarray, waypoint: np.ndarray, limits: UnicycleLimits = UnicycleLimits(),
+           turn_in_place: float = TURN_IN_PLACE, arrive: float = ARRIVE,
+           speed_cap: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(v, ω)`` (N,), (N,) driving each robot toward its waypoint within ``limits``.
+
+    The arc through the waypoint, tangent to the heading, is driven in one step by ``v = L·α /
+    sin α`` (its length) and ``ω = 2α`` (its turn): both are scaled down together, keeping the
+    arc, until within the speed and turn-rate limits; then the acceleration limit (against the
+    state's ``v``, ``ω``) is applied to ``v`` and ``ω`` re-derived from the arc's curvature, and
+    clipped last. A waypoint behind the robot (``|α| > turn_in_place``) is turned to on the
+    spot; one within ``arrive`` stops the robot. Forward driving only.
+
+    Args:
+        state: (N, 5) ``(x, y, θ, v, ω)``; ``v``, ``ω`` the previous command.
+        waypoint: (N, 2) where each robot should go.
+        limits: The robots' limits.
+        turn_in_place: Bearing [rad] beyond which the robot turns on the spot first (small values
+            make it drive straight chords only, exactly the holonomic moves).
+        arrive: Distance [units] within which a waypoint is reached.
+        speed_cap: (N,) a lower top speed for this step [units/step] (e.g. to be able to stop
+            at a path's end), or None.
+    """
+    state = np.asarray(state, float).reshape(-1, 5)
+    local = to_robot_frame(state, np.asarray(waypoint, float).reshape(-1, 2))
+    distance = np.hypot(local[:, 0], local[:, 1])
+    alpha = np.arctan2(local[:, 1], local[:, 0])
+    sin_a = np.sin(alpha)
+    small = np.abs(alpha) < 1e-9
+    length = np.where(small, distance, distance * alpha / np.where(small, 1.0, sin_a))     # arc length
+    turn = 2.0 * alpha
+    scale = np.minimum.reduce([np.ones_like(distance),
+                               limits.max_speed / np.maximum(length, 1e-300),
+                               limits.max_turn_rate / np.maximum(np.abs(turn), 1e-300)])
+    v = scale * length
+    curvature = np.where(distance > 0, 2.0 * sin_a / np.maximum(distance, 1e-300), 0.0)
+    spin = np.abs(alpha) > turn_in_place
+    v = np.where(spin | (distance <= arrive), 0.0, v)
+    if speed_cap is not None:
+        v = np.minimum(v, speed_cap)
+    v, _ = limits.clamp(v, 0.0, state[:, 3], None)
+    # on the arc through the waypoint; turning on the spot (or, when the robot cannot stop yet,
+    # as sharply as it can) toward a waypoint behind it
+    omega = np.where(spin, np.where(v > 0, np.sign(alpha) * limits.max_turn_rate, alpha), v * curvature)
+    return limits.clamp(v, omega, None, state[:, 4])
+
+
+def track_moves(state: np.ndarray, moves: np.ndarray, limits: UnicycleLimits = UnicycleLimits(),
+                turn_in_place: float = TURN_IN_PLACE) -> tuple[np.ndarray, np.ndarray]:
+    """``(v, ω)`` for holonomic moves ``(N, 2)`` planned from each unicycle's position: :func:`pursue`
+    of ``position + move`` (a zero move stops the robot)."""
+    state = np.asarray(state, float).reshape(-1, 5)
+    return pursue(state, state[:, :2] + np.asarray(moves, float).reshape(-1, 2), limits, turn_in_place)
+
+
+def project_on_paths(points: np.ndarray, paths: np.ndarray, lo: np.ndarray | None = None,
+                     hi: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest point of each robot's path polyline, optionally only within arc lengths ``[lo, hi]``.
+
+    Args:
+        points: (N, 2).
+        paths: (N, P, 2) polylines (pad a shorter path by repeating its last point).
+        lo, hi: (N,) the window of arc length searched (default the whole path).
+
+    Returns:
+        ``(distance (N,), arc length (N,))`` of the nearest point.
+    """
+    a, b = paths[:, :-1], paths[:, 1:]                                             # (N, P-1, 2)
+    seg = b - a
+    length = np.hypot(seg[..., 0], seg[..., 1])
+    start = np.concatenate([np.zeros((len(paths), 1)), np.cumsum(length, axis=1)[:, :-1]], axis=1)
+    rel = points[:, None, :] - a
+    u = np.clip(np.sum(rel * seg, axis=-1) / np.maximum(length * length, 1e-300), 0.0, 1.0)
+    s = start + u * length
+    if lo is not None:
+        s = np.clip(s, lo[:, None], None)
+    if hi is not None:
+        s = np.clip(s, None, hi[:, None])
+    if lo is not None or hi is not None:     # the clipped arc length's point on its own segment
+        u = np.clip((s - start) / np.maximum(length, 1e-300), 0.0, 1.0)
+        s = start + u * length
+    near = a + u[..., None] * seg
+    d = np.hypot(*(points[:, None, :] - near).transpose(2, 0, 1))
+    if lo is not None or hi is not None:
+        outside = (s < lo[:, None] - 1e-12) | (s > hi[:, None] + 1e-12)
+        d = np.where(outside, np.inf, d)
+    best = np.argmin(d, axis=1)
+    rows = np.arange(len(points))
+    return d[rows, best], s[rows, best]
+
+
+def point_at(paths: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """(N, 2) the point at arc length ``s`` (N,) along each path (clamped to its ends)."""
+    seg = np.diff(paths, axis=1)
+    length = np.hypot(seg[..., 0], seg[..., 1])
+    cum = np.concatenate([np.zeros((len(paths), 1)), np.cumsum(length, axis=1)], axis=1)     # (N, P)
+    s = np.clip(np.asarray(s, float), 0.0, cum[:, -1])
+    k = np.clip((cum[:, 1:] < s[:, None]).sum(axis=1), 0, seg.shape[1] - 1)
+    rows = np.arange(len(paths))
+    f = (s - cum[rows, k]) / np.maximum(length[rows, k], 1e-300)
+    return paths[rows, k] + np.clip(f, 0.0, 1.0)[:, None] * seg[rows, k]
+
+
+def cross_track_error(points: np.ndarray, paths: np.ndarray) -> np.ndarray:
+    """(N,) distance from each robot's point to its path polyline (N, P, 2)."""
+    return project_on_paths(np.asarray(points, float).reshape(-1, 2), np.asarray(paths, float))[0]
+
+
+class PathFollower:
+    """Pure pursuit along one path per robot, vectorised.
+
+    Each step a robot's progress (arc length along its path) moves to its nearest point on the
+    path within ``[progress, progress + 2·lookahead]`` (it never jumps back, nor to a later
+    part of the path that passes close), and the robot pursues the point ``lookahead`` farther
+    along (:func:`pursue`); the path's end is pursued exactly and the robot stops on it.
+
+    Args:
+        paths: (N, P, 2) polylines, each from its robot's start (pad shorter ones by repeating
+            their last point).
+        limits: The robots' limits.
+        lookahead: Distance along the path of the pursued point [units].
+        turn_in_place: As :func:`pursue`.
+    """
+
+    def __init__(self, paths: np.ndarray, limits: UnicycleLimits = UnicycleLimits(), lookahead: float = LOOKAHEAD,
+                 turn_in_place: float = TURN_IN_PLACE):
+        self.paths = np.asarray(paths, float)
+        if self.paths.ndim != 3 or self.paths.shape[1] < 2:
+            raise ValueError(f"paths must be (N, P >= 2, 2), got {self.paths.shape}")
+        self.limits = limits
+        self.lookahead = float(lookahead)
+        self.turn_in_place = float(turn_in_place)
+        seg = np.diff(self.paths, axis=1)
+        self.length = np.hypot(seg[..., 0], seg[..., 1]).sum(axis=1)          # (N,)
+        self.progress = np.zeros(len(self.paths))
+
+    def carrots(self, state: np.ndarray) -> np.ndarray:
+        """(N, 2) the points pursued from ``state`` (advances the progress)."""
+        state = np.asarray(state, float).reshape(-1, 5)
+        _, s = project_on_paths(state[:, :2], self.paths, self.progress, self.progress + 2 * self.lookahead)
+        self.progress = np.maximum(self.progress, s)
+        return point_at(self.paths, np.minimum(self.progress + self.lookahead, self.length))
+
+    def commands(self, state: np.ndarray, speed_cap: np.ndarray | float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(v, ω)`` for this step (``speed_cap``: a lower top speed this step, e.g.
+        :meth:`UnicycleFollowers.leader_cap`)."""
+        carrots = self.carrots(state)
+        remaining = np.maximum(self.length - self.progress, 0.0)
+        cap = np.sqrt(2.0 * self.limits.max_accel * remaining) + ARRIVE     # can still stop at the end
+        if speed_cap is not None:
+            cap = np.minimum(cap, speed_cap)
+        return pursue(state, carrots, self.limits, self.turn_in_place, speed_cap=cap)
+
+    def done(self, state: np.ndarray, tolerance: float) -> np.ndarray:
+        """(N,) bool: the robot is within ``tolerance`` of its path's end."""
+        end = self.paths[:, -1]
+        return np.hypot(*(np.asarray(state, float)[:, :2] - end).T) <= tolerance
+
+
+def slot_points(leader: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """(N, F, 2) the slots of a wedge or offsets formation behind leaders at poses ``leader`` (N, ≥3).
+
+    ``offsets`` (F, 2) are ``[back, left]`` relative to the leader's **heading θ** (the holonomic
+    rule uses a smoothed direction of travel, which a unicycle has exactly):
+    ``slot = p − back·h + left·l`` with ``h = (cos θ, sin θ)`` and ``l`` its left normal.
+    """
+    leader = np.asarray(leader, float)
+    offsets = np.asarray(offsets, float).reshape(-1, 2)
+    h = np.stack([np.cos(leader[:, 2]), np.sin(leader[:, 2])], axis=-1)[:, None, :]
+    left = np.stack([-h[..., 1], h[..., 0]], axis=-1)
+    return leader[:, None, :2] - offsets[None, :, :1] * h + offsets[None, :, 1:] * left
+
+
+class UnicycleFollowers:
+    """The followers of one formation of unicycle robots (Model §3 for wheeled robots).
+
+    Each step: the leader's command ``(v, ω)`` gives its move (the chord of its arc,
+    :func:`~apf_physics.kinematics.arc_displacement`); the thesis's holonomic rule
+    (:class:`~apf_physics.formation.FollowerController`: each follower's best safe neighbouring
+    position in its own field, anchored ``spacing`` back along the trail of the robot it follows,
+    or at its slot) gives each follower's **waypoint**; :func:`pursue` drives to it. The rule's
+    moves are checked for safety as straight moves; with ``turn_in_place`` small the followers
+    drive exactly those (turning first), with the default they drive arcs through the same
+    points (up to ``L/2·tan(α/2)`` off the chord).
+
+    Args:
+        world: The world.
+        spec: The formation.
+        limits: The followers' limits.
+        turn_in_place: As :func:`pursue`.
+    """
+
+    def __init__(self, world: World, spec: FormationSpec, limits: UnicycleLimits = UnicycleLimits(),
+                 turn_in_place: float = TURN_IN_PLACE):
+        self.controller = FollowerController(world, spec)
+        self.limits = limits
+        self.turn_in_place = float(turn_in_place)
+
+    def reset(self, states: np.ndarray) -> None:
+        """Start a run with robots at ``states`` (m, 5), the leader first."""
+        self.controller.reset(np.asarray(states, float)[:, :2])
+
+    def leader_cap(self, states: np.ndarray) -> float:
+        """The leader's top speed this step [units/step] so that its followers keep up: full speed
+        while every link is at least :data:`LINK_MARGIN` + 1 within the communication range, down
+        to 0 at :data:`LINK_MARGIN` within it (a unicycle follower turning on the spot falls behind)."""
+        states = np.asarray(states, float).reshape(-1, 5)
+        links = link_lengths(states[:, :2], self.controller.spec.followed)
+        room = self.controller.spec.comm_range - LINK_MARGIN - float(links.max(initial=0.0))
+        return float(np.clip(room, 0.0, self.limits.max_speed))
+
+    def waypoints(self, states: np.ndarray, leader_v: float, leader_omega: float) -> np.ndarray:
+        """(F, 2) where each follower should be after this step (advances the rule's trails)."""
+        states = np.asarray(states, float).reshape(-1, 5)
+        leader_move = arc_displacement(states[0, 2], leader_v, leader_omega)
+        moves = self.controller.act(states[:, :2], leader_move)
+        return states[1:, :2] + moves
+
+    def commands(self, states: np.ndarray, leader_v: float, leader_omega: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(v, ω)`` (F,), (F,) of the followers this step, given the leader's command.
+
+        The rule decides each follower's move knowing the moves of those ahead of it; a unicycle
+        may not make its move (it turns first, or drives an arc). So, in chain order, each
+        follower's arc (sampled at :data:`CHECK_SAMPLES` points) is checked against the arcs
+        of the robots ahead (final) and the start positions of those behind, and against the
+        obstacles; a follower whose arc comes closer than the rule's contact distance (or than its
+        radius to an obstacle) only turns this step (v = 0: it stays where the others were told it is).
+        """
+        states = np.asarray(states, float).reshape(-1, 5)
+        v, omega = pursue(states[1:], self.waypoints(states, leader_v, leader_omega), self.limits,
+                          self.turn_in_place)
+        v_all = np.concatenate([[float(leader_v)], v])
+        arcs = arc_points(states, v_all, np.concatenate([[float(leader_omega)], omega]), CHECK_SAMPLES)
+        standing = np.repeat(states[:, None, :2], CHECK_SAMPLES + 1, axis=1)
+        world, contact = self.controller.world, self.controller.contact
+        for i in range(1, len(states)):
+            others = np.concatenate([arcs[:i], standing[i + 1:]])                       # (m - 1, S + 1, 2)
+            gap = np.hypot(*(others - arcs[i][None]).transpose(2, 0, 1)).min() if len(others) else np.inf
+            clear = world.clearance(arcs[i]).min()
+            if v_all[i] != 0 and (gap < contact or clear < world.robot_radius):
+                v_all[i] = 0.0
+                arcs[i] = standing[i]
+        return v_all[1:], omega
