@@ -14,19 +14,23 @@ reads, per beam, the distance from its **centre** to the first thing the ray mee
 - other robots: discs of the robot radius, given per robot (:func:`teammates` builds them from
   team labels, leaving each robot itself out).
 
-A robot's centre inside an obstacle reads 0 on every beam that starts inside it. A point
-obstacle (a disc of radius 0) is hit only by a beam through it exactly: a beam has no width.
+A point obstacle (a disc of radius 0) is met only by a beam exactly through it: a beam has no
+width. A robot whose centre is inside a disc reads 0 on every beam; one inside a polygon (it has
+collided) does not see that polygon (only edges seen from outside are cast against).
 
 Beams (:meth:`LidarConfig.angles`), relative to the heading, counter-clockwise: with a full
 circle (360°), ``−π + 2πk/K`` (beam 0 straight back, beam ``K/2`` straight ahead); with a
 narrower field of view, ``K`` beams evenly from ``−fov/2`` to ``+fov/2``, ends included.
 Units: lengths in units, angles in radians (the field of view is given in degrees).
 
-Everything is numpy over arrays ``(robots, beams, shapes)``: no Python loop over robots or
-beams (robots are taken in chunks that bound the temporaries). Each world's static segments and
-discs are built once and kept with the world (:meth:`~apf_physics.world.World.cached`, one entry
-per world, shared by the worlds of other targets on the same map); with many segments (a large
-map) each robot casts only against the segments whose bounding box is within range of it.
+Everything is numpy, with no Python loop over robots or beams: each (robot, shape) pair is
+turned into the beams within the angle the shape subtends from the robot, and only those
+(robot, beam, shape) candidates are solved, exactly, the nearest hit of each beam kept; the
+map's edge is solved for every beam in closed form. Robots are cast :data:`ROBOTS_PER_CAST` at
+a time (bounding the temporaries). Each world's static segments and discs are built once and
+kept with the world (:meth:`~apf_physics.world.World.cached`, one entry per world, shared by
+the worlds of other targets on the same map); with many segments (a large map) each robot
+casts only against the segments whose bounding box is within range of it.
 Optional Gaussian noise (:attr:`LidarConfig.noise`) comes from a seeded generator; noisy ranges
 are clipped to ``[0, max_range]``.
 """
@@ -89,7 +93,7 @@ class _Static(NamedTuple):
 
     a: np.ndarray          # (S, 2)
     e: np.ndarray          # (S, 2)
-    side: np.ndarray       # (S,) +1 a polygon's edge, -1 the map's edge, 0 a grid's (see _facing)
+    side: np.ndarray       # (S,) +1 a polygon's edge, 0 a grid's boundary (see _seen)
     lo: np.ndarray         # (S, 2) bounding boxes
     hi: np.ndarray
     centre: np.ndarray     # (C, 2)
@@ -112,11 +116,9 @@ def _polygon_edges(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def static_geometry(world: World) -> _Static:
-    """The world's static obstacles and its map's edge as segments and discs (built once per world)."""
+    """The world's static obstacles as segments and discs (built once per world; the map's edge is cast on its own)."""
     def build() -> _Static:
-        w, h = world.size
-        corners = np.array([[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]])
-        a_list, e_list, sides = [corners], [np.roll(corners, -1, axis=0) - corners], [np.full(4, -1)]
+        a_list, e_list, sides = [np.zeros((0, 2))], [np.zeros((0, 2))], [np.zeros(0)]
         centres, radii = [], []
         for obstacle in world.static_obstacles:
             if isinstance(obstacle, PolygonObstacle):
@@ -269,18 +271,45 @@ def _cast_discs(beams: _Beams, out: np.ndarray, pos: np.ndarray, robot: np.ndarr
     np.minimum.at(out, flat, hit)
 
 
-def _within(pos: np.ndarray, lo: np.ndarray, hi: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
-    """(robot, shape) pairs whose shape's box (lo, hi (S, 2)) is within ``reach`` of the robot."""
-    gap = np.maximum(np.maximum(lo[None] - pos[:, None], pos[:, None] - hi[None]), 0.0)       # (N, S, 2)
-    return np.nonzero(gap[..., 0] ** 2 + gap[..., 1] ** 2 <= reach * reach)
+def _edge_ranges(beams: _Beams, pos: np.ndarray, size: tuple[float, float]) -> np.ndarray:
+    """(N, K) distance along each beam to the map's edge (the rectangle ``[0, w] × [0, h]``, seen from inside)."""
+    cb, sb = beams.cos_beam[None, :], beams.sin_beam[None, :]
+    c, s = beams.cos[:, None], beams.sin[:, None]
+    dx, dy = c * cb - s * sb, s * cb + c * sb                            # the beams' directions in the world
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tx = np.where(dx > 0, (size[0] - pos[:, 0, None]) / dx, np.where(dx < 0, -pos[:, 0, None] / dx, np.inf))
+        ty = np.where(dy > 0, (size[1] - pos[:, 1, None]) / dy, np.where(dy < 0, -pos[:, 1, None] / dy, np.inf))
+    return np.maximum(np.minimum(tx, ty), 0.0)
 
 
-def _facing(pos: np.ndarray, robot: np.ndarray, a: np.ndarray, e: np.ndarray, side: np.ndarray) -> np.ndarray:
-    """Which (robot, segment) pairs can hold a beam's first hit: a polygon's edge seen from outside
-    (``side`` +1: counter-clockwise outline), the map's edge from inside (−1), any side (0)."""
-    w = pos[robot] - a
-    cross = e[:, 0] * w[:, 1] - e[:, 1] * w[:, 0]           # > 0: the robot is left of the edge
-    return (side == 0) | (side * cross < 0)
+def _seen(pos: np.ndarray, a: np.ndarray, e: np.ndarray, side: np.ndarray, lo: np.ndarray | None = None,
+          hi: np.ndarray | None = None, reach: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+    """(robot, segment) pairs that can hold a beam's first hit.
+
+    A polygon's edge seen from outside (``side`` +1: its outline is counter-clockwise, the
+    inside on the edge's left), a grid's boundary from either side (0); with boxes ``lo``, ``hi``
+    (S, 2), only segments whose box is within ``reach``.
+
+    Args:
+        pos: (N, 2) robot centres.
+        a, e: segments ``a → a + e``: (S, 2) for all robots, or ``a`` (N, S, 2) per robot.
+        side: (S,).
+    """
+    wx = pos[:, 0, None] - a[..., 0]                                      # (N, S)
+    wy = pos[:, 1, None] - a[..., 1]
+    cross = e[:, 0] * wy - e[:, 1] * wx                                   # > 0: the robot is left of the edge
+    mask = (side == 0) | (side * cross < 0)
+    if lo is not None:
+        gx = np.maximum(np.maximum(lo[:, 0] - pos[:, 0, None], pos[:, 0, None] - hi[:, 0]), 0.0)
+        gy = np.maximum(np.maximum(lo[:, 1] - pos[:, 1, None], pos[:, 1, None] - hi[:, 1]), 0.0)
+        mask &= gx * gx + gy * gy <= reach * reach
+    return np.nonzero(mask)
+
+
+def _near_discs(pos: np.ndarray, centre: np.ndarray, radius: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """(robot, disc) pairs whose disc (centres (C, 2) or (N, C, 2)) reaches within ``reach`` of the robot."""
+    gap = np.hypot(pos[:, 0, None] - centre[..., 0], pos[:, 1, None] - centre[..., 1]) - radius
+    return np.nonzero(gap <= reach)
 
 
 def teammates(positions: np.ndarray, team: np.ndarray) -> np.ndarray:
@@ -320,30 +349,27 @@ def _cast(world: World, poses: np.ndarray, config: LidarConfig, t: np.ndarray,
     n, k = len(poses), config.beams
     pos = poses[:, :2]
     beams = _Beams(config, poses[:, 2])
-    out = np.full(n * k, float(config.max_range))
+    out = np.minimum(_edge_ranges(beams, pos, world.size), float(config.max_range)).ravel()
     reach = config.max_range
     geo = static_geometry(world)
     if len(geo.a) > CULL_ABOVE:
-        robot, shape = _within(pos, geo.lo, geo.hi, reach)
+        robot, shape = _seen(pos, geo.a, geo.e, geo.side, geo.lo, geo.hi, reach)
     else:
-        robot, shape = np.divmod(np.arange(n * len(geo.a)), len(geo.a))
-    keep = _facing(pos, robot, geo.a[shape], geo.e[shape], geo.side[shape])
-    robot, shape = robot[keep], shape[keep]
+        robot, shape = _seen(pos, geo.a, geo.e, geo.side)
     _cast_segments(beams, out, pos, robot, geo.a[shape], geo.e[shape])
     if len(geo.radius):
-        robot, shape = _within(pos, geo.centre - geo.radius[:, None], geo.centre + geo.radius[:, None], reach)
+        robot, shape = _near_discs(pos, geo.centre, geo.radius, reach)
         _cast_discs(beams, out, pos, robot, geo.centre[shape], geo.radius[shape])
     if world.moving:
         mov = moving_geometry(world)
         shift = np.broadcast_to(world.moving_offsets(t), (n, len(world.moving), 2))      # (n, M, 2)
         if len(mov.a):
             a = mov.a[None] + shift[:, mov.seg_owner]                                       # (n, Sm, 2)
-            robot, shape = np.nonzero(_facing(pos, np.repeat(np.arange(n), len(mov.a)), a.reshape(-1, 2),
-                                              np.tile(mov.e, (n, 1)), np.ones(n * len(mov.a))).reshape(n, -1))
+            robot, shape = _seen(pos, a, mov.e, np.ones(len(mov.a)))
             _cast_segments(beams, out, pos, robot, a[robot, shape], mov.e[shape])
         if len(mov.centre):
             centre = mov.centre[None] + shift[:, mov.disc_owner]                          # (n, Cm, 2)
-            robot, shape = np.nonzero(np.ones(centre.shape[:2], bool))
+            robot, shape = _near_discs(pos, centre, mov.radius, reach)
             _cast_discs(beams, out, pos, robot, centre[robot, shape], mov.radius[shape])
     discs = []
     if len(world.crowd):

@@ -11,9 +11,10 @@ vector env are) and, timed in alternating blocks in the same run:
   (the environments' observation today).
 
 Each figure is the median over blocks of µs per robot-step (one call for all robots divided by
-their number). Worlds: ``fixed20``; ``moving8``, fixed20 with 8 discs of radius 0.5 moving back
+their number), by the wall clock and by CPU time; the ratio is lidar over window (wall clock). Worlds: ``fixed20``; ``moving8``, fixed20 with 8 discs of radius 0.5 moving back
 and forth across it (as ``tools/bench_moving.py``); ``ros_arena``, an occupancy-grid map (many
-segments: each robot casts only against those within range). The machine's load is printed:
+segments: each robot casts only against those within range). ``segments`` counts the static
+segments (the map's edge is cast in closed form, apart). The machine's load is printed:
 a core taken by another job slows both columns alike.
 """
 
@@ -49,11 +50,13 @@ def world_named(name: str):
     return moving8() if name == "moving8" else apf_physics.load_world(name)
 
 
-def block(fn, repeats: int, robots: int) -> float:
-    t = time.perf_counter()
+def block(fn, repeats: int, robots: int) -> tuple[float, float]:
+    """(wall, CPU) µs per robot-step of ``repeats`` calls for ``robots`` robots."""
+    t, c = time.perf_counter(), time.process_time()
     for k in range(repeats):
         fn(k)
-    return (time.perf_counter() - t) / (repeats * robots) * 1e6
+    scale = 1e6 / (repeats * robots)
+    return (time.perf_counter() - t) * scale, (time.process_time() - c) * scale
 
 
 def main() -> None:
@@ -67,7 +70,8 @@ def main() -> None:
     one, five, _ = os.getloadavg()
     print(f"N = {args.robots} robots, K = {args.beams} beams over 360°, range 8; median of {args.blocks} blocks "
           f"of {args.repeats} calls; load {one:.2f} (5 min {five:.2f}) on {os.cpu_count()} cores")
-    print(f"{'world':<12}{'segments':>9}{'moving':>8}{'lidar µs/robot-step':>22}{'window µs/robot-step':>23}{'ratio':>8}")
+    print("µs per robot-step, wall clock (CPU time)")
+    print(f"{'world':<12}{'segments':>9}{'moving':>8}{'lidar':>16}{'window':>16}{'ratio':>8}")
     config = LidarConfig(beams=args.beams)
     for name in args.worlds:
         world = world_named(name)
@@ -83,9 +87,10 @@ def main() -> None:
         for _ in range(args.blocks):
             lidar_times.append(block(lambda k: scan(world, poses, config, t=steps + k), args.repeats, n))
             window_times.append(block(lambda k: observer.observe(poses[:, :2], t=steps + k), args.repeats, n))
-        lid, win = statistics.median(lidar_times), statistics.median(window_times)
-        print(f"{name:<12}{len(static_geometry(world).a):>9}{len(world.moving):>8}{lid:>22.1f}{win:>23.1f}"
-              f"{lid / win:>8.2f}")
+        lid = [statistics.median(column) for column in zip(*lidar_times)]
+        win = [statistics.median(column) for column in zip(*window_times)]
+        print(f"{name:<12}{len(static_geometry(world).a):>9}{len(world.moving):>8}"
+              f"{f'{lid[0]:.1f} ({lid[1]:.1f})':>16}{f'{win[0]:.1f} ({win[1]:.1f})':>16}{lid[0] / win[0]:>8.2f}")
 
 
 if __name__ == "__main__":
