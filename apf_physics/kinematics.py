@@ -87,8 +87,8 @@ class UnicycleLimits:
         if not self.max_reverse >= 0:
             raise ValueError(f"unicycle limit max_reverse must be >= 0, got {self.max_reverse}")
 
-    def clamp(self, v: np.ndarray, omega: np.ndarray, v_prev: np.ndarray | float = None,
-              omega_prev: np.ndarray | float = None) -> tuple[np.ndarray, np.ndarray]:
+    def clamp(self, v: np.ndarray, omega: np.ndarray, v_prev: np.ndarray | float | None = None,
+              omega_prev: np.ndarray | float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(v, ω)`` within the speed and turn-rate limits and, given the previous step's
         command, within the acceleration limits (each clipped on its own).
 

@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from apf_physics.actions import ACTIONS
+from apf_physics.physics import substeps_for
 from apf_physics.kinematics import (UNICYCLE_ACTION_NAMES, UNICYCLE_ACTIONS, UnicycleLimits, arc_points,
                                     distance_bearing, holonomic_from_unit, holonomic_to_unit, integrate,
                                     substep_velocities, to_robot_frame, wrap_angle)
@@ -136,3 +137,15 @@ def test_robot_frame_and_bearing():
                                [[[0.0, 1.0], [-1.0, 0.0]]], atol=1e-12)
     d, b = distance_bearing(state, np.array([[0.0, 1.0]]))
     np.testing.assert_allclose([d[0], b[0]], [1.0, math.pi / 2])
+
+
+def test_the_physics_substeps_keep_a_turning_robot_from_tunnelling():
+    """With the substep count the physics picks for the unicycle's top speed, no substep's chord
+    is longer than 0.9 of the robot's radius, whatever the turn."""
+    lim, radius = UnicycleLimits(), 0.25
+    substeps = substeps_for(radius, lim.max_speed)
+    rng = np.random.default_rng(0)
+    state = np.column_stack([rng.normal(size=(200, 2)), rng.uniform(-4, 4, 200), np.zeros((200, 2))])
+    v, omega = lim.from_unit(rng.uniform(-1, 1, (200, 2)))
+    chords = np.hypot(*substep_velocities(state, v, omega, substeps).transpose(2, 0, 1)) / substeps
+    assert chords.max() <= 0.9 * radius
