@@ -120,8 +120,10 @@ def shield_over_time(moment: Moment, positions: np.ndarray, moves: np.ndarray, q
     later step of the continuation as the shield will judge it when it comes: every heading
     from where the obstacle will be at that step's start at constant velocity (a continuation
     judged by constant velocity alone could lead where the next step's check admits nothing). Staying put is a move like the others. When no move is admitted the robot
-    takes the move whose best continuation keeps it out of contact (clearance below its radius)
-    the longest, the most room among those.
+    is judged again with every sequence of unit moves as its continuation (``9 ** (horizon − 1)``
+    of them) and twice the samples, only for such robots: the best-valued move admitted so, else the move whose best
+    continuation keeps it out of contact (clearance below its radius) the longest, the most room
+    among those.
 
     Only robots with a moving obstacle within reach (sensed, and near enough to meet within
     ``horizon`` steps) are checked over time; the others, and every robot of a world without
@@ -143,11 +145,29 @@ def shield_over_time(moment: Moment, positions: np.ndarray, moves: np.ndarray, q
     if not world.moving:
         bar = world.robot_radius + SAFETY
         return shielded_argmax(q, move_clearance(moment, positions, moves) - bar)
+    positions = np.asarray(positions, float).reshape(-1, 2)
     a = assess_moves(moment, positions, moves, prediction, horizon)
-    safe_pick = np.where(a.admitted, q, -np.inf).argmax(axis=1)
-    longest = a.contact >= a.contact.max(axis=1, keepdims=True)
-    fallback = np.where(longest, a.room, -np.inf).argmax(axis=1)
-    return np.where(a.admitted.any(axis=1), safe_pick, fallback)
+    admitted, contact, room = a.admitted.copy(), a.contact.copy(), a.room.copy()
+    stuck = np.flatnonzero(~admitted.any(axis=1) & a.watched)
+    if len(stuck):   # no move admitted: try every sequence of unit moves after each move, not only held ones
+        rich = assess_moves(moment, positions[stuck], moves, prediction, horizon, every_sequence(horizon),
+                            samples=2 * MOVE_SAMPLES)
+        admitted[stuck], contact[stuck], room[stuck] = rich.admitted, rich.contact, rich.room
+    safe_pick = np.where(admitted, q, -np.inf).argmax(axis=1)
+    longest = contact >= contact.max(axis=1, keepdims=True)
+    fallback = np.where(longest, room, -np.inf).argmax(axis=1)
+    return np.where(admitted.any(axis=1), safe_pick, fallback)
+
+
+def held_moves(horizon: int = HORIZON) -> np.ndarray:
+    """``(9, horizon − 1, 2)``: each of the nine unit moves held for ``horizon − 1`` steps."""
+    return np.repeat(ACTIONS[:, None, :], horizon - 1, axis=1)
+
+
+def every_sequence(horizon: int = HORIZON) -> np.ndarray:
+    """``(9 ** (horizon − 1), horizon − 1, 2)``: every sequence of ``horizon − 1`` unit moves."""
+    grids = np.meshgrid(*[np.arange(len(ACTIONS))] * (horizon - 1), indexing="ij")
+    return ACTIONS[np.stack([g.ravel() for g in grids], axis=1)]
 
 
 class MoveAssessment(NamedTuple):
@@ -165,8 +185,14 @@ class MoveAssessment(NamedTuple):
 
 
 def assess_moves(moment: Moment, positions: np.ndarray, moves: np.ndarray, prediction: str = "velocity",
-                 horizon: int = HORIZON) -> MoveAssessment:
-    """Each robot's moves as :func:`shield_over_time` judges them (see there)."""
+                 horizon: int = HORIZON, continuations: np.ndarray | None = None,
+                 samples: int = MOVE_SAMPLES) -> MoveAssessment:
+    """Each robot's moves as :func:`shield_over_time` judges them (see there).
+
+    ``continuations``: ``(C, horizon − 1, 2)`` the move sequences tried after each move; by
+    default the nine unit moves, each held (:func:`held_moves`). ``samples``: per step, for the
+    robots checked over time (more: tighter bounds).
+    """
     world = moment.world
     positions = np.asarray(positions, float).reshape(-1, 2)
     moves = np.asarray(moves, float).reshape(-1, 2)
@@ -176,7 +202,7 @@ def assess_moves(moment: Moment, positions: np.ndarray, moves: np.ndarray, predi
     t = int(round(moment.t))
     n, m = len(positions), len(moves)
     static_room = move_clearance(world, positions, moves)                          # (N, M), static only
-    k = MOVE_SAMPLES
+    k = int(samples)
     s1 = np.arange(k + 1) / k                                                       # the move
     s2 = 1.0 + np.arange(1, (horizon - 1) * k + 1) / k                              # its continuation
     offsets = predicted_offsets(world, t, np.concatenate([s1, s2]), prediction)     # (S, Mv, 2)
@@ -204,16 +230,21 @@ def assess_moves(moment: Moment, positions: np.ndarray, moves: np.ndarray, predi
         return MoveAssessment(all_admitted, all_contact, all_room, is_watched)
     p = positions[watched]
     w = len(watched)
-    cont = ACTIONS                                                                  # continuations: the nine unit moves
+    cont = held_moves(horizon) if continuations is None else np.asarray(continuations, float)  # (C, L, 2)
     first = p[:, None, None, :] + s1[None, None, :, None] * moves[None, :, None, :]             # (W, M, S1, 2)
     after = (p[:, None, :] + moves[None, :, :])[:, :, None, None, :]                            # (W, M, 1, 1, 2)
-    later = after + (s2 - 1.0)[None, None, None, :, None] * cont[None, None, :, None, :]        # (W, M, C, S2, 2)
+    index = np.clip(np.ceil(s2 - 1.0 - 1e-9).astype(int) - 1, 0, cont.shape[1] - 1)          # (S2,) the later step of each sample
+    begun = np.concatenate([np.zeros((len(cont), 1, 2)), np.cumsum(cont, axis=1)], axis=1)    # (C, L + 1, 2)
+    shift = begun[:, index] + (s2 - 1.0 - index)[None, :, None] * cont[:, index]              # (C, S2, 2)
+    later = after + shift[None, None]                                                           # (W, M, C, S2, 2)
     step_move = np.hypot(*moves.T)                                                              # (M,)
-    step_cont = np.hypot(*cont.T)                                                               # (C,)
+    step_cont = np.hypot(cont[:, index, 0], cont[:, index, 1])                                  # (C, S2)
     # static clearance along the continuations, as a lower bound per sample
     c_static = world.static_clearance(later.reshape(-1, 2), near=True).reshape(w, m, len(cont), len(s2))
-    c_static = c_static - 0.5 * step_cont[None, None, :, None] / k
-    first_samples = np.broadcast_to(static_room[watched][:, :, None], (w, m, len(s1))).copy()
+    c_static = c_static - 0.5 * step_cont[None, None] / k
+    # static clearance along the move, per sample (a lower bound at each)
+    first_samples = (world.static_clearance(first.reshape(-1, 2), near=True).reshape(w, m, len(s1))
+                     - 0.5 * step_move[None, :, None] / k)
     later_samples = c_static
     for j, (shape, path, close) in enumerate(zip(shapes, paths, near)):
         rows = np.flatnonzero(close[watched])
@@ -238,10 +269,10 @@ def assess_moves(moment: Moment, positions: np.ndarray, moves: np.ndarray, predi
             at_start = path[np.searchsorted(np.concatenate([s1, s2]), base)]      # (S2, 2) predicted at that step's start
             d2, _ = shape.signed_distance((later[rows] - at_start[None, None, None]).reshape(-1, 2))
             d2 = (d2.reshape(len(rows), m, len(cont), len(s2)) - v * (s2 - base)[None, None, None, :]
-                  - 0.5 * (step_cont[None, None, :, None] + v) / k)
+                  - 0.5 * (step_cont[None, None] + v) / k)
         else:
             d2, _ = shape.signed_distance((later[rows] - path[None, None, None, len(s1):]).reshape(-1, 2))
-            d2 = d2.reshape(len(rows), m, len(cont), len(s2)) - 0.5 * (step_cont[None, None, :, None] + v2) / k
+            d2 = d2.reshape(len(rows), m, len(cont), len(s2)) - 0.5 * (step_cont[None, None] + v2) / k
         first_samples[rows] = np.minimum(first_samples[rows], d1)
         later_samples[rows] = np.minimum(later_samples[rows], d2)
     first_room = first_samples.min(axis=2)                                           # (W, M)
