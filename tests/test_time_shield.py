@@ -12,7 +12,8 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from apf_physics import load_world
-from apf_physics.actions import ACTIONS, HORIZON, SAFETY, assess_moves, move_clearance, predicted_offsets, shield_over_time
+from apf_physics.actions import (ACTIONS, HORIZON, SAFETY, assess_moves, every_sequence, move_clearance, predicted_offsets,
+                                 shield_over_time)
 from apf_physics.planners import make_planner
 from apf_physics.planners.base import Planner
 from apf_physics.planners.dqn import DQNPlanner, shielded_argmax
@@ -133,9 +134,14 @@ def test_the_shield_with_known_motion_never_admits_a_fatal_move(heading, distanc
         a = assess_moves(world.at(t), p[None], ACTIONS, "known")
         for k in np.flatnonzero(a.admitted[0]):
             assert not _fatal(world, p, t, ACTIONS[k], HORIZON - 1), (t, p, ACTIONS[k])
+        if not a.admitted[0].any():   # what the shield tries then: every sequence after each move
+            rich = assess_moves(world.at(t), p[None], ACTIONS, "known", continuations=every_sequence(HORIZON),
+                                samples=16)
+            for k in np.flatnonzero(rich.admitted[0]):
+                assert not _fatal(world, p, t, ACTIONS[k], HORIZON - 1), (t, p, ACTIONS[k])
+            if not rich.admitted[0].any():
+                break
         k = int(shield_over_time(world.at(t), p[None], ACTIONS, q, "known")[0])
-        if not a.admitted[0].any():
-            break
         p = p + ACTIONS[k]
 
 
