@@ -161,8 +161,11 @@ class World:
     formations: tuple[FormationTask, ...] = ()
     crowd: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
     frame: Frame = Frame()
-    _cache: dict = field(default_factory=dict, repr=False, compare=False)
-    _static: dict = field(default_factory=dict, repr=False, compare=False)
+    # Caches of what is built from the world (rasters, indexes). Not constructor arguments: a
+    # world made by dataclasses.replace (other obstacles, targets, radius, ...) starts with its
+    # own; only the views below share them, on purpose.
+    _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    _static: dict = field(default_factory=dict, init=False, repr=False, compare=False)
     _moments: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
@@ -176,22 +179,29 @@ class World:
         A view: it shares this world's cache (rasters of the static field stay valid; the
         crowd's discs are added where they are, like moving obstacles).
         """
-        return replace(self, crowd=np.asarray(robots, float).reshape(-1, 2), _cache=self._cache, _static=self._static)
+        return self._sharing(replace(self, crowd=np.asarray(robots, float).reshape(-1, 2)), everything=True)
 
     def with_task(self, targets: np.ndarray, starts: np.ndarray, name: str | None = None) -> World:
         """This world with other targets and starts, sharing what is built from its static
         obstacles alone (indexes, clearance rasters): many scenarios on one map cost one map."""
-        return replace(self, name=name or self.name, targets=np.asarray(targets, float).reshape(-1, 2),
-                       starts=np.asarray(starts, float).reshape(-1, 2), _cache={}, _static=self._static)
+        return self._sharing(replace(self, name=name or self.name, targets=np.asarray(targets, float).reshape(-1, 2),
+                                     starts=np.asarray(starts, float).reshape(-1, 2)))
 
     def formation_world(self, index: int) -> World:
         """The world as formation ``index`` sees it: its own target and start (and formation); cached."""
         def build() -> World:
             task = self.formations[index]
-            return replace(self, name=f"{self.name}#{index}", targets=task.target.reshape(1, 2),
-                           starts=task.start.reshape(1, 2), formation=task.spec, formations=(), _cache={},
-                           _static=self._static)
+            return self._sharing(replace(self, name=f"{self.name}#{index}", targets=task.target.reshape(1, 2),
+                                         starts=task.start.reshape(1, 2), formation=task.spec, formations=()))
         return self.cached(("formation_world", int(index)), build)
+
+    def _sharing(self, view: World, everything: bool = False) -> World:
+        """``view`` (this world with other targets, starts or robots) sharing this world's cache
+        of what depends on the map alone, and with ``everything`` its whole cache."""
+        object.__setattr__(view, "_static", self._static)
+        if everything:
+            object.__setattr__(view, "_cache", self._cache)
+        return view
 
     def cached(self, key: Hashable, build: Callable[[], T], static: bool = False) -> T:
         """What ``build()`` returns, built once per world and key (rasters, free cells, search grids).

@@ -90,7 +90,7 @@ def worlds() -> dict[str, World]:
         CircleObstacle(np.array([3.0, 12.0]), 0.8), CircleObstacle(np.array([18.0, 12.0]), 0.0),
         CircleObstacle(np.array([10.0, 16.0]), 0.5, Motion(np.array([[4.0, 0.0]]), 0.5)),
         PolygonObstacle(np.array([[2.0, 4.0], [4.0, 4.0], [4.0, 4.4], [2.0, 4.4]]),
-                        Motion(np.array([[0.0, 2.0], [3.0, 2.0]]), 0.3, loop=True))), _cache={}, _static={})
+                        Motion(np.array([[0.0, 2.0], [3.0, 2.0]]), 0.3, loop=True))))
     crowd = discs.among(np.array([[11.0, 7.0], [6.0, 16.5]]))
     return {"fixed20": fixed, "moving": load_world(WORLDS / "moving_obstacles.yaml"), "discs": discs,
             "crowd": crowd, "grid": grid_world()}

@@ -23,7 +23,7 @@ from conftest import simple_world_dict
 
 def with_moving(world, *moving):
     """``world`` with extra moving obstacles."""
-    return dataclasses.replace(world, obstacles=world.obstacles + tuple(moving), _cache={})
+    return dataclasses.replace(world, obstacles=world.obstacles + tuple(moving))
 
 
 def bar(x0, y0, length, thickness, path, speed, **kw):

@@ -83,7 +83,7 @@ def crowded_world():
     for x in (4.0, 12.0):
         square = np.array([[x, 8.0], [x + 1.0, 8.0], [x + 1.0, 9.2], [x, 8.7]])
         extra.append(PolygonObstacle(square, Motion(np.array([[3.0, 0.0]]), 0.3)))
-    return dataclasses.replace(base, obstacles=base.obstacles + tuple(extra), _cache={})
+    return dataclasses.replace(base, obstacles=base.obstacles + tuple(extra))
 
 
 @pytest.mark.parametrize("scale,channels", [("raw", ("potential",)), ("log", ("potential", "previous"))])

@@ -220,7 +220,7 @@ def test_move_clearance_takes_moving_obstacles_where_they_are_at_step_t():
 
     base = world_from_dict(simple_world_dict(obstacles=[]))
     disc = CircleObstacle(np.array([10.0, 14.0]), 1.0, Motion(np.array([[0.0, -8.0]]), 0.5))
-    world = dataclasses.replace(base, obstacles=base.obstacles + (disc,), _cache={})
+    world = dataclasses.replace(base, obstacles=base.obstacles + (disc,))
     here = np.array([[10.0, 9.0]])
     # at step 0 the disc is 4 away (moving 0.5 nearer during the move); by step 6 it is 1 above, at 8 on the robot
     assert np.all(move_clearance(world.at(0), here) > 2.0)

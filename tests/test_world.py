@@ -1,5 +1,6 @@
 """The world-file contract: valid files load; each kind of bad input gets one clear error."""
 
+import dataclasses
 import json
 import os
 from pathlib import Path
@@ -10,6 +11,7 @@ import yaml
 
 from apf_physics import WorldError, load_world, world_from_dict
 from apf_physics.errors import UserError
+from apf_physics.obstacles import PolygonObstacle
 from apf_physics.worldfile import dump_world_yaml, load_worlds, save_world
 from conftest import simple_world_dict
 
@@ -419,3 +421,19 @@ def test_obstacle_names_are_checked_and_kept(tmp_path):
     path = tmp_path / "named.yaml"
     save_world(world, path)
     assert [o.name for o in load_world(path).obstacles] == ["pillar", "post"]
+
+
+def test_a_world_made_by_replace_builds_its_own_caches():
+    """dataclasses.replace with other obstacles must not read the rasters and indexes of the world it
+    came from (only among(), with_task() and formation_world() share them, on purpose)."""
+    base = world_from_dict(simple_world_dict())
+    far = np.array([[15.0, 4.0]])
+    base.potential(far)                       # fill the caches
+    assert len(base.static_obstacles) == 2
+    wall = PolygonObstacle(np.array([[13.0, 2.0], [17.0, 2.0], [17.0, 6.0], [13.0, 6.0]]))
+    walled = dataclasses.replace(base, obstacles=base.obstacles + (wall,))
+    assert len(walled.static_obstacles) == 3
+    assert walled.obstacle_distance(far)[0] < 0 < base.obstacle_distance(far)[0]
+    assert walled.potential(far)[0] > base.potential(far)[0]
+    view = base.with_task(np.array([[2.0, 15.0]]), np.array([[15.0, 15.0]]))
+    assert view.static_obstacles is base.static_obstacles   # a view of the same map shares them

@@ -128,7 +128,7 @@ def moving_world(frozen: bool):
         motion = None if frozen else Motion(np.array([[0.0, 10.0]]), float(rng.uniform(0.15, 0.6)),
                                             phase=float(rng.uniform(0, 10)))
         discs.append(CircleObstacle(centre, 0.5, motion))
-    return dataclasses.replace(base, obstacles=base.obstacles + tuple(discs), _cache={})
+    return dataclasses.replace(base, obstacles=base.obstacles + tuple(discs))
 
 
 def observation_cost(world, robots: int = 256, repeats: int = 200) -> float:

@@ -43,7 +43,7 @@ def moving8():
         centre = np.array([2.0 + 2.0 * k, rng.uniform(3, 6)])
         discs.append(CircleObstacle(centre, 0.5, Motion(np.array([[0.0, 10.0]]), float(rng.uniform(0.15, 0.6)),
                                                         phase=float(rng.uniform(0, 10)))))
-    return dataclasses.replace(base, name="moving8", obstacles=base.obstacles + tuple(discs), _cache={}, _static={})
+    return dataclasses.replace(base, name="moving8", obstacles=base.obstacles + tuple(discs))
 
 
 def world_named(name: str):

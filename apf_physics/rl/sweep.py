@@ -67,7 +67,7 @@ def check_phases(sweep: Sweep, target: Any, most: int = 12) -> None:
     """
     small = target
     if sweep.world is not None and len(target.starts):
-        small = dataclasses.replace(target, starts=target.starts[:1], _cache={})
+        small = dataclasses.replace(target, starts=target.starts[:1])
     first = {k: args[0] for k, (_, args) in sweep.sample.items()}
     for combo in itertools.islice(itertools.product(*sweep.grid.values()), most):
         params = {**dict(zip(sweep.grid, combo)), **first}
