@@ -167,6 +167,7 @@ def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | 
     max_steps = default_max_steps(world) if max_steps is None else int(max_steps)
     team = FormationTeam(formation_spec(world), n) if formation else None
     m = 1 if team is None else team.robots
+    planner.reset(world, starts.copy())   # first: the model it loads sets its trap window
     detector = TrapDetector(planner.trap_rule, planner.trap_window or trap.window, trap.radius, trap.min_drop)
     stepper = Stepper([world], n, m, max_steps=max_steps, trap=detector)
     slots = np.arange(n)
@@ -174,7 +175,6 @@ def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | 
     stepper.start(slots, initial)
     if team is not None:
         team.reset(slots, [world] * n, initial)
-    planner.reset(world, starts.copy())
 
     history = [initial.copy()]
     contacts: list[list[str]] = [[] for _ in range(n)]

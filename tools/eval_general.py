@@ -21,7 +21,8 @@ Usage::
         [--json OUT] [--per-world]
     PYTHONPATH=. python tools/eval_general.py worlds/thesis/test1.yaml ... --planners dqn --per-world
 
-``--model`` applies to the planners ``dqn`` and ``dqn-unshielded`` (one row per model each).
+``--model`` applies to the learned planners (``dqn``, ``dqn-unshielded``, ``dqn-known``; one row per
+model each).
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from apf_physics.evaluate import evaluate, figures  # noqa: E402
 from apf_physics.worldsets import label_starts  # noqa: E402
-from apf_physics.planners import make_planner  # noqa: E402
+from apf_physics.planners import LEARNED, make_planner  # noqa: E402
 from apf_physics.safefile import write_text  # noqa: E402
 from apf_physics.worldfile import load_world  # noqa: E402
 
@@ -121,7 +122,7 @@ def main(argv=None) -> int:
     worlds, labels = load_labelled(args.worlds)
     runs = []
     for name in [n.strip() for n in args.planners.split(",") if n.strip()]:
-        if name in ("dqn", "dqn-unshielded") and args.model:
+        if name in LEARNED and args.model:
             for spec in args.model:
                 label, _, path = spec.partition("=")
                 runs.append((f"{name}:{label}", make_planner(name, model=path)))

@@ -153,9 +153,12 @@ def _moving_what(data: dict) -> str:
 
 
 def _moving(data: dict) -> str:
-    a, m = data["astar"], data["dqn:moving"]
-    return (f"replanning A* {_pct(a['success_rate'])} with {_n(a['collisions'], 'collision')}; `moving.pt` (trained "
-            f"with them) **{_pct(m['success_rate'])}**, {_n(m['collisions'], 'collision')}")
+    a, s, m, g = data["astar"], data["sipp"], data["dqn:moving"], data["dqn:general"]
+    return (f"replanning A* {_pct(a['success_rate'])} with {_n(a['collisions'], 'collision')}; `sipp` (plans on the "
+            f"known motion) {_pct(s['success_rate'])}, {_n(s['collisions'], 'collision')}; the shield over time with "
+            f"the motion predicted from what a robot senses: `moving.pt` (trained with them) "
+            f"**{_pct(m['success_rate'])}**, {_n(m['collisions'], 'collision')}; the default `general.pt` "
+            f"{_pct(g['success_rate'])}, {_n(g['collisions'], 'collision')}")
 
 
 def _movingai_what(data: dict) -> str:
@@ -211,7 +214,8 @@ ROWS = [
                        "--model general=general --model map=map --json {out}"),
         _structures_what, _structures),
     Row("moving", ("apf-physics generate --family moving --count 60 --seed 313 --starts 5 --out {data}/mv_heldout --force",
-                   f"{EVAL_GENERAL} {{data}}/mv_heldout --planners astar,dqn --model moving=moving --json {{out}}"),
+                   f"{EVAL_GENERAL} {{data}}/mv_heldout --planners astar,sipp,dqn --model moving=moving "
+                   "--model general=general --json {out}"),
         _moving_what, _moving),
     Row("movingai", ("python tools/bench_movingai.py {movingai} --planners dqn,dqn-unshielded,astar --json {out}",),
         _movingai_what, _movingai),

@@ -71,7 +71,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                                           "print a table and optionally write JSON.")
     p.add_argument("worlds", nargs="+", metavar="WORLD", help="world files (.yaml) or directories of them")
     p.add_argument("--planner", default="gradient",
-                   help="planner, or several separated by commas: gradient, dqn, dqn-unshielded, astar, escape (default: gradient)")
+                   help="planner, or several separated by commas: gradient, dqn, dqn-unshielded, dqn-known, astar, sipp, "
+                        "escape (default: gradient)")
     p.add_argument("--model", help="DQN model file, or a shipped model by name (general, moving, map, fixed20; "
                                    "default: the shipped model for the world's field)")
     p.add_argument("--formation", action="store_true", help="run the world's formation (leader and followers)")

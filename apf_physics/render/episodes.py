@@ -51,11 +51,7 @@ def episode_clips(episodes: Sequence, overlay: tuple[str, ...], formation: bool,
     episode is a clip of its own, one after another; the formations of a world with several
     share one clip, each in its colour family.
     """
-    crowds: dict[str, list] = {}
-    for episode in episodes:
-        record = getattr(episode, "formation", None)
-        if getattr(record, "crowd", None) is not None:
-            crowds.setdefault(record.crowd, []).append(episode)
+    crowds = _crowds(episodes)
     if crowds:
         for name, members in crowds.items():
             positions = [robot_positions(e) for e in members]
@@ -91,17 +87,23 @@ def episode_clips(episodes: Sequence, overlay: tuple[str, ...], formation: bool,
 
 def clip_members(episodes: Sequence, formation: bool) -> list[list]:
     """The episodes each clip of :func:`episode_clips` shows, in the same order."""
-    crowds: dict[str, list] = {}
-    for episode in episodes:
-        record = getattr(episode, "formation", None)
-        if getattr(record, "crowd", None) is not None:
-            crowds.setdefault(record.crowd, []).append(episode)
+    crowds = _crowds(episodes)
     if crowds:
         return list(crowds.values())
     paths = [robot_positions(episode) for episode in episodes]
     if not formation and all(p.ndim == 2 for p in paths):
         return [list(episodes)]
     return [[episode] for episode in episodes]
+
+
+def _crowds(episodes: Sequence) -> dict[str, list]:
+    """The episodes of each world run with several formations at once, by world (none: {})."""
+    crowds: dict[str, list] = {}
+    for episode in episodes:
+        record = getattr(episode, "formation", None)
+        if getattr(record, "crowd", None) is not None:
+            crowds.setdefault(record.crowd, []).append(episode)
+    return crowds
 
 
 def collision_events(episodes: Sequence) -> list[tuple[int, str]]:
