@@ -153,11 +153,11 @@ def _moving_what(data: dict) -> str:
 
 
 def _moving(data: dict) -> str:
-    a, s, m, g = data["astar"], data["sipp"], data["dqn:moving"], data["dqn:general"]
+    a, s, m, g = data["astar"], data["sipp"], data["dqn:moving"], data["dqn:map"]
     return (f"replanning A* {_pct(a['success_rate'])} with {_n(a['collisions'], 'collision')}; `sipp` (plans on the "
             f"known motion) {_pct(s['success_rate'])}, {_n(s['collisions'], 'collision')}; the shield over time with "
             f"the motion predicted from what a robot senses: `moving.pt` (trained with them) "
-            f"**{_pct(m['success_rate'])}**, {_n(m['collisions'], 'collision')}; the default `general.pt` "
+            f"**{_pct(m['success_rate'])}**, {_n(m['collisions'], 'collision')}; the default, `map.pt`, "
             f"{_pct(g['success_rate'])}, {_n(g['collisions'], 'collision')}")
 
 
@@ -215,7 +215,7 @@ ROWS = [
         _structures_what, _structures),
     Row("moving", ("apf-physics generate --family moving --count 60 --seed 313 --starts 5 --out {data}/mv_heldout --force",
                    f"{EVAL_GENERAL} {{data}}/mv_heldout --planners astar,sipp,dqn --model moving=moving "
-                   "--model general=general --json {out}"),
+                   "--model map=map --json {out}"),
         _moving_what, _moving),
     Row("movingai", ("python tools/bench_movingai.py {movingai} --planners dqn,dqn-unshielded,astar --json {out}",),
         _movingai_what, _movingai),
