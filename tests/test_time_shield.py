@@ -16,7 +16,7 @@ from apf_physics.actions import (ACTIONS, HORIZON, SAFETY, assess_moves, every_s
                                  shield_over_time)
 from apf_physics.planners import make_planner
 from apf_physics.planners.base import Planner
-from apf_physics.planners.dqn import DQNPlanner, shielded_argmax
+from apf_physics.planners.dqn import DQNPlanner
 from apf_physics.rollout import rollout
 from apf_physics.search import escape_moves, physics_offsets, timed_move_clearance, timed_path
 from apf_physics.worldfile import world_from_dict
@@ -24,24 +24,10 @@ from apf_physics.worldfile import world_from_dict
 from conftest import simple_world_dict
 
 
-class OneStepShield(DQNPlanner):
-    """The DQN planner with the shield as it was before the shield over time: each move against
-    the obstacles where they are along it, at the step's positions (``move_clearance(moment, ...)``)."""
-
-    def act(self, positions, active, moment=None):
-        moment = self._moment(moment)
-        if self._started:
-            self.observer.visit(positions)
-        self._started = True
-        obs = self.observer.observe(positions, t=moment.t, discs=moment.world.crowd)
-        room = move_clearance(moment, positions) - (self.world.robot_radius + SAFETY)
-        return ACTIONS[shielded_argmax(self._policy.q_values(obs), room)] * active[:, None]
-
-
 def test_among_static_obstacles_the_shield_over_time_is_the_shield_of_one_step():
     world = load_world("worlds/fixed20.yaml")
     assert not world.moving
-    before = rollout(world, OneStepShield(), world.starts)
+    before = rollout(world, DQNPlanner(horizon=0), world.starts)   # the shield of one step
     after = rollout(world, make_planner("dqn"), world.starts)
     assert len(after) == 40
     for a, b in zip(before, after):

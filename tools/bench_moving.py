@@ -16,7 +16,6 @@ in one run.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import importlib.util
 import os
 import statistics
@@ -25,22 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-import apf_physics
-from apf_physics.obstacles import CircleObstacle, Motion
 from apf_physics.observation import Observer, ObserverConfig
-
-
-def moving_world(frozen: bool):
-    """fixed20 with 8 discs moving back and forth across it (or standing where they start)."""
-    base = apf_physics.load_world("fixed20")
-    rng = np.random.default_rng(0)
-    discs = []
-    for k in range(8):
-        centre = np.array([2.0 + 2.0 * k, rng.uniform(3, 6)])
-        motion = None if frozen else Motion(np.array([[0.0, 10.0]]), float(rng.uniform(0.15, 0.6)),
-                                            phase=float(rng.uniform(0, 10)))
-        discs.append(CircleObstacle(centre, 0.5, motion))
-    return dataclasses.replace(base, obstacles=base.obstacles + tuple(discs))
+from bench_env import moving_world   # the same worlds as bench_env's moving-obstacle rows (this folder)
 
 
 def reference_add_near():

@@ -34,39 +34,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from eval_general import load_labelled, summarise  # noqa: E402
 
-from apf_physics.actions import ACTIONS, SAFETY, move_clearance, shielded_argmax  # noqa: E402
 from apf_physics.evaluate import evaluate  # noqa: E402
-from apf_physics.models.policy import move_inputs  # noqa: E402
 from apf_physics.planners import LEARNED, make_planner  # noqa: E402
 from apf_physics.planners.dqn import DQNPlanner  # noqa: E402
 from apf_physics.safefile import write_text  # noqa: E402
 from apf_physics.search import escape_moves  # noqa: E402
 
 
-class OneStepShield(DQNPlanner):
-    """``dqn-one-step``: the DQN planner with the shield it had before the shield over time (each move
-    against the moving obstacles where they are along it, no look-ahead), for comparison."""
-
-    def act(self, positions, active, moment=None):
-        moment = self._moment(moment)
-        if self.observer is None:          # a map network: its own room input was the one-step shield's
-            room, du = move_inputs(moment, positions, self._policy.moves)
-            q = self._policy.q_values(self.world, positions, room, du)
-            return self._policy.moves[shielded_argmax(q, room)] * active[:, None]
-        if self._started:
-            self.observer.visit(positions)
-        self._started = True
-        obs = self.observer.observe(positions, t=moment.t, discs=moment.world.crowd)
-        room = move_clearance(moment, positions) - (self.world.robot_radius + SAFETY)
-        return ACTIONS[shielded_argmax(self._policy.q_values(obs), room)] * active[:, None]
-
-
 def planner_named(name: str, model: str | None):
-    """A planner by its command-line name, or ``dqn-one-step`` (:class:`OneStepShield`)."""
+    """A planner by its command-line name, or ``dqn-one-step`` (the shield of one step, no look-ahead)."""
     if name == "dqn-one-step":
-        planner = OneStepShield(model=model)
-        planner.name = name
-        return planner
+        return DQNPlanner(model=model, horizon=0)
     return make_planner(name, model=model if name in LEARNED else None)
 
 

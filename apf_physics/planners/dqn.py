@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from apf_physics.actions import ACTIONS, HORIZON, PREDICTIONS, shield_over_time, shielded_argmax
+from apf_physics.actions import (ACTIONS, HORIZON, PREDICTIONS, SAFETY, move_clearance, shield_over_time,
+                                 shielded_argmax)
 from apf_physics.models import DQNPolicy, MapPolicy, load_policy, resolve_model, shipped_model_for
 from apf_physics.models.policy import move_inputs
 from apf_physics.observation import Observer
@@ -38,7 +39,8 @@ class DQNPlanner(Planner):
             ``velocity`` (default: constant velocity from the last two steps, within
             :data:`~apf_physics.actions.SENSING_RADIUS`) or ``known`` (the world file's motion:
             planner name ``dqn-known``).
-        horizon: Steps the shield looks ahead.
+        horizon: Steps the shield looks ahead; 0: the shield of one step (each move against the
+            obstacles where they are along it, no look-ahead; ``dqn-one-step``, for comparison).
         policy: An in-memory policy to use instead of a model file (e.g. a network while it
             trains); its field is not checked against the world's.
 
@@ -63,7 +65,12 @@ class DQNPlanner(Planner):
         self.shield = bool(shield)
         self.prediction = prediction
         self.horizon = int(horizon)
-        self.name = ("dqn" if prediction == "velocity" else f"dqn-{prediction}") if self.shield else "dqn-unshielded"
+        if not self.shield:
+            self.name = "dqn-unshielded"
+        elif self.horizon == 0:
+            self.name = "dqn-one-step"
+        else:
+            self.name = "dqn" if prediction == "velocity" else f"dqn-{prediction}"
         self._policy = policy
         self._loaded = None if policy is None else "given"
 
@@ -94,8 +101,11 @@ class DQNPlanner(Planner):
         obs = self.observer.observe(positions, t=moment.t, discs=moment.world.crowd)
         if not self.shield:
             return ACTIONS[self._policy.act(obs)] * active[:, None]
-        chosen = shield_over_time(moment, positions, ACTIONS, self._policy.q_values(obs), self.prediction, self.horizon)
-        return ACTIONS[chosen] * active[:, None]
+        q = self._policy.q_values(obs)
+        if self.horizon == 0:   # each move against the obstacles where they are along it, no look-ahead
+            room = move_clearance(moment, positions) - (self.world.robot_radius + SAFETY)
+            return ACTIONS[shielded_argmax(q, room)] * active[:, None]
+        return ACTIONS[shield_over_time(moment, positions, ACTIONS, q, self.prediction, self.horizon)] * active[:, None]
 
 
     def _act_on_map(self, positions: np.ndarray, active: np.ndarray, moment: Moment) -> np.ndarray:
@@ -106,7 +116,7 @@ class DQNPlanner(Planner):
         q = policy.q_values(self.world, positions, room, du)
         if not self.shield:
             return moves[q.argmax(axis=1)] * active[:, None]
-        if not self.world.moving:
+        if not self.world.moving or self.horizon == 0:   # its room input is the one-step shield's
             return moves[shielded_argmax(q, room)] * active[:, None]
         return moves[shield_over_time(moment, positions, moves, q, self.prediction, self.horizon)] * active[:, None]
 
