@@ -28,6 +28,12 @@ the same episode the same way, at the same step.
 
 An ended slot's robots stay where the episode ended until :meth:`Stepper.start` begins the
 slot's next episode.
+
+**Robot kinds.** Holonomic robots (the thesis's) are commanded a velocity. Unicycle robots
+(``unicycle=`` limits, :mod:`apf_physics.kinematics`) have a heading, kept here with the
+last command; they are commanded ``(v, ω)``, which the stepper bounds by the limits and turns
+into a velocity per physics substep, so that the physics sweeps each robot's disc along its
+exact arc (the same substeps keep it from tunnelling). The episode rules are the same.
 """
 
 from __future__ import annotations
@@ -38,7 +44,8 @@ from typing import Literal, Sequence
 
 import numpy as np
 
-from apf_physics.physics import ContactLog, Physics
+from apf_physics.kinematics import UnicycleLimits, substep_velocities, wrap_angle
+from apf_physics.physics import MAX_SPEED, ContactLog, Physics
 from apf_physics.world import Moment, World
 
 TrapRule = Literal["descent", "oscillation"]
@@ -155,17 +162,25 @@ class Stepper:
         crowds: Slots with the same crowd number share the map and their robots meet: several
             formations in one world, a slot each (default: every slot on its own). Start a
             crowd's slots together.
+        unicycle: The robots are unicycles with these limits (None: holonomic); see the module
+            docstring.
     """
 
     def __init__(self, worlds: Sequence[World], num_slots: int, robots_per_slot: int = 1,
                  max_steps: int | None = None, trap: TrapDetector | None = None,
-                 crowds: Sequence[int] | None = None):
+                 crowds: Sequence[int] | None = None, unicycle: UnicycleLimits | None = None):
         self.worlds = list(worlds)
         self.num_slots = int(num_slots)
         self.robots_per_slot = int(robots_per_slot)
         self.max_steps = max_steps
-        self.physics = Physics([self.worlds[0]] * self.num_slots, self.robots_per_slot, other_worlds=self.worlds,
-                               crowds=crowds)
+        self.unicycle = unicycle
+        top = MAX_SPEED if unicycle is None else max(MAX_SPEED, unicycle.top_speed)
+        self.physics = Physics([self.worlds[0]] * self.num_slots, self.robots_per_slot, max_speed=top,
+                               other_worlds=self.worlds, crowds=crowds)
+        self.headings = np.zeros((self.num_slots, self.robots_per_slot))
+        """(S, m) each robot's heading θ [rad] (unicycles; zeros for holonomic robots)."""
+        self.drive = np.zeros((self.num_slots, self.robots_per_slot, 2))
+        """(S, m, 2) each unicycle's last command ``(v, ω)``, after the limits (what its acceleration is bounded against)."""
         self.world_of = np.zeros(self.num_slots, np.intp)
         self.positions = np.zeros((self.num_slots, self.robots_per_slot, 2))
         self.steps = np.zeros(self.num_slots, np.intp)
@@ -184,7 +199,7 @@ class Stepper:
         self._moving = any(w.moving for w in self.worlds)
         self.last_distance = np.full(self.num_slots, np.inf)
         """Each leader's distance to its nearest target, after the last start or step."""
-        self.scalar = self.num_slots == 1 and self.robots_per_slot == 1
+        self.scalar = self.num_slots == 1 and self.robots_per_slot == 1 and unicycle is None
         """A batch of one robot (``Navigate-v0``, ``eval``'s rollouts): stepped in Python scalars
         (the same episodes as the array path, to the last bit; False: the array path, for tests)."""
         self._yes, self._no = _constant(True), _constant(False)
@@ -207,6 +222,14 @@ class Stepper:
         d = self.positions[:, 0, None, :] - self._slot_targets                  # (S, T, 2)
         return np.hypot(d[..., 0], d[..., 1]).min(axis=1)
 
+    def poses(self) -> np.ndarray:
+        """(S, m, 3) every robot's ``(x, y, θ)``."""
+        return np.concatenate([self.positions, self.headings[..., None]], axis=2)
+
+    def states(self) -> np.ndarray:
+        """(S, m, 5) every robot's unicycle state ``(x, y, θ, v, ω)`` (:mod:`apf_physics.kinematics`)."""
+        return np.concatenate([self.positions, self.headings[..., None], self.drive], axis=2)
+
     def _leader_potential(self, slots: np.ndarray) -> np.ndarray:
         """U at each leader of ``slots``, at its episode's step (for the ``"descent"`` trap rule)."""
         if self.trap is None or self.trap.rule != "descent":
@@ -219,7 +242,7 @@ class Stepper:
         return out
 
     def start(self, slots: np.ndarray, positions: np.ndarray, world_ids: np.ndarray | None = None,
-              present: np.ndarray | None = None) -> None:
+              present: np.ndarray | None = None, headings: np.ndarray | None = None) -> None:
         """Begin episodes in ``slots``: robots at ``positions`` (k, m, 2), in ``worlds[world_ids]`` (default 0).
 
         An episode whose leader starts within the goal tolerance of a target of its world ends
@@ -228,6 +251,9 @@ class Stepper:
 
         ``present``: (k, m) bool, the robots that exist (a formation smaller than the slot has
         absent ones, which never move or touch anything); default all.
+
+        ``headings``: (k, m) unicycles' initial headings [rad]; default: every robot of a slot
+        faces the target nearest its leader. Unicycles start at rest.
         """
         slots = np.asarray(slots, np.intp).reshape(-1)
         positions = np.asarray(positions, float).reshape(len(slots), self.robots_per_slot, 2)
@@ -249,12 +275,39 @@ class Stepper:
         self.positions = self.positions.copy()   # never change an array a report handed out
         self.positions[slots] = positions
         self.outcome[slots] = RUNNING
+        if self.unicycle is not None:
+            self._face(slots, positions, headings)
         self.last_distance = self.distance()
         if self._watch is not None:
             self._watch.reset(slots, positions[:, 0], self._leader_potential(slots))
         arrived = self.last_distance[slots] <= self._slot_tolerance[slots]
         self.outcome[slots[arrived]] = REACHED
         self._unreported[slots] = arrived
+
+    def _face(self, slots: np.ndarray, positions: np.ndarray, headings: np.ndarray | None) -> None:
+        """Unicycles of ``slots`` at rest, headed as given or toward the target nearest each leader."""
+        self.headings = self.headings.copy()
+        if headings is None:
+            d = self._slot_targets[slots] - positions[:, :1, :]                       # (k, T, 2)
+            nearest = np.argmin(np.hypot(d[..., 0], d[..., 1]), axis=1)
+            toward = d[np.arange(len(slots)), nearest]
+            headings = np.broadcast_to(np.arctan2(toward[:, 1], toward[:, 0])[:, None], (len(slots), self.robots_per_slot))
+        self.headings[slots] = wrap_angle(np.asarray(headings, float).reshape(len(slots), self.robots_per_slot))
+        self.drive[slots] = 0.0
+
+    def _drive(self, commands: np.ndarray, moved: np.ndarray) -> np.ndarray:
+        """Unicycles' ``(v, ω)`` commands (S, m, 2) as (N, substeps, 2) velocities along their arcs;
+        the headings and last commands of the robots of ``moved`` slots advance."""
+        limits = self.unicycle
+        commands = np.asarray(commands, float).reshape(self.num_slots, self.robots_per_slot, 2)
+        v, omega = limits.clamp(commands[..., 0], commands[..., 1], self.drive[..., 0], self.drive[..., 1])
+        state = self.states().reshape(-1, 5)
+        velocities = substep_velocities(state, v.ravel(), omega.ravel(), self.physics.substeps,
+                                        self.physics.control_dt)
+        go = moved[:, None] & self.physics.present.reshape(self.num_slots, -1)
+        self.headings = np.where(go, wrap_angle(self.headings + omega * self.physics.control_dt), self.headings)
+        self.drive = np.where(go[..., None], np.stack([v, omega], axis=-1), self.drive)
+        return velocities
 
     def finish(self, slots: np.ndarray, outcome: Outcome) -> None:
         """End the running episodes among ``slots`` with ``outcome`` (e.g. a planner that gave up)."""
@@ -265,7 +318,8 @@ class Stepper:
         """Advance every running slot by one control step.
 
         Args:
-            commands: (S, m, 2) velocity commands (units per control step); those of slots that
+            commands: (S, m, 2) velocity commands (units per control step), or for unicycles
+                ``(v, ω)`` [units/step, rad/step], bounded by the limits; those of slots that
                 are not running are ignored.
             gave_up: (S,) bool: slots whose planner knows it is trapped; they end as ``trapped``
                 before moving.
@@ -276,7 +330,10 @@ class Stepper:
             return self._step_one(commands)
         moved = self.outcome == RUNNING
         everyone = moved.all()
-        commands = np.asarray(commands, float).reshape(-1, 2)
+        if self.unicycle is not None:
+            commands = self._drive(commands, moved)
+        else:
+            commands = np.asarray(commands, float).reshape(-1, 2)
         if self._moving:
             self.physics.set_time(self.steps)
         contacts = self.physics.step(commands, None if everyone else np.repeat(moved, self.robots_per_slot))

@@ -1,4 +1,4 @@
-"""Unicycle (differential-drive) kinematics: a robot with a heading, driven by ``(v, ω)`` (issue 27).
+"""Unicycle (differential-drive) kinematics: a robot with a heading, driven by ``(v, ω)``.
 
 Units and conventions (as everywhere in the package, README "The model"): lengths in **units**
 (one unit is today's robot travel per control step), time in **control steps**, angles in
@@ -30,9 +30,14 @@ Everything is vectorised over robots: arrays of shape ``(N,)`` or ``(N, 2)``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+
+KINEMATICS = ("holonomic", "unicycle")
+"""The robot kinds: ``holonomic`` (the thesis's robot: any velocity, no heading) and ``unicycle``."""
+LIMIT_KEYS = ("max_speed", "max_reverse", "max_turn_rate", "max_accel", "max_turn_accel")
+"""The fields of :class:`UnicycleLimits`, as a world file's ``robot:`` and the env options name them."""
 
 SMALL_TURN = 1e-6
 """Below this ``|ω·dt|`` [rad] the arc is computed from its Taylor series (exact to rounding)."""
@@ -86,6 +91,16 @@ class UnicycleLimits:
                 raise ValueError(f"unicycle limit {name} must be positive, got {getattr(self, name)}")
         if not self.max_reverse >= 0:
             raise ValueError(f"unicycle limit max_reverse must be >= 0, got {self.max_reverse}")
+
+    def scaled(self, unit: float) -> UnicycleLimits:
+        """These limits with lengths divided by ``unit`` (a world file's units to steps; rates of turn unchanged)."""
+        return replace(self, max_speed=self.max_speed / unit, max_reverse=self.max_reverse / unit,
+                       max_accel=self.max_accel / unit)
+
+    @property
+    def top_speed(self) -> float:
+        """The fastest the robot moves, forward or back [units/step] (what the physics' substeps are chosen for)."""
+        return max(self.max_speed, self.max_reverse)
 
     def clamp(self, v: np.ndarray, omega: np.ndarray, v_prev: np.ndarray | float | None = None,
               omega_prev: np.ndarray | float | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -242,6 +257,6 @@ def to_robot_frame(state: np.ndarray, points: np.ndarray) -> np.ndarray:
 
 def distance_bearing(state: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(N,), (N,): distance [units] and bearing [rad, in ``[-π, π)``, left positive] of ``target``
-    (N, 2) from each robot: what the lidar observation carries with its ranges (issue 27)."""
+    (N, 2) from each robot: what the lidar observation carries with its ranges."""
     local = to_robot_frame(state, np.asarray(target, float).reshape(-1, 2))
     return np.hypot(local[:, 0], local[:, 1]), np.arctan2(local[:, 1], local[:, 0])

@@ -411,8 +411,11 @@ class Physics:
         """(N, 2) robot centres in each robot's own world coordinates."""
         return self._positions.copy()
 
-    def needs_physics(self, moves: np.ndarray) -> np.ndarray:
+    def needs_physics(self, moves: np.ndarray, bend: np.ndarray | None = None) -> np.ndarray:
         """(N,) bool: robots whose ``moves`` this step might bring them into contact with anything.
+
+        ``bend``: (N,) how far each robot's path strays from its straight move at the same
+        moment (a unicycle's arc; None: every path is straight). Every clearance is lowered by it.
 
         Conservative: False guarantees that the robot's disc keeps more than
         :data:`CONTACT_MARGIN` from every obstacle, the map's edge and the robots it meets
@@ -428,24 +431,29 @@ class Physics:
         # so on the whole move at least (c_mid + min(c_start, c_end) − L/2) / 2.
         samples = self._positions[:, None, :] + _THIRDS * moves[:, None, :]
         c = self._atlas.sample(samples, self._sample_atlas).reshape(-1, 3)
-        needs = c[:, 1] + np.minimum(c[:, 0], c[:, 2]) - 0.5 * np.hypot(moves[:, 0], moves[:, 1]) < self._free_twice
+        bound = c[:, 1] + np.minimum(c[:, 0], c[:, 2]) - 0.5 * np.hypot(moves[:, 0], moves[:, 1])
+        if bend is not None:
+            bound = bound - 2 * bend
+        needs = bound < self._free_twice
         m = self.robots_per_slot
         if m > 1:   # robots of one slot: closed under "may touch a robot that goes to pymunk"
             p = self._positions.reshape(-1, m, 2)
             dp = moves.reshape(-1, m, 2)
             present = self.present.reshape(-1, m)
-            both_free, near_held = _may_touch(p, dp, self._slot_radius[:, None, None], present, self._reach)
+            both_free, near_held = _may_touch(p, dp, self._slot_radius[:, None, None], present, self._reach,
+                                              None if bend is None else bend.reshape(-1, m))
             needs = _close_under_touch(needs.reshape(-1, m), both_free, near_held).ravel()
         for group in self._crowd_robots:   # robots of several slots that meet: the same over the crowd
             group = group[self.present[group]]
             radius = self._slot_radius[group // m][None, :, None]
             both_free, near_held = _may_touch(self._positions[group][None], moves[group][None], radius,
-                                              np.ones((1, len(group)), bool), self._reach)
+                                              np.ones((1, len(group)), bool), self._reach,
+                                              None if bend is None else bend[group][None])
             needs[group] = _close_under_touch(needs[group][None], both_free, near_held)[0]
         if not self._any_moving:
             return needs
         self._movers_needed = []
-        for slots, world, index, near in self._near_movers(moves):
+        for slots, world, index, near in self._near_movers(moves, bend):
             robots = (slots[:, None] * m + np.arange(m)).ravel()
             needs[robots] |= near.ravel()
             self._movers_needed.append((world, index, slots, near.any(axis=1)))
@@ -455,7 +463,7 @@ class Physics:
         """The control step each slot's episode is at (where its moving obstacles are)."""
         self._slot_time = np.asarray(steps, float).reshape(self.num_slots)
 
-    def _near_movers(self, moves: np.ndarray):
+    def _near_movers(self, moves: np.ndarray, bend: np.ndarray | None = None):
         """For each moving obstacle of each world in use: ``(slots, world, index, near (k, m))``,
         the robots of those slots whose swept disc this step comes near the obstacle's swept box."""
         if not self._any_moving:
@@ -472,6 +480,8 @@ class Physics:
             p = self._positions.reshape(-1, m, 2)[slots]
             q = p + moves.reshape(-1, m, 2)[slots]
             reach = world.robot_radius + 2 * CONTACT_MARGIN
+            if bend is not None:
+                reach = reach + bend.reshape(-1, m)[slots][..., None]
             robot_lo, robot_hi = np.minimum(p, q) - reach, np.maximum(p, q) + reach
             for index in world.moving:
                 obstacle = world.obstacles[index]
@@ -487,22 +497,39 @@ class Physics:
         """Advance one control step with a velocity command per robot.
 
         Args:
-            velocities: (N, 2) commanded velocities in units per control step; each is clipped to
-                ``max_speed``.
+            velocities: (N, 2) commanded velocities in units per control step, held for the
+                whole step; or (N, S, 2), one per substep (S = :attr:`substeps`): a unicycle
+                robot driving an arc (:func:`~apf_physics.kinematics.substep_velocities`). Each
+                is clipped to ``max_speed``.
             active: (N,) bool: the robots that take part (default all). The others are frozen
                 where they are: they neither move nor touch anything (their slot's episode is over).
 
         Returns:
             The contacts seen during the step (read-only).
         """
-        v = np.asarray(velocities, dtype=float).reshape(self.num_robots, 2)
-        speed = np.hypot(v[:, 0], v[:, 1])
-        if speed.max() > self.max_speed:
-            too_fast = speed > self.max_speed
-            v = v.copy()
-            v[too_fast] *= (self.max_speed / speed[too_fast])[:, None]
-        moves = v * self.control_dt
-        simulate = self.needs_physics(moves) & self.present
+        v = np.asarray(velocities, dtype=float)
+        per_substep = v.ndim == 3
+        if per_substep:
+            v = v.reshape(self.num_robots, self.substeps, 2)
+            speed = np.hypot(v[..., 0], v[..., 1])
+            if speed.max() > self.max_speed:
+                v = v * np.minimum(1.0, self.max_speed / np.maximum(speed, 1e-300))[..., None]
+            # the net move, and how far the substeps' path strays from the straight one at the same
+            # moment (its largest at a substep's end: the distance between two uniform motions is convex)
+            moves = v.mean(axis=1) * self.control_dt
+            along = np.cumsum(v, axis=1) * (self.control_dt / self.substeps)
+            stray = along - (np.arange(1, self.substeps + 1) / self.substeps)[None, :, None] * moves[:, None, :]
+            bend = np.hypot(stray[..., 0], stray[..., 1]).max(axis=1)
+        else:
+            v = v.reshape(self.num_robots, 2)
+            speed = np.hypot(v[:, 0], v[:, 1])
+            if speed.max() > self.max_speed:
+                too_fast = speed > self.max_speed
+                v = v.copy()
+                v[too_fast] *= (self.max_speed / speed[too_fast])[:, None]
+            moves = v * self.control_dt
+            bend = None
+        simulate = self.needs_physics(moves, bend) & self.present
         if active is not None:
             simulate &= active
             moves = moves * active[:, None]
@@ -770,8 +797,9 @@ class Physics:
         if self._rows_dirty:
             self._index_rows()
         proxies = self._robot_proxy[robots]
+        per_substep = v.ndim == 3   # a velocity per substep (unicycles driving arcs)
         velocity = np.zeros((len(self._proxy_body), 2))
-        velocity[proxies] = v[robots] / self.control_dt
+        velocity[proxies] = (v[robots, 0] if per_substep else v[robots]) / self.control_dt
         moved = np.flatnonzero(self._proxy_moved)
         if len(self._proxy_body) <= _FEW and not self._mover_body:
             for k in moved.tolist():
@@ -797,6 +825,8 @@ class Physics:
         touching = self._touching
         self._depths = None
         for k in range(self.substeps):
+            if per_substep and k:   # steer: the command's change, on top of what contacts did to the velocity
+                self._add_velocities(proxies, (v[robots, k] - v[robots, k - 1]) / self.control_dt)
             self.space.step(self.dt)
             if not touching[0]:
                 continue   # no shapes touch: no arbiters to read
@@ -817,6 +847,26 @@ class Physics:
             after = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 2)[self._row_of_proxy[proxies]]
         self._positions[robots] = after - offsets
         return np.vstack(touched) if touched else np.zeros((0, 2), np.uintp)
+
+    def _add_velocities(self, proxies: np.ndarray, change: np.ndarray) -> None:
+        """Add ``change`` to the velocities of the bodies of ``proxies`` (between substeps), leaving
+        everything else as it is. A free body then moves at its new command; one that a contact
+        slowed keeps what the contact took (as a holonomic robot keeps it for the whole step)."""
+        if len(proxies) <= _FEW:
+            for k, (dx, dy) in zip(proxies.tolist(), change.tolist()):
+                body = self._proxy_body[k]
+                vx, vy = body.velocity
+                body.velocity = (vx + dx, vy + dy)
+            return
+        fields = pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.VELOCITY
+        buf = self._buffer
+        buf.clear()
+        pymunk.batch.get_space_bodies(self.space, fields, buf)
+        rows = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 4).copy()
+        rows[self._row_of_proxy[proxies], 2:] += change
+        write = pymunk.batch.Buffer()
+        write.set_float_buf(rows.reshape(-1))
+        pymunk.batch.set_space_bodies(self.space, fields, write)
 
     def _log(self, pairs: np.ndarray) -> ContactLog:
         """The contact log of the touching body-id pairs (a pair may come several times)."""
@@ -852,7 +902,7 @@ def _segment_point_distance(p: np.ndarray, dp: np.ndarray) -> np.ndarray:
 
 
 def _may_touch(p: np.ndarray, dp: np.ndarray, radius: np.ndarray, present: np.ndarray,
-               reach: float) -> tuple[np.ndarray, np.ndarray]:
+               reach: float, bend: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Which robots of each slot may touch which, both ``(S, m, m)`` bool (never i with itself,
     never an absent robot):
 
@@ -860,8 +910,13 @@ def _may_touch(p: np.ndarray, dp: np.ndarray, radius: np.ndarray, present: np.nd
       within touching distance and the margin;
     - ``near_held[s, i, j]``: robot i's commanded move comes that near anywhere robot j could
       be if pymunk moved it (within ``reach`` of its start, however it was blocked or pushed).
+
+    ``bend`` (S, m): how far each robot's path strays from its straight move (None: not at
+    all); the two robots' strays widen the touching distance.
     """
     touch = 2 * radius + CONTACT_MARGIN
+    if bend is not None:
+        touch = touch + bend[:, :, None] + bend[:, None, :]
     both_free = _closest_approach(p, dp) < touch
     near_held = _segment_point_distance(p, dp) < touch + reach
     others = present[:, None, :] & present[:, :, None] & ~np.eye(p.shape[1], dtype=bool)[None]

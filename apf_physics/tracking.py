@@ -1,4 +1,4 @@
-"""Tracking: holonomic plans driven by unicycle robots (issue 27), vectorised over robots.
+"""Tracking: holonomic plans driven by unicycle robots, vectorised over robots.
 
 Every planner of the package (``gradient``, ``escape``, ``astar``, ``dqn``) decides a
 displacement per control step for a robot that can move in any direction. A unicycle robot

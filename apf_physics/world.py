@@ -27,6 +27,7 @@ from apf_physics import field as apf
 from apf_physics import geometry
 from apf_physics.errors import WorldError
 from apf_physics.field import FieldParams
+from apf_physics.kinematics import LIMIT_KEYS, UnicycleLimits
 from apf_physics.obstacles import CircleObstacle, GridObstacle, Obstacle
 from apf_physics.spatial import ShapeSet
 
@@ -146,6 +147,8 @@ class World:
         crowd: ``(K, 2)`` centres of other robots, discs of :attr:`robot_radius` that repel and
             block like obstacles: the robots of other formations, as one leader sees them
             (:meth:`among`). Empty for a world as read from its file.
+        unicycle: The robots are unicycles with these limits (``robot: {kinematics: unicycle,
+            ...}``), in steps; None: holonomic, the thesis's robot.
     """
 
     name: str
@@ -161,6 +164,7 @@ class World:
     formations: tuple[FormationTask, ...] = ()
     crowd: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
     frame: Frame = Frame()
+    unicycle: UnicycleLimits | None = None
     # Caches of what is built from the world (rasters, indexes). Not constructor arguments: a
     # world made by dataclasses.replace (other obstacles, targets, radius, ...) starts with its
     # own; only the views below share them, on purpose.
@@ -479,6 +483,14 @@ class World:
         return cells[rng.integers(len(cells), size=count)] + rng.uniform(-half, half, size=(count, 2))
 
     # -- serialisation -----------------------------------------------------------------
+    def _robot_to_file(self) -> dict[str, Any]:
+        u = self.frame.unit
+        robot: dict[str, Any] = {"radius": self.robot_radius * u, "step": u}
+        if self.unicycle is not None:
+            limits = self.unicycle.scaled(1.0 / u)
+            robot.update({"kinematics": "unicycle", **{k: float(getattr(limits, k)) for k in LIMIT_KEYS}})
+        return robot
+
     def to_dict(self) -> dict[str, Any]:
         """The world as the world-file contract's mapping, in the file's units (round-trips through ``world_from_dict``)."""
         frame, u = self.frame, self.frame.unit
@@ -489,7 +501,7 @@ class World:
         else:
             data["size"] = [self.size[0] * u, self.size[1] * u]
         data.update({
-            "robot": {"radius": self.robot_radius * u, "step": u},
+            "robot": self._robot_to_file(),
             "goal_tolerance": self.goal_tolerance * u,
             "field": frame.field_to_file(self.field),
             "obstacles": [_obstacle_to_file(o, frame) for o in self.obstacles if not isinstance(o, GridObstacle)],

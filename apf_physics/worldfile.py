@@ -277,8 +277,9 @@ def _build(check: Checker, data: Any, source: str) -> World | None:
         _check_what_parsed(check, parts, size, robot_radius, goal_tolerance, obstacles, targets, starts, to_world,
                            (data.get("grid") if isinstance(data, Mapping) else None), source)
         return None
+    unicycle = None if parts.unicycle is None else parts.unicycle.scaled(u)
     world = World(parts.name, size, robot_radius, goal_tolerance, parts.params, obstacles, targets, starts, formation,
-                  source, formations, frame=frame)
+                  source, formations, frame=frame, unicycle=unicycle)
     _check_placement(check, world)
     _check_routes(check, world)
     _check_formations(check, world)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import numbers
 import re
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence, TypeVar
 
@@ -24,6 +24,7 @@ import numpy as np
 from apf_physics import geometry, mapfiles
 from apf_physics.errors import WorldError, closest_match
 from apf_physics.field import FIELD_PRESETS, FieldParams
+from apf_physics.kinematics import KINEMATICS, LIMIT_KEYS, UnicycleLimits
 from apf_physics.obstacles import CircleObstacle, Motion, Obstacle, PolygonObstacle
 from apf_physics.safeyaml import key_text, shortened
 from apf_physics.world import FormationSpec, FormationTask, Frame
@@ -405,14 +406,20 @@ def _parse_formation(check: Checker, value: Any, key: str = "formation") -> Form
     return FormationSpec(followers, comm_range, spacing, shape, offsets)
 
 
-def _parse_robot(check: Checker, data: Mapping[str, Any]) -> tuple[float | None, float | None]:
-    """``(radius, step)`` in file units, from ``robot: {radius, step}`` (or the older ``robot_radius``).
+def _parse_robot(check: Checker, data: Mapping[str, Any]) -> tuple[float | None, float | None, UnicycleLimits | None]:
+    """``(radius, step, unicycle)`` in file units, from ``robot: {radius, step, kinematics, ...}``
+    (or the older ``robot_radius``).
 
-    Unset, the radius is a quarter of the step and the step is one file unit.
+    Unset, the radius is a quarter of the step and the step is one file unit. ``kinematics:
+    unicycle`` makes the robots unicycles, with the limits of
+    :class:`~apf_physics.kinematics.UnicycleLimits` that the mapping gives (speeds and
+    accelerations in file units per step, turn rates in radians per step); ``holonomic`` (the
+    default) takes no limits.
     """
-    robot = check.attempt(check.mapping, data["robot"], "robot", {"radius", "step"}) if "robot" in data else {}
+    keys = {"radius", "step", "kinematics", *LIMIT_KEYS}
+    robot = check.attempt(check.mapping, data["robot"], "robot", keys) if "robot" in data else {}
     if robot is None:
-        return None, None
+        return None, None, None
     if "radius" in robot and "robot_radius" in data:
         check.bad("robot_radius", "given twice: write robot: {radius: ...} alone")
     step = check.attempt(check.number, robot.get("step", 1.0), "robot.step", positive=True)
@@ -422,7 +429,25 @@ def _parse_robot(check: Checker, data: Mapping[str, Any]) -> tuple[float | None,
         radius = check.attempt(check.number, data["robot_radius"], "robot_radius", positive=True)
     else:
         radius = None if step is None else 0.25 * step
-    return radius, step
+    kind = robot.get("kinematics", "holonomic")
+    if kind not in KINEMATICS:
+        check.bad("robot.kinematics", f"expected one of {', '.join(KINEMATICS)}, got {shortened(kind)}")
+        return radius, step, None
+    given = [k for k in LIMIT_KEYS if k in robot]
+    if kind == "holonomic":
+        for k in given:
+            check.bad(f"robot.{k}", "only for a unicycle robot: add kinematics: unicycle")
+        return radius, step, None
+    limits = {}
+    for k in given:
+        value = check.attempt(check.number, robot[k], f"robot.{k}", nonnegative=k == "max_reverse",
+                              positive=k != "max_reverse")
+        if value is not None:
+            limits[k] = value
+    if len(limits) < len(given):
+        return radius, step, None
+    defaults = UnicycleLimits().scaled(1.0 / (step or 1.0))   # the default limits are in steps
+    return radius, step, replace(defaults, **limits)
 
 
 def _parse_grid(check: Checker, value: Any, source: str) -> mapfiles.OccupancyMap:
@@ -476,6 +501,7 @@ class FileWorld:
         starts: (S, 2) starts (a formations-only file: the formations' starts).
         formation: The ``formation:`` of the world's robots, if any.
         formations: The ``formations:`` (empty when there are none).
+        unicycle: The robot's limits if it is a unicycle (file units), else None.
     """
 
     name: str | None
@@ -490,6 +516,7 @@ class FileWorld:
     starts: np.ndarray | None
     formation: FormationSpec | None
     formations: tuple[FormationTask, ...] | None
+    unicycle: UnicycleLimits | None = None
 
 
 def parse_world(check: Checker, data: Any, source: str) -> FileWorld | None:
@@ -519,7 +546,7 @@ def parse_world(check: Checker, data: Any, source: str) -> FileWorld | None:
     box = (offset, offset + np.asarray(size, float)) if size is not None else None
     default_name = Path(source).stem if source != "<dict>" else "world"
     name = check.attempt(_parse_name, check, data.get("name", default_name))
-    robot_radius, step = _parse_robot(check, data)
+    robot_radius, step, unicycle = _parse_robot(check, data)
     frame = Frame((float(offset[0]), float(offset[1])), float(step if step is not None else 1.0))
     goal_tolerance = check.attempt(check.number, data.get("goal_tolerance", 0.75 * frame.unit), "goal_tolerance",
                                    positive=True)
@@ -537,4 +564,4 @@ def parse_world(check: Checker, data: Any, source: str) -> FileWorld | None:
         if not data.get("starts"):
             starts = np.array([task.start for task in formations])
     return FileWorld(name, size, grid, frame, robot_radius, goal_tolerance, params, obstacles, targets, starts,
-                     formation, formations)
+                     formation, formations, unicycle)

@@ -149,7 +149,7 @@ def test_no_tunnelling_at_full_speed(obstacles, heading, seed, radius):
 # -- the fast path: robots in open space skip pymunk, and move exactly as pymunk would move them ---
 
 def _all_through_pymunk(physics):
-    physics.needs_physics = lambda moves: np.ones(physics.num_robots, bool)
+    physics.needs_physics = lambda moves, bend=None: np.ones(physics.num_robots, bool)
     return physics
 
 

@@ -6,10 +6,8 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 
-from apf_physics.actions import ACTIONS
-from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, resolve_worlds
+from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, resolve_worlds, robot_options
 from apf_physics.envs.reward import TERMS, reward_weights
 from apf_physics.envs.task import NavigationTask, TrapOption
 from apf_physics.formation import formation_success, link_lengths, links_in_range
@@ -70,8 +68,11 @@ class FormationEnv(gym.Env):
     def __init__(self, world: WorldSpec | None = None, obs_size: int = 11, reward: Any = "thesis-fixed",
                  starts: Any = "world", resolution: int = 4, formation: FormationSpec | dict | None = None,
                  render_mode: str | None = None, memory: bool = False, previous: bool = False, obs_scale: str = "raw",
-                 observer: ObserverConfig | dict | None = None, trap: TrapOption = None):
+                 observer: ObserverConfig | dict | None = None, trap: TrapOption = None,
+                 action: str = "discrete", kinematics: str | None = None, observation: str = "window",
+                 lidar: Any = None, limits: Any = None):
         self.worlds = resolve_worlds(world)
+        self.robot = robot_options(self.worlds, action, kinematics, observation, lidar, limits)
         if formation is None:
             spec = self.worlds[0].formation or FormationSpec()
         else:
@@ -81,10 +82,10 @@ class FormationEnv(gym.Env):
         self.weights = reward_weights(reward)
         self.chooser = StartChooser(starts, self.worlds)
         self.render_mode = render_mode
-        self.action_space = spaces.Discrete(len(ACTIONS))
-        self._task = NavigationTask(self.worlds, 1, self.observer, self.weights, formation=spec, trap=trap)
-        low, high = self._task.observer.value_bounds()  # finite: from the worlds' U
-        self.observation_space = spaces.Box(low, high, self.observer.shape, np.float32)
+        self.action_space = self.robot.action_space()
+        self._task = NavigationTask(self.worlds, 1, self.observer, self.weights, formation=spec, trap=trap,
+                                    robot=self.robot)
+        self.observation_space = self._task.observation_space()
         self.m = spec.followers + 1
         self.followed = spec.followed
 
@@ -99,15 +100,17 @@ class FormationEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
+        if seed is not None:
+            self._task.seed([seed])
         w, start = self.chooser.choose(self.np_random, options)
         self._task.start(np.array([0]), np.array([w]), start[None])
         self.steps = 0
         self.in_range = np.zeros(self.formation.followers)
         self.trails = [[p.copy()] for p in self.positions]
-        return self._task.observation()[0], self._get_info()
+        return self._task.observation(0), self._get_info()
 
     def step(self, action):
-        result = self._task.step(np.array([int(action)]))
+        result = self._task.step(np.array([int(action)]) if self.robot.action == "discrete" else action)
         for trail, p in zip(self.trails, self.positions):
             trail.append(p.copy())
         self.steps += 1
@@ -121,7 +124,7 @@ class FormationEnv(gym.Env):
         info["formation_success"] = formation_success(reached, self.positions, self.followed, self.formation.comm_range)
         if self._task.stepper.trap is not None:
             info["trapped"] = bool(result.trapped[0])
-        return (result.observation[0], float(result.reward[0]), bool(result.terminated[0]), bool(result.truncated[0]),
+        return (self._task.observation(0), float(result.reward[0]), bool(result.terminated[0]), bool(result.truncated[0]),
                 info)
 
     def _get_info(self) -> dict:

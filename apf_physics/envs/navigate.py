@@ -6,10 +6,9 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 
 from apf_physics.actions import ACTION_NAMES, ACTIONS
-from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, resolve_worlds
+from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, resolve_worlds, robot_options
 from apf_physics.envs.reward import TERMS, reward_weights
 from apf_physics.envs.task import NavigationTask, TrapOption
 from apf_physics.observation import ObserverConfig
@@ -129,18 +128,20 @@ class NavigateEnv(gym.Env):
     def __init__(self, world: WorldSpec | None = None, obs_size: int = 11, reward: Any = "thesis-fixed",
                  starts: Any = "world", resolution: int = 4, render_mode: str | None = None,
                  memory: bool = False, previous: bool = False, obs_scale: str = "raw",
-                 observer: ObserverConfig | dict | None = None, trap: TrapOption = None):
+                 observer: ObserverConfig | dict | None = None, trap: TrapOption = None,
+                 action: str = "discrete", kinematics: str | None = None, observation: str = "window",
+                 lidar: Any = None, limits: Any = None):
         self.worlds = resolve_worlds(world)
+        self.robot = robot_options(self.worlds, action, kinematics, observation, lidar, limits)
         self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer, previous)
         self.weights = reward_weights(reward)
         self.chooser = StartChooser(starts, self.worlds)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         self.render_mode = render_mode
-        self.action_space = spaces.Discrete(len(ACTIONS))
-        self._task = NavigationTask(self.worlds, 1, self.observer, self.weights, trap=trap)
-        low, high = self._task.observer.value_bounds()  # finite: from the worlds' U
-        self.observation_space = spaces.Box(low, high, self.observer.shape, np.float32)
+        self.action_space = self.robot.action_space()
+        self._task = NavigationTask(self.worlds, 1, self.observer, self.weights, trap=trap, robot=self.robot)
+        self.observation_space = self._task.observation_space()
         self._trail: list[np.ndarray] = []
         self._steps = 0
 
@@ -155,14 +156,16 @@ class NavigateEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
+        if seed is not None:
+            self._task.seed([seed])
         w, start = self.chooser.choose(self.np_random, options)
         self._task.start(np.array([0]), np.array([w]), start[None])
         self._trail = [start.copy()]
         self._steps = 0
-        return self._task.observation()[0], self._get_info()
+        return self._task.observation(0), self._get_info()
 
     def step(self, action):
-        result = self._task.step(int(action))
+        result = self._task.step(int(action) if self.robot.action == "discrete" else action)
         self._steps += 1
         if self.render_mode is not None:  # the trail is only drawn
             self._trail.append(self.position)
@@ -172,15 +175,20 @@ class NavigateEnv(gym.Env):
         info["collision"] = bool(result.collided[0])
         if self._task.stepper.trap is not None:
             info["trapped"] = bool(result.trapped[0])
-        return (result.observation[0], float(result.reward[0]), bool(result.terminated[0]), bool(result.truncated[0]),
+        return (self._task.observation(0), float(result.reward[0]), bool(result.terminated[0]), bool(result.truncated[0]),
                 info)
 
     def _get_info(self) -> dict:
-        return {"position": self.position, "world": self.world.name, "distance": float(self._task.distance()[0])}
+        info = {"position": self.position, "world": self.world.name, "distance": float(self._task.distance()[0])}
+        if self.robot.unicycle is not None:
+            info["heading"] = float(self._task.stepper.headings[0, 0])
+        return info
 
     def render(self):
         if self.render_mode != "rgb_array":
             return None
         snap = Snapshot(self._task.positions[0, :1], ("single",), (np.asarray(self._trail),),
-                        (f"{self.world.name}  step {self._steps}",), self._steps)
+                        (f"{self.world.name}  step {self._steps}",), self._steps,
+                        headings=self._task.stepper.headings[0, :1] if self.robot.unicycle is not None else None)
         return draw_frame(field_image(self.world), snap)
+

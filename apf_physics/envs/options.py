@@ -1,14 +1,19 @@
-"""Options shared by the environments: which worlds, how each episode's world and start are chosen."""
+"""Options shared by the environments: which worlds, which robot, how each episode's world and start are chosen."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
-from typing import Any, Sequence, Union
+from typing import Any, Mapping, Sequence, Union
 
 import numpy as np
+from gymnasium import spaces
 
+from apf_physics.actions import ACTIONS
 from apf_physics.errors import UserError
-from apf_physics.observation import ObserverConfig
+from apf_physics.kinematics import KINEMATICS, LIMIT_KEYS, UNICYCLE_ACTIONS, UnicycleLimits, holonomic_from_unit
+from apf_physics.lidar import LidarConfig
+from apf_physics.observation import OBSERVATIONS, ObserverConfig
 from apf_physics.world import World
 from apf_physics.worldfile import load_world
 
@@ -23,6 +28,129 @@ def resolve_worlds(world: WorldSpec | None) -> list[World]:
     if not items:
         raise UserError("world= is an empty list")
     return [w if isinstance(w, World) else load_world(w) for w in items]
+
+
+ACTION_KINDS = ("discrete", "continuous")
+"""The environments' ``action`` option."""
+
+
+@dataclass(frozen=True)
+class RobotOptions:
+    """Which robot an environment drives and what it sees (:func:`robot_options` builds it from the options).
+
+    Attributes:
+        action: ``"discrete"``: ``Discrete(9)``, the thesis's Table 1 for a holonomic robot,
+            :data:`~apf_physics.kinematics.UNICYCLE_ACTIONS` for a unicycle; ``"continuous"``:
+            ``Box(-1, 1, (2,))``, a holonomic robot's velocity (each axis times the top speed,
+            one unit per step: the box's corners are Table 1's diagonal moves) or a unicycle's
+            ``(v, ω)`` as shares of its limits (:meth:`UnicycleLimits.from_unit`).
+        unicycle: The unicycle's limits, or None for a holonomic robot.
+        observation: One of :data:`~apf_physics.observation.OBSERVATIONS`.
+        lidar: The range sensor (used with a ``"lidar"`` observation).
+    """
+
+    action: str = "discrete"
+    unicycle: UnicycleLimits | None = None
+    observation: str = "window"
+    lidar: LidarConfig = LidarConfig()
+
+    @property
+    def kinematics(self) -> str:
+        return "holonomic" if self.unicycle is None else "unicycle"
+
+    @property
+    def window(self) -> bool:
+        return "window" in self.observation
+
+    @property
+    def ranges(self) -> bool:
+        return "lidar" in self.observation
+
+    @property
+    def thesis(self) -> bool:
+        """The thesis's robot: holonomic, nine moves, the potential window."""
+        return self.action == "discrete" and self.unicycle is None and self.observation == "window"
+
+    def action_space(self) -> spaces.Space:
+        if self.action == "continuous":
+            return spaces.Box(-1.0, 1.0, (2,), np.float32)
+        return spaces.Discrete(len(ACTIONS))
+
+    def commands(self, actions: Any, num: int) -> np.ndarray:
+        """(num, 2) the stepper's commands of ``num`` actions: a holonomic robot's velocity
+        [units/step] or a unicycle's ``(v, ω)`` (bounded by the stepper)."""
+        if self.action == "continuous":
+            a = np.asarray(actions, float).reshape(num, 2)
+            if self.unicycle is None:
+                return holonomic_from_unit(a)
+            return np.column_stack(self.unicycle.from_unit(a))
+        index = np.asarray(actions, dtype=np.intp).reshape(num)
+        if self.unicycle is None:
+            return ACTIONS[index]
+        return np.column_stack(self.unicycle.from_unit(UNICYCLE_ACTIONS[index]))
+
+
+def robot_options(worlds: Sequence[World], action: str = "discrete", kinematics: str | None = None,
+                  observation: str = "window", lidar: LidarConfig | Mapping[str, Any] | None = None,
+                  limits: UnicycleLimits | Mapping[str, Any] | None = None) -> RobotOptions:
+    """The environments' robot options, checked.
+
+    Args:
+        worlds: The environment's worlds: ``kinematics=None`` takes their robot (``robot:
+            {kinematics: unicycle, ...}`` in the world file; all must agree).
+        action: ``"discrete"`` or ``"continuous"``.
+        kinematics: ``"holonomic"``, ``"unicycle"`` or None (the worlds').
+        observation: ``"window"``, ``"lidar"`` or ``"window+lidar"``.
+        lidar: :class:`~apf_physics.lidar.LidarConfig` or its keys (``beams``, ``fov`` [degrees],
+            ``max_range``, ``noise``).
+        limits: A unicycle's :class:`~apf_physics.kinematics.UnicycleLimits` or some of its
+            keys, over the world's (default: the world's, else the defaults).
+
+    Raises:
+        UserError: An unknown value, or worlds whose robots differ.
+    """
+    if action not in ACTION_KINDS:
+        raise UserError(f"action must be one of {', '.join(ACTION_KINDS)}, got {action!r}")
+    if observation not in OBSERVATIONS:
+        raise UserError(f"observation must be one of {', '.join(OBSERVATIONS)}, got {observation!r}")
+    own = {w.unicycle for w in worlds}
+    if kinematics is None:
+        if len(own) > 1:
+            raise UserError("the worlds' robots differ (robot: kinematics or limits): give kinematics= "
+                            "and limits= to drive them all alike")
+        unicycle = own.pop() if own else None
+    elif kinematics in KINEMATICS:
+        worlds_own = next((u for u in own if u is not None), None)
+        unicycle = (worlds_own or UnicycleLimits()) if kinematics == "unicycle" else None
+    else:
+        raise UserError(f"kinematics must be one of {', '.join(KINEMATICS)}, got {kinematics!r}")
+    if limits is not None:
+        if unicycle is None:
+            raise UserError("limits= is for unicycle robots: add kinematics='unicycle'")
+        if isinstance(limits, UnicycleLimits):
+            unicycle = limits
+        else:
+            unknown = set(limits) - set(LIMIT_KEYS)
+            if unknown:
+                raise UserError(f"limits: unknown keys {sorted(unknown)}; known: {', '.join(LIMIT_KEYS)}")
+            try:
+                unicycle = replace(unicycle, **{k: float(v) for k, v in limits.items()})
+            except (TypeError, ValueError) as e:
+                raise UserError(f"limits: {e}") from None
+    if lidar is None:
+        config = LidarConfig()
+    elif isinstance(lidar, LidarConfig):
+        config = lidar
+    else:
+        known = {f.name for f in fields(LidarConfig)}
+        unknown = set(lidar) - known
+        if unknown:
+            raise UserError(f"lidar: unknown keys {sorted(unknown)}; known: {', '.join(sorted(known))}")
+        try:
+            config = LidarConfig(**dict(lidar))
+        except (TypeError, ValueError) as e:
+            raise UserError(f"lidar: {e}") from None
+    return RobotOptions(action, unicycle, observation, config)
 
 
 def observer_config(obs_size: int, resolution: int, memory: bool, obs_scale: str,

@@ -1,8 +1,11 @@
 """The navigation task for a batch of episodes: what every environment of the package steps.
 
-One step: actions → unit moves (Model Table 1) → followers' moves (formations) → one
-:class:`~apf_physics.engine.Stepper` step for the whole batch → observations (one
-:class:`~apf_physics.observation.Observer` call) and the reward's named terms. ``Navigate-v0``
+One step: actions → the stepper's commands (unit moves, Model Table 1; or a continuous
+velocity, or a unicycle's ``(v, ω)``: :class:`~apf_physics.envs.options.RobotOptions`) →
+followers' moves (formations) → one :class:`~apf_physics.engine.Stepper` step for the whole
+batch → observations (one :class:`~apf_physics.observation.Observer` call for the windows,
+one :class:`~apf_physics.observation.RangeObserver` call for the ranges) and the reward's
+named terms. ``Navigate-v0``
 is a batch of one, :class:`~apf_physics.envs.vector.NavigateVectorEnv` a batch of N, and
 ``Formation-v0`` a batch of one formation.
 """
@@ -14,13 +17,15 @@ from dataclasses import dataclass
 from typing import Sequence, Union
 
 import numpy as np
+from gymnasium import spaces
 
 from apf_physics.actions import ACTIONS
 from apf_physics.engine import RUNNING, TIMEOUT, TRAPPED, Stepper, TrapDetector
+from apf_physics.envs.options import RobotOptions
 from apf_physics.errors import UserError
 from apf_physics.envs.reward import RewardWeights, reward_terms, reward_terms_one
 from apf_physics.formation import FormationCrowd, FormationTeam
-from apf_physics.observation import Observer, ObserverConfig
+from apf_physics.observation import Observer, ObserverConfig, RangeObserver
 from apf_physics.world import FormationSpec, World
 
 
@@ -28,7 +33,7 @@ from apf_physics.world import FormationSpec, World
 class TaskStep:
     """One step of the batch (arrays over slots)."""
 
-    observation: np.ndarray    # (N, C, k, k) float32
+    observation: np.ndarray | dict  # (N, C, k, k) float32 windows, (N, K + 5) ranges, or a dict of both
     reward: np.ndarray         # (N,) float64, 0 where nothing moved
     terminated: np.ndarray     # (N,) bool: reached or collided
     truncated: np.ndarray      # (N,) bool: the step limit
@@ -88,6 +93,7 @@ class NavigationTask:
             environments leave it to Gymnasium's ``TimeLimit``).
         trap: Truncate episodes whose leader the trap detector finds stuck (:func:`trap_detector`;
             default None: no trap rule).
+        robot: The robot's kind, its actions and what it sees (default: the thesis's).
 
     The episode rules are the stepper's (:mod:`apf_physics.engine`): an episode that starts
     within the goal tolerance of a target has ended at its start, and its next step reports
@@ -95,17 +101,27 @@ class NavigationTask:
     """
 
     def __init__(self, worlds: Sequence[World], num: int, observer: ObserverConfig, weights: RewardWeights,
-                 formation: FormationSpec | None = None, max_steps: int | None = None, trap: TrapOption = None):
+                 formation: FormationSpec | None = None, max_steps: int | None = None, trap: TrapOption = None,
+                 robot: RobotOptions = RobotOptions()):
         self.worlds = list(worlds)
         self.num = int(num)
         self.weights = weights
+        self.robot = robot
+        if formation is not None and robot.unicycle is not None:
+            raise UserError("a formation of unicycle robots is driven by planners (apf-physics eval), "
+                            "not by the environments yet: use kinematics='holonomic'")
         self.team = FormationTeam(formation, self.num) if formation is not None else None
         robots = 1 if self.team is None else self.team.robots
-        self.stepper = Stepper(self.worlds, self.num, robots, max_steps=max_steps, trap=trap_detector(trap))
+        self.stepper = Stepper(self.worlds, self.num, robots, max_steps=max_steps, trap=trap_detector(trap),
+                               unicycle=robot.unicycle)
         self.observer = Observer(observer, self.num, self.worlds, track_visits=bool(weights.revisit))
+        self.ranges = RangeObserver(robot.lidar, self.num, robot.unicycle) if robot.ranges else None
         self._centre = observer.size // 2
-        self._obs = np.zeros((self.num, *observer.shape), np.float32)
+        self._obs = np.zeros((self.num, *observer.shape), np.float32) if robot.window else None
+        self._scan = np.zeros((self.num, self.ranges.size), np.float32) if self.ranges is not None else None
         self._u = np.zeros(self.num)     # the potential at each leader (its window's centre)
+        self._moved = np.zeros((self.num, 2))   # each leader's last displacement (a holonomic robot's velocity)
+        self._scalar = self.stepper.scalar and self.team is None and robot.thesis
 
     @property
     def positions(self) -> np.ndarray:
@@ -116,8 +132,29 @@ class NavigationTask:
     def world_of(self) -> np.ndarray:
         return self.stepper.world_of
 
-    def start(self, slots: np.ndarray, world_ids: np.ndarray, leaders: np.ndarray) -> None:
-        """Begin episodes in ``slots``, leaders at ``leaders`` (k, 2) in ``worlds[world_ids]``.
+    def observation_space(self) -> spaces.Space:
+        """One slot's observation space: the window's ``Box``, the ranges' ``Box``, or a ``Dict`` of both."""
+        window = ranges = None
+        if self.robot.window:
+            low, high = self.observer.value_bounds()  # finite: from the worlds' U
+            window = spaces.Box(low, high, self.observer.config.shape, np.float32)
+        if self.ranges is not None:
+            low, high = self.ranges.bounds()
+            ranges = spaces.Box(low, high, low.shape, np.float32)
+        if window is not None and ranges is not None:
+            return spaces.Dict({"window": window, "lidar": ranges})
+        return window if window is not None else ranges
+
+    def seed(self, seeds: Sequence[int | None]) -> None:
+        """Restart the range sensor's noise, slot ``i`` from ``seeds[i]`` (the environments call it
+        at a seeded reset)."""
+        if self.ranges is not None:
+            self.ranges.seed(seeds)
+
+    def start(self, slots: np.ndarray, world_ids: np.ndarray, leaders: np.ndarray,
+              headings: np.ndarray | None = None) -> None:
+        """Begin episodes in ``slots``, leaders at ``leaders`` (k, 2) in ``worlds[world_ids]``
+        (unicycles headed ``headings`` (k,), default toward the nearest target).
 
         Raises:
             UserError: A formation's followers find no free position near its leader.
@@ -131,46 +168,75 @@ class NavigationTask:
         else:
             positions = np.stack([self.team.starts(world, p[None])[0] for world, p in zip(worlds, leaders)])
             self.team.reset(slots, worlds, positions)
-        self.stepper.start(slots, positions, world_ids)
+        if headings is not None:
+            headings = np.repeat(np.asarray(headings, float).reshape(-1, 1), positions.shape[1], axis=1)
+        self.stepper.start(slots, positions, world_ids, headings=headings)
         self.observer.reset(slots, leaders, worlds)
+        self._moved[slots] = 0.0
         self._observe(slots)
 
     def _observe(self, slots: np.ndarray | None) -> None:
-        """Refresh the observations (and the potential at the leaders) of ``slots`` (None: all)."""
+        """Refresh the observations (and the potential at the leader) of ``slots`` (None: all)."""
         leaders = self.stepper.positions[:, 0] if slots is None else self.stepper.positions[slots, 0]
         steps = self.stepper.steps if slots is None else self.stepper.steps[slots]   # moving obstacles' time
-        obs = self.observer.observe(leaders, slots, steps)
-        if self.observer.config.scale == "raw":
+        obs = self.observer.observe(leaders, slots, steps) if self.robot.window else None
+        if obs is not None and self.observer.config.scale == "raw":
             u = obs[:, 0, self._centre, self._centre]
-        else:  # the scaled window reads 0 at the robot: take U from an unscaled sample
+        else:  # no window, or a scaled one that reads 0 at the robot: take U from an unscaled sample
             u = self.observer.potential_at(leaders, slots, steps)
+        scan = self._scan_of(slots, steps) if self.ranges is not None else None
         if slots is None:
-            self._obs, self._u = obs, u.astype(float)
+            self._u = u.astype(float)
+            if obs is not None:
+                self._obs = obs
+            if scan is not None:
+                self._scan = scan
         else:  # copy on write: an array handed out by step() is never changed afterwards
-            self._obs = self._obs.copy()
-            self._obs[slots], self._u[slots] = obs, u
+            self._u[slots] = u
+            if obs is not None:
+                self._obs = self._obs.copy()
+                self._obs[slots] = obs
+            if scan is not None:
+                self._scan = self._scan.copy()
+                self._scan[slots] = scan
 
-    def observation(self, slots: np.ndarray | None = None) -> np.ndarray:
-        """(N, C, k, k) the current observations (or those of ``slots``); never changed afterwards."""
-        return self._obs if slots is None else self._obs[slots]
+    def _scan_of(self, slots: np.ndarray | None, steps: np.ndarray) -> np.ndarray:
+        """The range observations of the leaders of ``slots`` (None: all)."""
+        rows = slice(None) if slots is None else slots
+        poses = self.stepper.poses()[rows, 0]
+        velocity = self.stepper.drive[rows, 0] if self.robot.unicycle is not None else self._moved[rows]
+        others = self.stepper.positions[rows, 1:] if self.stepper.robots_per_slot > 1 else None
+        return self.ranges.observe(self.worlds, self.stepper.world_of[rows], poses, velocity, steps, others, slots)
+
+    def observation(self, slots: np.ndarray | int | None = None) -> np.ndarray | dict:
+        """The current observations (or those of ``slots``; an int: that slot's alone): (N, C, k, k)
+        windows, (N, K + 5) ranges, or ``{"window": ..., "lidar": ...}``; never changed afterwards."""
+        rows = slice(None) if slots is None else slots
+        if self._scan is None:
+            return self._obs[rows]
+        if self._obs is None:
+            return self._scan[rows]
+        return {"window": self._obs[rows], "lidar": self._scan[rows]}
 
     def step(self, actions: np.ndarray | int) -> TaskStep:
         """Advance every running slot by its action (slots not running do not move; a batch of
         one may be given its action as an int)."""
-        if self.stepper.scalar and self.team is None and self.stepper.outcome[0] == RUNNING:
+        if self._scalar and self.stepper.outcome[0] == RUNNING:
             return self._step_one(int(actions) if isinstance(actions, (int, np.integer))
                                   else int(np.asarray(actions).reshape(-1)[0]))
-        moves = ACTIONS[np.asarray(actions, dtype=np.intp).reshape(self.num)]
+        commands = self.robot.commands(actions, self.num)
         before = self.stepper.positions[:, 0]
         if self.team is None:
-            commands = moves[:, None, :]
+            commands = commands[:, None, :]
         else:
-            commands = self.team.commands(self.stepper.positions, moves, self.stepper.running)
+            commands = self.team.commands(self.stepper.positions, commands, self.stepper.running)
         report = self.stepper.step(commands)
         moved = report.moved
         everyone = bool(moved.all())
         slots = None if everyone else np.flatnonzero(moved)
         leaders = report.positions[:, 0]
+        if self.ranges is not None and self.robot.unicycle is None:
+            self._moved = np.where(moved[:, None], leaders - before, self._moved)
         revisits = None
         if self.observer.memory is not None:
             revisits = np.zeros(self.num)
@@ -188,8 +254,8 @@ class NavigationTask:
         terminated, truncated, trapped = _ends(ended, self.stepper.outcome)
         robot_contact = report.contacts.robot.reshape(self.num, -1).any(axis=1) if report.contacts.touched \
             else ended & False
-        return TaskStep(self._obs, reward, terminated, truncated, terms, report.reached, report.collided, moved,
-                        robot_contact, trapped)
+        return TaskStep(self.observation(), reward, terminated, truncated, terms, report.reached, report.collided,
+                        moved, robot_contact, trapped)
 
     def _step_one(self, action: int) -> TaskStep:
         """:meth:`step` of a batch of one running robot alone (``Navigate-v0``): the same

@@ -19,13 +19,11 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from gymnasium import spaces
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from apf_physics.actions import ACTIONS
-from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, resolve_worlds
+from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, resolve_worlds, robot_options
 from apf_physics.envs.reward import TERMS, reward_weights
 from apf_physics.envs.task import NavigationTask, TrapOption
 from apf_physics.observation import ObserverConfig
@@ -52,6 +50,8 @@ class NavigateVectorEnv(VectorEnv):
         observer: An observer configuration instead of the four options above.
         trap: Truncate an episode that a trap detector finds stuck (see ``NavigateEnv``; default
             None: no trap rule); ``info["trapped"]`` then says which.
+        action, kinematics, observation, lidar, limits: The robot's actions, kind and sensor
+            (see ``NavigateEnv``).
 
     Also reachable as ``gymnasium.make_vec("apf_physics/Navigate-v0", num_envs=N,
     vectorization_mode="vector_entry_point", world=...)``.
@@ -62,19 +62,21 @@ class NavigateVectorEnv(VectorEnv):
     def __init__(self, world: WorldSpec | None = None, num_envs: int = 8, obs_size: int = 11,
                  reward: Any = "thesis-fixed", starts: Any = "world", max_episode_steps: int = 100,
                  resolution: int = 4, render_mode: str | None = None, memory: bool = False, previous: bool = False,
-                 obs_scale: str = "raw", observer: ObserverConfig | dict | None = None, trap: TrapOption = None):
+                 obs_scale: str = "raw", observer: ObserverConfig | dict | None = None, trap: TrapOption = None,
+                 action: str = "discrete", kinematics: str | None = None, observation: str = "window",
+                 lidar: Any = None, limits: Any = None):
         self.worlds = resolve_worlds(world)
+        self.robot = robot_options(self.worlds, action, kinematics, observation, lidar, limits)
         self.num_envs = int(num_envs)
         self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer, previous)
         self.weights = reward_weights(reward)
         self.chooser = StartChooser(starts, self.worlds)
         self.max_episode_steps = int(max_episode_steps)
         self.render_mode = render_mode
-        self.single_action_space = spaces.Discrete(len(ACTIONS))
+        self.single_action_space = self.robot.action_space()
         self._task = NavigationTask(self.worlds, self.num_envs, self.observer, self.weights,
-                                    max_steps=self.max_episode_steps, trap=trap)
-        low, high = self._task.observer.value_bounds()  # finite: from the worlds' U
-        self.single_observation_space = spaces.Box(low, high, self.observer.shape, np.float32)
+                                    max_steps=self.max_episode_steps, trap=trap, robot=self.robot)
+        self.single_observation_space = self._task.observation_space()
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self._rngs = [seeding.np_random(None)[0] for _ in range(self.num_envs)]
@@ -115,12 +117,13 @@ class NavigateVectorEnv(VectorEnv):
                 raise ValueError(f"{len(seeds)} seeds for {self.num_envs} environments")
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
             self._drawn[:] = _BLOCK
+            self._task.seed(seeds)
         self._start(np.arange(self.num_envs), options)
         info = self._info()
         return self._task.observation(), info
 
     def step(self, actions):
-        actions = np.asarray(actions).reshape(self.num_envs)
+        actions = np.asarray(actions).reshape(self.num_envs, *self.single_action_space.shape)
         restarting = np.flatnonzero(self._needs_reset)
         result = self._task.step(actions)
         if len(restarting):
@@ -141,14 +144,18 @@ class NavigateVectorEnv(VectorEnv):
 
     def _info(self) -> dict:
         names = np.array([w.name for w in self.worlds], dtype=object)
-        return {"position": self._task.positions[:, 0].copy(), "_position": self._all,
+        info = {"position": self._task.positions[:, 0].copy(), "_position": self._all,
                 "world": names[self._task.world_of], "_world": self._all,
                 "distance": self._task.distance(), "_distance": self._all}
+        if self.robot.unicycle is not None:
+            info["heading"], info["_heading"] = self._task.stepper.headings[:, 0].copy(), self._all
+        return info
 
     def render(self):
         if self.render_mode != "rgb_array":
             return None
         world = self.worlds[self._task.world_of[0]]
         snap = Snapshot(self._task.positions[0, :1], ("single",), (np.asarray(self._trail),), (world.name,),
-                        int(self._task.stepper.steps[0]))
+                        int(self._task.stepper.steps[0]),
+                        headings=self._task.stepper.headings[0, :1] if self.robot.unicycle is not None else None)
         return draw_frame(field_image(world), snap)

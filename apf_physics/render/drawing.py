@@ -152,6 +152,8 @@ class Snapshot:
         t: The control step shown: where the world's moving obstacles are drawn.
         families: One formation number per robot (several formations: each in a colour
             family of its own), or empty.
+        headings: ``(R,)`` each robot's heading [rad] (unicycles: drawn as a line from the
+            centre to the rim), or None (holonomic robots have none).
     """
 
     positions: np.ndarray
@@ -160,6 +162,7 @@ class Snapshot:
     overlay: tuple[str, ...] = ()
     t: float = 0.0
     families: tuple[int, ...] = ()
+    headings: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         positions = np.asarray(self.positions, dtype=float).reshape(-1, 2)
@@ -172,6 +175,11 @@ class Snapshot:
         if self.trails and len(self.trails) != len(positions):
             raise ValueError(f"{len(positions)} robot positions but {len(self.trails)} trails")
         robot_colours(self.roles, self.families)  # validates the roles
+        if self.headings is not None:
+            headings = np.asarray(self.headings, dtype=float).reshape(-1)
+            if len(headings) != len(positions):
+                raise ValueError(f"{len(positions)} robot positions but {len(headings)} headings")
+            object.__setattr__(self, "headings", headings)
 
 
 @dataclass(frozen=True, eq=False)
@@ -407,6 +415,13 @@ class FieldImage:
             cv2.circle(image, c, r, _halo(colour), ring + 2 * self.halo_width, cv2.LINE_AA, _SHIFT)
             cv2.circle(image, c, r, colour, ring, cv2.LINE_AA, _SHIFT)
 
+    def draw_headings(self, image: np.ndarray, centres: np.ndarray, headings: np.ndarray) -> None:
+        """Draw each robot's heading onto ``image`` in place: a dark line from its centre to its rim."""
+        tips = centres + self.robot_radius * np.column_stack([np.cos(headings), np.sin(headings)])
+        for a, b in zip(self._fixed(centres), self._fixed(tips)):
+            cv2.line(image, tuple(int(v) for v in a), tuple(int(v) for v in b), (20, 20, 20),
+                     max(1, self.line_width), cv2.LINE_AA, _SHIFT)
+
     def draw_text(self, image: np.ndarray, lines: Sequence[str]) -> None:
         """Write lines of text in the top-left corner of ``image`` in place, white on a dimmed box."""
         if not lines:
@@ -541,6 +556,8 @@ def _draw_robots(frame: np.ndarray, field_image: FieldImage, snapshot: Snapshot,
     field_image.draw_targets(frame)
     for position, (disc_colour, _) in zip(snapshot.positions, colours):
         field_image.draw_disc(frame, position, disc_colour)
+    if snapshot.headings is not None:
+        field_image.draw_headings(frame, snapshot.positions, snapshot.headings)
     field_image.draw_text(frame, snapshot.overlay)
 
 
