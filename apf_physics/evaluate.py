@@ -11,7 +11,7 @@ import numpy as np
 
 from apf_physics.planners.base import Planner
 from apf_physics.safefile import check_writable, write_text
-from apf_physics.rollout import Episode, rollout, rollout_formations
+from apf_physics.rollout import Episode, kinematics_option, rollout, rollout_formations
 from apf_physics.world import World
 
 
@@ -147,7 +147,8 @@ class Evaluation:
 
 def evaluate(planner: Planner, worlds: Sequence[World], starts: dict[str, np.ndarray] | None = None,
              max_steps: int | None = None, formation: bool = False,
-             progress: Callable[[World, list[Episode]], None] | None = None) -> Evaluation:
+             progress: Callable[[World, list[Episode]], None] | None = None,
+             kinematics: str | None = None) -> Evaluation:
     """Run ``planner`` from every start of every world (or from ``starts[world.name]``).
 
     Args:
@@ -157,14 +158,20 @@ def evaluate(planner: Planner, worlds: Sequence[World], starts: dict[str, np.nda
         max_steps: Step limit per episode (default: :func:`~apf_physics.rollout.default_max_steps`).
         formation: Run each world's formation (its followers behind each leader).
         progress: Called with each world and its episodes once they are done.
+        kinematics: ``"holonomic"`` or ``"unicycle"``: the robots of every world are of that kind
+            (unicycles with the world file's limits, else the defaults); None: each world file's.
+
+    Raises:
+        UserError: An unknown ``kinematics``.
     """
+    unicycle = kinematics_option(kinematics)
     episodes: list[Episode] = []
     for world in worlds:
         if formation and world.formations:   # several formations at once, each to its own target
-            done = rollout_formations(world, planner, max_steps=max_steps)
+            done = rollout_formations(world, planner, max_steps=max_steps, unicycle=unicycle)
         else:
             s = world.starts if starts is None else starts[world.name]
-            done = rollout(world, planner, s, max_steps=max_steps, formation=formation)
+            done = rollout(world, planner, s, max_steps=max_steps, formation=formation, unicycle=unicycle)
         episodes.extend(done)
         if progress is not None:
             progress(world, done)

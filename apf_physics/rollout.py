@@ -6,6 +6,14 @@ The planner steers each slot's leader; in a formation the followers follow by th
 world at that step (:meth:`~apf_physics.engine.Stepper.moment`, built once for the step). How
 an episode ends is the stepper's decision (reached, also at the start; collision, trapped,
 timeout), with the planner's trap rule.
+
+**Unicycle robots** (``unicycle=``, by default the world file's robot kind,
+:attr:`~apf_physics.world.World.unicycle`): the planners are unchanged, they give holonomic
+moves from the robots' positions; each step :func:`~apf_physics.tracking.track_safely` turns
+a leader's move into ``(v, ω)`` (an arc only where it is as clear as the straight move,
+else a turn on the spot and the straight move), and a formation's followers follow by the
+rule's unicycle form (:class:`~apf_physics.tracking.UnicycleFollowers`, the leader slowed by
+its ``leader_cap``). Episodes then carry the robots' headings.
 """
 
 from __future__ import annotations
@@ -17,9 +25,20 @@ from typing import Sequence
 import numpy as np
 
 from apf_physics.engine import Outcome, Stepper, TrapDetector
+from apf_physics.errors import UserError
 from apf_physics.formation import FormationCrowd, FormationTeam, formation_spec, formation_success, links_in_range
+from apf_physics.kinematics import UnicycleLimits
 from apf_physics.planners.base import Planner
+from apf_physics.tracking import UnicycleFollowers, track_safely
 from apf_physics.world import World
+
+KINEMATICS = ("holonomic", "unicycle")
+"""The robot kinds a run can be forced to (``--kinematics``)."""
+UNICYCLE_TRAP_FACTOR = 2
+"""A unicycle's trap window is this many times the planner's: each change of direction can cost it
+up to two steps of turning on the spot, so following a boundary takes it longer around one spot
+(chosen on a validation set: with the holonomic window ``escape`` was declared trapped while
+following boundaries)."""
 
 
 @dataclass
@@ -37,6 +56,7 @@ class FormationRecord:
         index: Which of the world's formations it was.
         between_collisions: Control steps in which one of its robots touched a robot of another formation.
         deadlocks: Times it was found blocked by other formations (and given the right of way).
+        headings: ``(steps + 1, m)`` every robot's heading [rad] (unicycles; None for holonomic robots).
     """
 
     positions: np.ndarray
@@ -49,6 +69,7 @@ class FormationRecord:
     index: int = 0
     between_collisions: int = 0
     deadlocks: int = 0
+    headings: np.ndarray | None = None
 
     @property
     def min_robot_distance(self) -> float:
@@ -82,6 +103,8 @@ class Episode:
         contacts: What was touched when the episode ended in a collision (``"obstacle"``,
             ``"wall"``, ``"robot"``).
         formation: The formation's record, for a formation's episode.
+        headings: ``(steps + 1,)`` the (leader's) heading [rad] at each position of :attr:`path`
+            (unicycles; None for holonomic robots).
     """
 
     world: str
@@ -91,6 +114,7 @@ class Episode:
     path: np.ndarray
     contacts: list[str] = field(default_factory=list)
     formation: FormationRecord | None = None
+    headings: np.ndarray | None = None
 
     @property
     def success(self) -> bool:
@@ -115,6 +139,8 @@ class Episode:
             "path_length": round(self.path_length, 4),
             "final_position": [round(float(v), 4) for v in self.path[-1]],
         }
+        if self.headings is not None:
+            data["final_heading"] = round(float(self.headings[-1]), 4)
         f = self.formation
         if f is not None:
             links = f.final_links_in_range()
@@ -129,6 +155,8 @@ class Episode:
             data["robot_obstacle_collisions"] = f.robot_obstacle_collisions
             data["link_in_range"] = [round(v, 4) for v in f.link_in_range]
             data["trajectory"] = np.round(f.positions, 4).tolist()
+            if f.headings is not None:
+                data["headings"] = np.round(f.headings, 4).tolist()
             if f.crowd is not None:
                 data["crowd"], data["formation"] = f.crowd, f.index
                 data["between_collisions"], data["deadlocks"] = f.between_collisions, f.deadlocks
@@ -140,8 +168,40 @@ def default_max_steps(world: World) -> int:
     return int(4 * (world.size[0] + world.size[1]))
 
 
+def robot_limits(world: World, unicycle: UnicycleLimits | bool | None = None) -> UnicycleLimits | None:
+    """The unicycle limits a run of ``world`` uses, or None for holonomic robots.
+
+    ``unicycle``: None, the world file's robot kind (:attr:`World.unicycle`); False, holonomic;
+    True, unicycles with the world file's limits, or the default :class:`UnicycleLimits`;
+    limits, unicycles with those.
+    """
+    if unicycle is None:
+        return world.unicycle
+    if unicycle is False:
+        return None
+    if unicycle is True:
+        return world.unicycle if world.unicycle is not None else UnicycleLimits()
+    return unicycle
+
+
+def kinematics_option(kinematics: str | None) -> bool | None:
+    """``--kinematics``'s value as :func:`robot_limits`'s ``unicycle``: None (the world file's),
+    ``"holonomic"`` False, ``"unicycle"`` True.
+
+    Raises:
+        UserError: Another value.
+    """
+    if kinematics is None:
+        return None
+    if kinematics not in KINEMATICS:
+        raise UserError(f"--kinematics: unknown robot kind {kinematics!r} (known: {', '.join(KINEMATICS)}; "
+                        "default: the world file's robot.kinematics)")
+    return kinematics == "unicycle"
+
+
 def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | np.ndarray,
-            max_steps: int | None = None, trap: TrapDetector = TrapDetector(), formation: bool = False) -> list[Episode]:
+            max_steps: int | None = None, trap: TrapDetector = TrapDetector(), formation: bool = False,
+            unicycle: UnicycleLimits | bool | None = None) -> list[Episode]:
     """Run ``planner`` from every start in ``world``, all at once, through the engine.
 
     Args:
@@ -153,6 +213,9 @@ def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | 
             (:attr:`Planner.trap_rule`, :attr:`Planner.trap_window`).
         formation: Run the world's formation (:func:`~apf_physics.formation.formation_spec`):
             followers placed behind each leader, moved by their own rule.
+        unicycle: The robot kind (:func:`robot_limits`; default the world file's): with limits,
+            the robots are unicycles driving the planner's moves (see the module docstring);
+            their trap window is :data:`UNICYCLE_TRAP_FACTOR` times the planner's.
 
     Returns:
         One episode per start, in order.
@@ -165,16 +228,25 @@ def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | 
     if n == 0:
         return []
     max_steps = default_max_steps(world) if max_steps is None else int(max_steps)
+    limits = robot_limits(world, unicycle)
     team = FormationTeam(formation_spec(world), n) if formation else None
     m = 1 if team is None else team.robots
     planner.reset(world, starts.copy())   # first: the model it loads sets its trap window
-    detector = TrapDetector(planner.trap_rule, planner.trap_window or trap.window, trap.radius, trap.min_drop)
-    stepper = Stepper([world], n, m, max_steps=max_steps, trap=detector)
+    window = (planner.trap_window or trap.window) * (1 if limits is None else UNICYCLE_TRAP_FACTOR)
+    detector = TrapDetector(planner.trap_rule, window, trap.radius, trap.min_drop)
+    stepper = Stepper([world], n, m, max_steps=max_steps, trap=detector, unicycle=limits)
     slots = np.arange(n)
     initial = starts[:, None, :] if team is None else team.starts(world, starts)
     stepper.start(slots, initial)
-    if team is not None:
+    followers: list[UnicycleFollowers] = []
+    if team is not None and limits is None:
         team.reset(slots, [world] * n, initial)
+    elif team is not None:
+        states = stepper.states()
+        for slot in range(n):
+            followers.append(UnicycleFollowers(world, team.spec, limits))
+            followers[slot].reset(states[slot])
+    headings = [stepper.headings.copy()] if limits is not None else None
 
     history = [initial.copy()]
     contacts: list[list[str]] = [[] for _ in range(n)]
@@ -189,12 +261,16 @@ def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | 
         gave_up = planner.stuck()
         gave_up = active & gave_up if gave_up is not None else np.zeros(n, bool)
         moving = active & ~gave_up
-        if team is None:
+        if limits is not None:
+            commands = unicycle_commands(stepper.states(), leader, moving, moment, limits, followers)
+        elif team is None:
             commands = np.where(moving[:, None], leader, 0.0)[:, None, :]
         else:
             commands = team.commands(positions, leader, moving)
         report = stepper.step(commands, gave_up)
         history.append(report.positions)
+        if headings is not None:
+            headings.append(stepper.headings.copy())
         touched = report.contacts
         for slot in np.flatnonzero(report.collided).tolist():
             mine = range(slot * m, (slot + 1) * m)
@@ -206,17 +282,51 @@ def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | 
             in_range += moved[:, None] & links_in_range(report.positions, team.followed, team.spec.comm_range)
 
     trajectory = np.stack(history)                                     # (T, n, m, 2)
+    turns = np.stack(headings) if headings is not None else None       # (T, n, m)
     episodes = []
     for i in range(n):
         steps = int(stepper.steps[i])
         positions = trajectory[: steps + 1, i]
+        theta = turns[: steps + 1, i] if turns is not None else None
         record = None
         if team is not None:
             record = FormationRecord(positions, team.spec.comm_range, team.followed, int(robot_steps[i]),
-                                     int(obstacle_steps[i]), list(in_range[i] / max(steps, 1)))
+                                     int(obstacle_steps[i]), list(in_range[i] / max(steps, 1)),
+                                     headings=None if theta is None else theta.copy())
         episodes.append(Episode(world.name, starts[i], Outcome(stepper.outcome[i]).label, steps,
-                                positions[:, 0].copy(), contacts[i], record))
+                                positions[:, 0].copy(), contacts[i], record,
+                                headings=None if theta is None else theta[:, 0].copy()))
     return episodes
+
+
+def unicycle_commands(states: np.ndarray, leader_moves: np.ndarray, moving: np.ndarray, moment,
+                      limits: UnicycleLimits, followers: Sequence[UnicycleFollowers] = ()) -> np.ndarray:
+    """(S, m, 2) every unicycle's ``(v, ω)`` this step: the leaders' moves driven by
+    :func:`~apf_physics.tracking.track_safely` (slowed by their followers'
+    :meth:`~apf_physics.tracking.UnicycleFollowers.leader_cap`), the followers' by their rule;
+    slots not ``moving`` are told to stop.
+
+    Args:
+        states: (S, m, 5) every robot's ``(x, y, θ, v, ω)`` (:meth:`Stepper.states`).
+        leader_moves: (S, 2) the planner's moves of the leaders.
+        moving: (S,) bool, the slots that move this step.
+        moment: The world at this step.
+        limits: The robots' limits.
+        followers: One :class:`~apf_physics.tracking.UnicycleFollowers` per slot (formations), or none.
+    """
+    n, m = states.shape[:2]
+    moves = np.where(moving[:, None], leader_moves, 0.0)
+    cap = None
+    if followers:
+        cap = np.array([followers[s].leader_cap(states[s]) if moving[s] else limits.max_speed for s in range(n)])
+    v, omega = track_safely(states[:, 0], moves, moment, limits, speed_cap=cap)
+    commands = np.zeros((n, m, 2))
+    commands[:, 0, 0], commands[:, 0, 1] = v, omega
+    if followers:
+        for s in np.flatnonzero(moving).tolist():
+            fv, fomega = followers[s].commands(states[s], v[s], omega[s])
+            commands[s, 1:, 0], commands[s, 1:, 1] = fv, fomega
+    return commands
 
 
 CROWD_TRAP_WINDOW = 40
@@ -224,7 +334,7 @@ CROWD_TRAP_WINDOW = 40
 
 
 def rollout_formations(world: World, planner: Planner, max_steps: int | None = None,
-                       trap: TrapDetector = TrapDetector()) -> list[Episode]:
+                       trap: TrapDetector = TrapDetector(), unicycle: UnicycleLimits | bool | None = None) -> list[Episode]:
     """Run every formation of a world with ``formations`` at once, each to its own target.
 
     Each leader is steered by its own copy of ``planner`` in its own field (its target,
@@ -233,7 +343,14 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
 
     Returns:
         One episode per formation, in the world's order (:attr:`FormationRecord.crowd` names the world).
+
+    Raises:
+        UserError: The robots are unicycles (``unicycle``, default the world file's): several
+            formations of unicycles in one world are not supported yet.
     """
+    if robot_limits(world, unicycle) is not None:
+        raise UserError(f"{world.source or world.name}: several formations of unicycle robots in one world are not "
+                        "supported yet (run the formations one at a time, or --kinematics holonomic)")
     crowd = FormationCrowd(world)
     count, m = crowd.count, crowd.robots
     max_steps = default_max_steps(world) if max_steps is None else int(max_steps)

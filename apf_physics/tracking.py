@@ -29,9 +29,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from apf_physics.actions import SAFETY
 from apf_physics.formation import FollowerController, link_lengths
 from apf_physics.kinematics import UnicycleLimits, arc_displacement, arc_points, to_robot_frame
-from apf_physics.world import FormationSpec, World
+from apf_physics.world import FormationSpec, Moment, World
 
 ARRIVE = 1e-3
 """A waypoint this close to the robot [units] is reached: the robot stops."""
@@ -42,7 +43,10 @@ LOOKAHEAD = 0.75
 LINK_MARGIN = 0.75
 """How far within the communication range :meth:`UnicycleFollowers.leader_cap` stops the leader [units]."""
 CHECK_SAMPLES = 16
-"""Points (after the start) at which :class:`UnicycleFollowers` checks each follower's arc."""
+"""Points (after the start) at which :class:`UnicycleFollowers` and :func:`track_safely` check an arc."""
+ALIGNED = 1e-6
+"""Bearing [rad] within which :func:`track_safely` counts a robot as facing its waypoint: it drives
+the straight chord (up to ``L·ALIGNED/2`` off it) rather than an arc that must be checked."""
 
 
 def pursue(state: np.ndarray, waypoint: np.ndarray, limits: UnicycleLimits = UnicycleLimits(),
@@ -97,6 +101,61 @@ def track_moves(state: np.ndarray, moves: np.ndarray, limits: UnicycleLimits = U
     of ``position + move`` (a zero move stops the robot)."""
     state = np.asarray(state, float).reshape(-1, 5)
     return pursue(state, state[:, :2] + np.asarray(moves, float).reshape(-1, 2), limits, turn_in_place)
+
+
+def track_safely(state: np.ndarray, moves: np.ndarray, where: Moment, limits: UnicycleLimits = UnicycleLimits(),
+                 turn_in_place: float = TURN_IN_PLACE, speed_cap: np.ndarray | float | None = None,
+                 samples: int = CHECK_SAMPLES) -> tuple[np.ndarray, np.ndarray]:
+    """``(v, ω)`` for holonomic moves ``(N, 2)``, never less safe than the straight moves themselves.
+
+    A planner checks (or at least means) the straight move from where the robot is to
+    ``position + move``. Each robot pursues that point (:func:`pursue`, as :func:`track_moves`);
+    a robot that would drive a curved arc to it (its bearing more than :data:`ALIGNED` off the
+    heading) does so only when the arc, sampled at ``samples`` points, keeps at least
+    ``min(clearance of the straight move, robot_radius + SAFETY)`` from every obstacle and the
+    map's edge at ``where`` (the moving ones where they are at this step); otherwise it turns on
+    the spot to face the point (v = 0) and drives the straight move from the next step on (when
+    the planner asks for it again). So every step a robot either stands (turning), or drives a
+    part of the straight move its planner chose from there (a robot drives at most
+    ``max_speed``: a diagonal unit move is driven 1 of its √2), or an arc as clear as that move
+    or clear by the planners' margin (:data:`~apf_physics.actions.SAFETY`).
+
+    The guarantee needs a robot able to stop within a step (``max_accel ≥ max_speed``, as the
+    default limits) and holds for the obstacles at this step: a robot turning on the spot is
+    not checked against a moving obstacle coming at it.
+
+    Args:
+        state: (N, 5) ``(x, y, θ, v, ω)``.
+        moves: (N, 2) the planner's moves, from each robot's position (a zero move stops it).
+        where: The world at this step.
+        limits: The robots' limits.
+        turn_in_place: As :func:`pursue`: beyond this bearing a robot turns on the spot anyway.
+        speed_cap: As :func:`pursue` (a scalar or (N,)).
+        samples: Points (after the start) at which arcs and moves are checked.
+    """
+    state = np.asarray(state, float).reshape(-1, 5)
+    moves = np.asarray(moves, float).reshape(-1, 2)
+    n = len(state)
+    cap = None if speed_cap is None else np.broadcast_to(np.asarray(speed_cap, float), (n,))
+    waypoint = state[:, :2] + moves
+    v, omega = pursue(state, waypoint, limits, turn_in_place, speed_cap=cap)
+    local = to_robot_frame(state, waypoint)
+    bearing = np.abs(np.arctan2(local[:, 1], local[:, 0]))
+    curved = np.flatnonzero((v > 0) & (bearing > ALIGNED) & (np.abs(omega) > 0))
+    if not len(curved):
+        return v, omega
+    arcs = arc_points(state[curved], v[curved], omega[curved], samples)                     # (k, S + 1, 2)
+    f = np.linspace(0.0, 1.0, samples + 1)
+    chords = state[curved, None, :2] + f[None, :, None] * moves[curved, None, :]
+    clear = where.clearance(np.concatenate([arcs, chords]).reshape(-1, 2)).reshape(2, len(curved), -1).min(axis=2)
+    bar = np.minimum(clear[1], where.world.robot_radius + SAFETY)
+    unsafe = curved[clear[0] < bar]
+    if len(unsafe):
+        v_turn, omega_turn = pursue(state[unsafe], waypoint[unsafe], limits, ALIGNED,
+                                    speed_cap=None if cap is None else cap[unsafe])
+        v, omega = v.copy(), omega.copy()
+        v[unsafe], omega[unsafe] = v_turn, omega_turn
+    return v, omega
 
 
 def project_on_paths(points: np.ndarray, paths: np.ndarray, lo: np.ndarray | None = None,

@@ -18,7 +18,7 @@ Usage::
     PYTHONPATH=. python tools/eval_general.py /tmp/heldout \\
         --planners gradient,escape,astar,dqn \\
         --model general=apf_physics/models/general.pt --model thesis=runs/thesis/best.pt \\
-        [--json OUT] [--per-world]
+        [--json OUT] [--per-world] [--kinematics unicycle]
     PYTHONPATH=. python tools/eval_general.py worlds/thesis/test1.yaml ... --planners dqn --per-world
 
 ``--model`` applies to the learned planners (``dqn``, ``dqn-unshielded``, ``dqn-known``; one row per
@@ -40,6 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from apf_physics.evaluate import evaluate, figures  # noqa: E402
 from apf_physics.worldsets import label_starts  # noqa: E402
 from apf_physics.planners import LEARNED, make_planner  # noqa: E402
+from apf_physics.rollout import KINEMATICS  # noqa: E402
 from apf_physics.safefile import write_text  # noqa: E402
 from apf_physics.worldfile import load_world  # noqa: E402
 
@@ -112,6 +113,8 @@ def main(argv=None) -> int:
     parser.add_argument("--model", action="append", default=[], metavar="NAME=PATH",
                         help="a DQN model to evaluate as planner dqn:NAME (default: the shipped model)")
     parser.add_argument("--max-steps", type=int, default=None, help="as apf-physics eval (default 4 x (w + h))")
+    parser.add_argument("--kinematics", choices=KINEMATICS, default=None,
+                        help="as apf-physics eval: the robots are holonomic or unicycles (default: each world file's)")
     parser.add_argument("--per-world", action="store_true", help="also print successes per world")
     parser.add_argument("--per-family", action="store_true",
                         help="also print the figures per family (a world's name without its number; "
@@ -140,7 +143,7 @@ def main(argv=None) -> int:
     print("-" * len(header))
     results = {}
     for label, planner in runs:
-        ev = evaluate(planner, worlds, max_steps=args.max_steps)
+        ev = evaluate(planner, worlds, max_steps=args.max_steps, kinematics=args.kinematics)
         s = summarise(ev.episodes, labels)
         results[label] = s
         print(f"{label:<26} {s['successes']:>4}/{s['starts']:<4}{s['success_rate']:>5.1%} "
