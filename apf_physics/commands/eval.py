@@ -20,6 +20,7 @@ from apf_physics.evaluate import Episode, evaluate, format_table, write_json, wr
 from apf_physics.planners import make_planner
 from apf_physics.safefile import check_writable
 from apf_physics.render.page import PAGE, write_results
+from apf_physics.rollout import KINEMATICS, kinematics_option
 from apf_physics.worldfile import MAX_STARTS, load_worlds
 
 
@@ -76,6 +77,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--model", help="DQN model file, or a shipped model by name (general, moving, map, fixed20; "
                                    "default: the shipped model for the world's field)")
     p.add_argument("--formation", action="store_true", help="run the world's formation (leader and followers)")
+    p.add_argument("--kinematics", default=None, metavar="KIND",
+                   help=f"robot kind: {' or '.join(KINEMATICS)} (default: each world file's robot.kinematics); "
+                        "unicycles drive the planners' moves (turning on the spot where an arc is not as clear "
+                        "as the straight move)")
     p.add_argument("--random-starts", type=int, metavar="N",
                    help="instead of the world's starts, N random free starts per world")
     p.add_argument("--seed", type=int, default=0, help="seed for --random-starts (default 0)")
@@ -133,6 +138,11 @@ def run(args: argparse.Namespace) -> int:
     if args.random_starts is not None and not 1 <= args.random_starts <= MAX_STARTS:
         raise UserError(f"--random-starts: must be from 1 to {MAX_STARTS:,} (as a world file's starts), "
                         f"got {args.random_starts}")
+    kinematics_option(args.kinematics)   # a clear error for an unknown kind, before any work
+    if args.kinematics is not None and args.scen is not None:
+        raise UserError("--kinematics: not with --scen (MovingAI scenarios run holonomic robots)")
+    if args.kinematics is not None and args.ray is not None:
+        raise UserError("--kinematics: not with --ray yet (run without --ray)")
     if args.scen is not None:
         return run_scenarios(args)
     for flag in ("buckets", "limit"):
@@ -165,7 +175,8 @@ def run(args: argparse.Namespace) -> int:
             progress = EvalProgress(planner.name, len(worlds), count, enabled=not args.no_progress)
             try:
                 evaluations.append(evaluate(planner, worlds, starts, max_steps=args.max_steps,
-                                            formation=args.formation, progress=progress))
+                                            formation=args.formation, progress=progress,
+                                            kinematics=args.kinematics))
             finally:
                 progress.close()
     print(format_table(evaluations))

@@ -4,13 +4,19 @@ from __future__ import annotations
 
 import argparse
 from collections import Counter
+from pathlib import Path
+from typing import Iterator, Sequence
+
+import numpy as np
 
 from apf_physics.errors import UserError
 from apf_physics.planners import make_planner
-from apf_physics.render.episodes import write_episode_video
+from apf_physics.render.drawing import FieldImage
+from apf_physics.render.episodes import clip_members, collision_events, episode_clips, write_episode_video
 from apf_physics.safefile import check_writable
-from apf_physics.render.video import VIDEO_EXTENSIONS, choose_codec
-from apf_physics.rollout import rollout, rollout_formations
+from apf_physics.render.video import (VIDEO_EXTENSIONS, choose_codec, render_trajectory, stack_headings, write_png,
+                                      write_video)
+from apf_physics.rollout import KINEMATICS, kinematics_option, rollout, rollout_formations
 from apf_physics.worldfile import load_world
 
 
@@ -47,6 +53,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--size", type=int, default=512, help="pixels along the world's longer side (default 512)")
     parser.add_argument("--hold", type=float, default=1.0, help="seconds the last frame stays on screen (default 1)")
     parser.add_argument("--max-steps", type=int, default=None, help="step limit per episode (default: the rollout's)")
+    parser.add_argument("--kinematics", default=None, metavar="KIND",
+                        help=f"robot kind: {' or '.join(KINEMATICS)} (default: the world file's robot.kinematics); "
+                             "unicycles drive the planner's moves and are drawn with their heading")
     parser.add_argument("--codec", default=None, metavar="CODEC",
                         help="h264 (.mp4, the default there), vp9 (.webm, the default there), mjpg (.avi), or "
                              "mp4v (.mp4 through OpenCV: browsers do not play it; the fallback without PyAV)")
@@ -57,6 +66,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the planner, render and write the video; returns the exit status."""
+    unicycle = kinematics_option(args.kinematics)
     out = check_writable(args.out, VIDEO_EXTENSIONS, create_parent=True)
     codec = choose_codec(out, args.codec or ("h264" if args.h264 else None))
     png = check_writable(args.png, (".png",), create_parent=True) if args.png else None
@@ -76,11 +86,13 @@ def run(args: argparse.Namespace) -> int:
 
     planner = make_planner(args.planner, model=args.model)
     if args.formation and world.formations:   # every formation at once, each to its own target
-        episodes = rollout_formations(world, planner, max_steps=args.max_steps)
+        episodes = rollout_formations(world, planner, max_steps=args.max_steps, unicycle=unicycle)
     else:
-        episodes = rollout(world, planner, starts, max_steps=args.max_steps, formation=bool(args.formation))
+        episodes = rollout(world, planner, starts, max_steps=args.max_steps, formation=bool(args.formation),
+                           unicycle=unicycle)
 
-    written = write_episode_video(world, episodes, out, png=png, fps=args.fps, size=args.size, hold=args.hold,
+    write = write_headed_video if any(e.headings is not None for e in episodes) else write_episode_video
+    written = write(world, episodes, out, png=png, fps=args.fps, size=args.size, hold=args.hold,
                                   overlay=(f"world {world.name}", f"planner {args.planner}"),
                                   formation=bool(args.formation),
                                   start_index=None if args.all_starts else args.start,
@@ -93,3 +105,40 @@ def run(args: argparse.Namespace) -> int:
           + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) + ")"
           + (f" and {png}" if png is not None else ""))
     return 0
+
+
+def write_headed_video(world, episodes: Sequence, out: str | Path, png: str | Path | None = None, fps: float = 10.0,
+                       size: int = 512, hold: float = 1.0, overlay: tuple[str, ...] = (), formation: bool = False,
+                       start_index: int | None = None, codec: str | None = None, progress: bool = True) -> int:
+    """:func:`~apf_physics.render.episodes.write_episode_video` for unicycles' episodes: the same
+    clips, each robot drawn with its heading (:attr:`Episode.headings`,
+    :attr:`FormationRecord.headings`). Returns the number of frames written."""
+    image = FieldImage.from_world(world, size)
+    hold_frames = max(0, int(round(hold * fps)))
+    clips = list(zip(episode_clips(episodes, overlay, formation, start_index), clip_members(episodes, formation)))
+    total = sum(len(clip[0]) + hold_frames for clip, _ in clips)
+    last: list[np.ndarray] = []
+
+    def frames() -> Iterator[np.ndarray]:
+        frame = None
+        for (trajectory, roles, lines, final, families), members in clips:
+            for frame in render_trajectory(world, trajectory, roles, overlay=lines, final_overlay=final,
+                                           families=families, hold=hold_frames, image=image,
+                                           events=collision_events(members), headings=clip_headings(members, trajectory)):
+                yield frame
+        last.append(frame)
+
+    written = write_video(frames(), out, fps, codec=codec, progress=progress, total=total)
+    if png is not None:
+        write_png(last[-1], png)
+    return written
+
+
+def clip_headings(members: Sequence, trajectory: np.ndarray) -> np.ndarray:
+    """(T, R) the headings of a clip's robots (the episodes of :func:`clip_members`), matching its trajectory."""
+    formations = [e.formation for e in members if e.formation is not None]
+    if formations:
+        headings = np.concatenate([f.headings for f in formations], axis=1)
+    else:
+        headings = stack_headings([e.headings for e in members])
+    return headings.reshape(len(trajectory), -1)

@@ -22,7 +22,7 @@ prints nothing.
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from fractions import Fraction
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterable, Iterator, Sequence
@@ -32,6 +32,7 @@ import numpy as np
 from tqdm import tqdm
 
 from apf_physics.errors import UserError
+from apf_physics.kinematics import heading_vectors
 from apf_physics.render.drawing import FieldImage, Snapshot, TrailLayer, draw_frame, field_image
 from apf_physics.safefile import Replacement, check_writable, write_bytes
 
@@ -356,6 +357,7 @@ def trajectory_snapshots(
     hold: int = 0,
     families: Sequence[int] = (),
     events: Sequence[tuple[int, str]] = (),
+    headings: np.ndarray | None = None,
 ) -> Iterator[Snapshot]:
     """One :class:`Snapshot` per time step of a trajectory.
 
@@ -370,6 +372,8 @@ def trajectory_snapshots(
         families: One formation number per robot (several formations), or empty.
         events: ``(step, text)``: a line shown from that step's frame on (e.g. a collision, marked
             at the step it happened).
+        headings: ``(T, R)`` each robot's heading [rad] at each step (``(T,)`` for one robot;
+            unicycles: drawn as a line from the centre to the rim), or None (holonomic robots).
     """
     trajectory = np.asarray(trajectory, dtype=float)
     if trajectory.ndim == 2:
@@ -378,13 +382,15 @@ def trajectory_snapshots(
         raise ValueError(f"trajectory must be (T, R, 2) with T >= 1, got shape {trajectory.shape}")
     steps, robots = trajectory.shape[:2]
     roles = tuple(roles) if roles is not None else ("single",) * robots
+    if headings is not None:
+        headings = np.asarray(headings, dtype=float).reshape(steps, robots)
     per_robot = np.ascontiguousarray(trajectory.transpose(1, 0, 2))  # (R, T, 2): trails are slices
     for t in range(steps):
         lines = (f"step {t}/{steps - 1}", *overlay, *(text for step, text in events if t >= step))
         if t == steps - 1:
             lines = (*lines, *final_overlay)
         snapshot = Snapshot(trajectory[t], roles, tuple(per_robot[:, : t + 1]) if trails else (), lines, t,
-                            tuple(families))
+                            tuple(families), None if headings is None else headings[t])
         yield snapshot
         if t == steps - 1:
             for _ in range(hold):
@@ -404,6 +410,7 @@ def render_trajectory(
     image: FieldImage | None = None,
     families: Sequence[int] = (),
     events: Sequence[tuple[int, str]] = (),
+    headings: np.ndarray | None = None,
 ) -> Iterator[np.ndarray]:
     """Frames of robots moving through ``world``, one per time step (see :func:`trajectory_snapshots`).
 
@@ -420,6 +427,7 @@ def render_trajectory(
         image: A prebuilt :class:`FieldImage` to draw on (overrides ``long_side``).
         families: One formation number per robot (several formations), or empty.
         events: ``(step, text)`` lines shown from that step on (see :func:`trajectory_snapshots`).
+        headings: ``(T, R)`` robots' headings [rad] (unicycles), or None (see :func:`trajectory_snapshots`).
 
     Yields:
         ``(H, W, 3)`` uint8 RGB frames.
@@ -428,14 +436,49 @@ def render_trajectory(
     layer: TrailLayer | None = None
     # Trails grow by one segment a step on a persistent layer: constant cost per frame.
     for snapshot in trajectory_snapshots(trajectory, roles, overlay=overlay, final_overlay=final_overlay,
-                                         trails=False, hold=hold, families=families, events=events):
+                                         trails=False, hold=hold, families=families, events=events,
+                                         headings=headings):
+        # the headings are drawn here (draw_heading_lines), not by the drawing module's
+        drawn = snapshot if snapshot.headings is None else replace(snapshot, headings=None)
         if not trails:
-            yield draw_frame(image, snapshot)
-            continue
-        if layer is None:
-            layer = TrailLayer(image, snapshot.roles, snapshot.families)
-        layer.extend(snapshot.positions)
-        yield layer.frame(snapshot)
+            frame = draw_frame(image, drawn)
+        else:
+            if layer is None:
+                layer = TrailLayer(image, snapshot.roles, snapshot.families)
+            layer.extend(snapshot.positions)
+            frame = layer.frame(drawn)
+        if snapshot.headings is not None:
+            draw_heading_lines(image, frame, snapshot.positions, snapshot.headings)
+        yield frame
+
+
+HEADING_COLOUR = (20, 20, 20)
+"""RGB of the line that shows a unicycle's heading."""
+
+
+def draw_heading_lines(image: FieldImage, frame: np.ndarray, centres: np.ndarray, headings: np.ndarray) -> None:
+    """Draw each robot's heading onto ``frame`` in place: a dark line from its centre to its disc's rim.
+
+    (``FieldImage.draw_headings`` adds the radius in pixels to world coordinates, which draws
+    lines several units long; this converts it to world units first.)
+    """
+    centres = np.asarray(centres, float).reshape(-1, 2)
+    reach = image.robot_radius / image.scale                             # the disc's radius drawn, in world units
+    tips = centres + reach * heading_vectors(np.asarray(headings, float).reshape(-1))
+    shift = 4
+    for a, b in zip(image.to_pixels(centres), image.to_pixels(tips)):
+        a, b = (tuple(int(v) for v in np.round((p - 0.5) * (1 << shift))) for p in (a, b))
+        cv2.line(frame, a, b, HEADING_COLOUR, max(1, image.line_width), cv2.LINE_AA, shift)
+
+
+def stack_headings(headings: Sequence[np.ndarray]) -> np.ndarray:
+    """Stack robots' headings ``(n_i,)`` of different lengths into ``(T, R)``, as :func:`stack_paths`
+    stacks their paths (each held at its last value)."""
+    if not headings:
+        raise ValueError("no headings to stack")
+    headings = [np.asarray(h, dtype=float).reshape(-1) for h in headings]
+    steps = max(len(h) for h in headings)
+    return np.stack([np.concatenate([h, np.repeat(h[-1:], steps - len(h))]) for h in headings], axis=1)
 
 
 def stack_paths(paths: Sequence[np.ndarray]) -> np.ndarray:
