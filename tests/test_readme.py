@@ -68,6 +68,10 @@ def test_readme_python_snippets_run_and_print_what_they_say(monkeypatch):
     assert lines == ["2000 1024"] and "# 2000 1024" in source
     assert names["dqn"].observation_space.shape == (1, 11, 11)
 
+    # -- a unicycle with continuous commands and the range sensor: the spaces the README names
+    source, lines = _snippet(blocks, printed, 'kinematics="unicycle", observation="lidar"')
+    assert lines == ["Box(-1.0, 1.0, (2,), float32) (69,) heading 0.63 rad"] and f"# {lines[0]}" in source
+
     # -- the field: prints nothing, and its expressions give what the comments say
     source, lines = _snippet(blocks, printed, "world.potential(points)")
     assert lines == []
