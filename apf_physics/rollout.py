@@ -303,8 +303,9 @@ def unicycle_commands(states: np.ndarray, leader_moves: np.ndarray, moving: np.n
                       limits: UnicycleLimits, followers: Sequence[UnicycleFollowers] = ()) -> np.ndarray:
     """(S, m, 2) every unicycle's ``(v, ω)`` this step: the leaders' moves driven by
     :func:`~apf_physics.tracking.track_safely` (slowed by their followers'
-    :meth:`~apf_physics.tracking.UnicycleFollowers.leader_cap`), the followers' by their rule;
-    slots not ``moving`` are told to stop.
+    :meth:`~apf_physics.tracking.UnicycleFollowers.leader_cap`), the followers' by their rule
+    (:meth:`~apf_physics.tracking.UnicycleFollowers.drive`, which may stop a leader about to meet
+    a follower); slots not ``moving`` are told to stop.
 
     Args:
         states: (S, m, 5) every robot's ``(x, y, θ, v, ω)`` (:meth:`Stepper.states`).
@@ -324,8 +325,7 @@ def unicycle_commands(states: np.ndarray, leader_moves: np.ndarray, moving: np.n
     commands[:, 0, 0], commands[:, 0, 1] = v, omega
     if followers:
         for s in np.flatnonzero(moving).tolist():
-            fv, fomega = followers[s].commands(states[s], v[s], omega[s])
-            commands[s, 1:, 0], commands[s, 1:, 1] = fv, fomega
+            commands[s, :, 0], commands[s, :, 1] = followers[s].drive(states[s], v[s], omega[s])
     return commands
 
 

@@ -337,12 +337,70 @@ class UnicycleFollowers:
         v_all = np.concatenate([[float(leader_v)], v])
         arcs = arc_points(states, v_all, np.concatenate([[float(leader_omega)], omega]), CHECK_SAMPLES)
         standing = np.repeat(states[:, None, :2], CHECK_SAMPLES + 1, axis=1)
-        world, contact = self.controller.world, self.controller.contact
-        for i in range(1, len(states)):
+        self._keep_apart(v_all, arcs, standing, 1)
+        return v_all[1:], omega
+
+    def _keep_apart(self, v_all: np.ndarray, arcs: np.ndarray, standing: np.ndarray, first: int) -> bool:
+        """In chain order from robot ``first``, stop (v = 0, in place in ``v_all`` and ``arcs``) each
+        robot whose arc comes within contact of the arcs of the robots before it or of the robots
+        after it where they stand, or within its radius of an obstacle; returns whether any stopped."""
+        world = self.controller.world
+        stopped = False
+        for i in range(first, len(arcs)):
             others = np.concatenate([arcs[:i], standing[i + 1:]])                       # (m - 1, S + 1, 2)
-            gap = np.hypot(*(others - arcs[i][None]).transpose(2, 0, 1)).min() if len(others) else np.inf
+            close = self._too_close(arcs[i], others)
             clear = world.clearance(arcs[i]).min()
-            if v_all[i] != 0 and (gap < contact or clear < world.robot_radius):
+            if v_all[i] != 0 and (close or clear < world.robot_radius):
                 v_all[i] = 0.0
                 arcs[i] = standing[i]
-        return v_all[1:], omega
+                stopped = True
+        return stopped
+
+    def _too_close(self, arc: np.ndarray, others: np.ndarray) -> bool:
+        """Whether ``arc`` (S + 1, 2) comes within contact of any of ``others`` (k, S + 1, 2) at the same
+        moments, or, for robots already that close at the start, closer than they are (so that
+        robots placed exactly at contact distance can still move apart)."""
+        if not len(others):
+            return False
+        d = np.hypot(*(others - arc[None]).transpose(2, 0, 1))                         # (k, S + 1)
+        bar = np.minimum(self.controller.contact, d[:, 0] - 1e-9)
+        return bool((d[:, 1:] < bar[:, None]).any())
+
+    CLOSING = 0.75
+    """:meth:`drive`: a line follower does not drive nearer than this share of ``spacing`` to the
+    robot it follows (where that one ends the step), unless it is already nearer."""
+
+    def drive(self, states: np.ndarray, leader_v: float, leader_omega: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(v, ω)`` (m,), (m,) of every robot this step, the leader's command given (it may be
+        stopped here): what a rollout of unicycle formations drives.
+
+        As :meth:`commands`, and besides: in a line, a follower whose robot ahead does not make its
+        move (it turns on the spot first) does not close in on it below :data:`CLOSING` ·
+        ``spacing`` (the rule placed it assuming that move; the robots behind would bunch up and
+        block one another); and the leader, which its planner steers without regard to its
+        followers, is checked too: when its arc comes within contact of a follower's (a follower
+        turning on the spot, or stopped), the leader only turns this step and the followers are
+        checked again against it standing. So no two robots' arcs come within contact at the
+        same moment (at :data:`CHECK_SAMPLES` points of the step).
+        """
+        states = np.asarray(states, float).reshape(-1, 5)
+        v, omega = pursue(states[1:], self.waypoints(states, leader_v, leader_omega), self.limits,
+                          self.turn_in_place)
+        v_all = np.concatenate([[float(leader_v)], v])
+        omega_all = np.concatenate([[float(leader_omega)], omega])
+        arcs = arc_points(states, v_all, omega_all, CHECK_SAMPLES)
+        standing = np.repeat(states[:, None, :2], CHECK_SAMPLES + 1, axis=1)
+        if self.controller.offsets is None:
+            spacing = self.controller.spec.spacing
+            for i, ahead in enumerate(self.controller.spec.followed, start=1):
+                end = arcs[ahead, -1]
+                now, then = np.hypot(*(states[i, :2] - end)), np.hypot(*(arcs[i, -1] - end))
+                if v_all[i] > 0 and then < min(self.CLOSING * spacing, now):
+                    v_all[i] = 0.0
+                    arcs[i] = standing[i]
+        self._keep_apart(v_all, arcs, standing, 1)
+        if v_all[0] != 0 and self._too_close(arcs[0], arcs[1:]):
+            v_all[0] = 0.0
+            arcs[0] = standing[0]
+            self._keep_apart(v_all, arcs, standing, 1)
+        return v_all, omega_all
