@@ -7,14 +7,17 @@ formations of unicycles, and ``eval`` / ``render --kinematics``.
 - :func:`track_safely` never drives an arc that comes nearer an obstacle than the straight move
   it tracks: next to a wall it turns on the spot first, then drives the straight move.
 - A formation of unicycles arrives with every link in range and no two robots touching.
+- ``Formation-v0`` runs unicycle formations (the leader the agent's, the followers by the rule).
 - ``--kinematics unicycle`` reaches ``eval`` (JSON with headings) and ``render`` (a video);
   ``--kinematics holonomic`` overrides a unicycle world file; a bad value is a clear error.
 """
 
 import json
 
+import gymnasium as gym
 import numpy as np
 import pytest
+from gymnasium.utils.env_checker import check_env
 
 from apf_physics import world_from_dict
 from apf_physics.cli import main
@@ -133,3 +136,20 @@ def test_a_bad_kinematics_value_is_named(tmp_path, capsys, command):
     assert main([command, str(path), "--kinematics", "wheels", *extra]) == 2
     err = capsys.readouterr().err
     assert "--kinematics" in err and "'wheels'" in err and "holonomic, unicycle" in err
+
+
+@pytest.mark.parametrize("action", ["discrete", "continuous"])
+def test_a_formation_of_unicycles_in_the_environment(action):
+    """``Formation-v0`` with unicycles passes Gymnasium's checker, and driven at random its robots
+    never touch one another (the followers' unicycle rule checks the leader's arc too)."""
+    env = gym.make("apf_physics/Formation-v0", world="fixed20", action=action, kinematics="unicycle")
+    check_env(env.unwrapped)
+    env.reset(seed=3)
+    env.action_space.seed(3)
+    for _ in range(40):
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        positions = env.unwrapped.positions
+        gaps = np.hypot(*(positions[:, None] - positions[None]).transpose(2, 0, 1))
+        assert gaps[~np.eye(len(positions), dtype=bool)].min() >= 2 * env.unwrapped.world.robot_radius - 1e-9
+        if terminated or truncated:
+            env.reset()

@@ -26,6 +26,7 @@ from apf_physics.errors import UserError
 from apf_physics.envs.reward import RewardWeights, reward_terms, reward_terms_one
 from apf_physics.formation import FormationCrowd, FormationTeam
 from apf_physics.observation import Observer, ObserverConfig, RangeObserver
+from apf_physics.tracking import UnicycleFollowers
 from apf_physics.world import FormationSpec, World
 
 
@@ -107,10 +108,10 @@ class NavigationTask:
         self.num = int(num)
         self.weights = weights
         self.robot = robot
-        if formation is not None and robot.unicycle is not None:
-            raise UserError("a formation of unicycle robots is driven by planners (apf-physics eval), "
-                            "not by the environments yet: use kinematics='holonomic'")
         self.team = FormationTeam(formation, self.num) if formation is not None else None
+        # a formation of unicycles: the followers' rule in its unicycle form, one per slot (made at start)
+        self.unicycle_followers: list[UnicycleFollowers | None] | None = (
+            [None] * self.num if formation is not None and robot.unicycle is not None else None)
         robots = 1 if self.team is None else self.team.robots
         self.stepper = Stepper(self.worlds, self.num, robots, max_steps=max_steps, trap=trap_detector(trap),
                                unicycle=robot.unicycle)
@@ -167,10 +168,17 @@ class NavigationTask:
             positions = leaders[:, None, :]
         else:
             positions = np.stack([self.team.starts(world, p[None])[0] for world, p in zip(worlds, leaders)])
-            self.team.reset(slots, worlds, positions)
+            if self.unicycle_followers is None:
+                self.team.reset(slots, worlds, positions)
         if headings is not None:
             headings = np.repeat(np.asarray(headings, float).reshape(-1, 1), positions.shape[1], axis=1)
         self.stepper.start(slots, positions, world_ids, headings=headings)
+        if self.unicycle_followers is not None:
+            states = self.stepper.states()
+            for slot, world in zip(slots.tolist(), worlds):
+                followers = UnicycleFollowers(world, self.team.spec, self.robot.unicycle)
+                followers.reset(states[slot])
+                self.unicycle_followers[slot] = followers
         self.observer.reset(slots, leaders, worlds)
         self._moved[slots] = 0.0
         self._observe(slots)
@@ -228,6 +236,8 @@ class NavigationTask:
         before = self.stepper.positions[:, 0]
         if self.team is None:
             commands = commands[:, None, :]
+        elif self.unicycle_followers is not None:
+            commands = self._unicycle_team(commands)
         else:
             commands = self.team.commands(self.stepper.positions, commands, self.stepper.running)
         report = self.stepper.step(commands)
@@ -256,6 +266,22 @@ class NavigationTask:
             else ended & False
         return TaskStep(self.observation(), reward, terminated, truncated, terms, report.reached, report.collided,
                         moved, robot_contact, trapped)
+
+    def _unicycle_team(self, leader: np.ndarray) -> np.ndarray:
+        """(N, m, 2) every unicycle's ``(v, ω)``: each running leader's command within the limits and
+        slowed to its followers' :meth:`~apf_physics.tracking.UnicycleFollowers.leader_cap` (as in
+        ``eval``'s rollouts), the followers' by :meth:`~apf_physics.tracking.UnicycleFollowers.drive`
+        (which stops a leader about to meet one of its followers)."""
+        limits = self.robot.unicycle
+        states = self.stepper.states()
+        v, omega = limits.clamp(leader[:, 0], leader[:, 1], states[:, 0, 3], states[:, 0, 4])
+        out = np.zeros((self.num, self.stepper.robots_per_slot, 2))
+        for slot in np.flatnonzero(self.stepper.running).tolist():
+            followers = self.unicycle_followers[slot]
+            cap = followers.leader_cap(states[slot])
+            lv, lw = limits.clamp(min(float(v[slot]), cap), float(omega[slot]), states[slot, 0, 3], states[slot, 0, 4])
+            out[slot, :, 0], out[slot, :, 1] = followers.drive(states[slot], float(lv), float(lw))
+        return out
 
     def _step_one(self, action: int) -> TaskStep:
         """:meth:`step` of a batch of one running robot alone (``Navigate-v0``): the same
