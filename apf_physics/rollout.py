@@ -24,12 +24,13 @@ from typing import Sequence
 
 import numpy as np
 
+from apf_physics.actions import SAFETY
 from apf_physics.engine import Outcome, Stepper, TrapDetector
 from apf_physics.errors import UserError
 from apf_physics.formation import FormationCrowd, FormationTeam, formation_spec, formation_success, links_in_range
-from apf_physics.kinematics import UnicycleLimits
+from apf_physics.kinematics import UnicycleLimits, arc_points
 from apf_physics.planners.base import Planner
-from apf_physics.tracking import UnicycleFollowers, track_safely
+from apf_physics.tracking import CHECK_SAMPLES, UnicycleFollowers, give_way, track_safely
 from apf_physics.world import World
 
 KINEMATICS = ("holonomic", "unicycle")
@@ -344,26 +345,35 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
     Returns:
         One episode per formation, in the world's order (:attr:`FormationRecord.crowd` names the world).
 
-    Raises:
-        UserError: The robots are unicycles (``unicycle``, default the world file's): several
-            formations of unicycles in one world are not supported yet.
+    Unicycles (``unicycle``, default the world file's robot kind): each leader's move is driven
+    by :func:`~apf_physics.tracking.track_safely` in its own field, its followers by
+    :meth:`~apf_physics.tracking.UnicycleFollowers.drive`; then every robot of every formation
+    gives way (:func:`~apf_physics.tracking.give_way`, in the crowd's order: a deadlocked
+    formation first) so that no two robots' arcs meet.
     """
-    if robot_limits(world, unicycle) is not None:
-        raise UserError(f"{world.source or world.name}: several formations of unicycle robots in one world are not "
-                        "supported yet (run the formations one at a time, or --kinematics holonomic)")
     crowd = FormationCrowd(world)
     count, m = crowd.count, crowd.robots
     max_steps = default_max_steps(world) if max_steps is None else int(max_steps)
+    limits = robot_limits(world, unicycle)
     initial = crowd.starts()
     planners = [copy.copy(planner) for _ in range(count)]
     for f, p in enumerate(planners):
         p.reset(crowd.worlds[f], initial[f, :1].copy())
     window = max(planner.trap_window or trap.window, *(p.trap_window or trap.window for p in planners), CROWD_TRAP_WINDOW)
+    window *= 1 if limits is None else UNICYCLE_TRAP_FACTOR
     stepper = Stepper(crowd.worlds, count, m, max_steps=max_steps,
-                      trap=TrapDetector(planner.trap_rule, window, trap.radius, trap.min_drop), crowds=[0] * count)
+                      trap=TrapDetector(planner.trap_rule, window, trap.radius, trap.min_drop), crowds=[0] * count,
+                      unicycle=limits)
     slots = np.arange(count)
     stepper.start(slots, initial, world_ids=slots, present=crowd.present)
     crowd.reset(initial)
+    followers: list[UnicycleFollowers] = []
+    if limits is not None:
+        states = stepper.states()
+        for f in range(count):
+            followers.append(UnicycleFollowers(crowd.worlds[f], crowd.tasks[f].spec, limits))
+            followers[-1].reset(states[f, :crowd.sizes[f]])
+    headings = [stepper.headings.copy()] if limits is not None else None
 
     history = [initial.copy()]
     contacts: list[list[str]] = [[] for _ in range(count)]
@@ -377,16 +387,24 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
         positions = stepper.positions
         leader = np.zeros((count, 2))
         gave_up = np.zeros(count, bool)
+        views = {}
         for f in np.flatnonzero(active).tolist():
             view = planners[f].world = crowd.view(positions, f)
-            leader[f] = planners[f].act(positions[f, :1], np.ones(1, bool), view.at(step))[0]
+            views[f] = view.at(step)
+            leader[f] = planners[f].act(positions[f, :1], np.ones(1, bool), views[f])[0]
             stuck = planners[f].stuck()
             gave_up[f] = bool(stuck[0]) if stuck is not None else False
-        commands = crowd.commands(positions, leader, active & ~gave_up, step)
+        if limits is None:
+            commands = crowd.commands(positions, leader, active & ~gave_up, step)
+        else:
+            commands = crowd_unicycle_commands(crowd, stepper.states(), leader, active & ~gave_up, views, limits,
+                                               followers, step)
         report = stepper.step(commands, gave_up)
         step += 1
         crowd.watch(report.positions, report.moved, step)
         history.append(report.positions)
+        if headings is not None:
+            headings.append(stepper.headings.copy())
         touched = report.contacts
         pairs = touched.pairs
         robot_pairs = pairs[pairs[:, 1] == 2] if len(pairs) else pairs
@@ -403,14 +421,45 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
             contacts[f] = sorted({c.kind for c in touched.contacts if c.robot // m == f})
 
     trajectory = np.stack(history)                                     # (T, F, m, 2)
+    turns = np.stack(headings) if headings is not None else None       # (T, F, m)
     episodes = []
     for f in range(count):
         steps = int(stepper.steps[f])
         size = crowd.sizes[f]
         positions = trajectory[: steps + 1, f, :size]
+        theta = turns[: steps + 1, f, :size].copy() if turns is not None else None
         record = FormationRecord(positions, crowd.tasks[f].spec.comm_range, crowd.followed[f], int(within[f] + between[f]),
                                  int(obstacle_steps[f]), list(in_range[f] / max(steps, 1)), crowd=world.name, index=f,
-                                 between_collisions=int(between[f]), deadlocks=int(crowd.deadlocks[f]))
+                                 between_collisions=int(between[f]), deadlocks=int(crowd.deadlocks[f]), headings=theta)
         episodes.append(Episode(world.name, crowd.tasks[f].start, Outcome(stepper.outcome[f]).label, steps,
-                                positions[:, 0].copy(), contacts[f], record))
+                                positions[:, 0].copy(), contacts[f], record,
+                                headings=None if theta is None else theta[:, 0].copy()))
     return episodes
+
+
+def crowd_unicycle_commands(crowd: FormationCrowd, states: np.ndarray, leader_moves: np.ndarray, moving: np.ndarray,
+                            views: dict, limits: UnicycleLimits, followers: Sequence[UnicycleFollowers],
+                            step: int) -> np.ndarray:
+    """(F, m, 2) every unicycle's ``(v, ω)`` of several formations in one world this step.
+
+    Each moving formation: its leader's move driven by :func:`~apf_physics.tracking.track_safely`
+    in its own view (``views[f]``, the other formations' robots as discs), slowed by its
+    followers' ``leader_cap``; its followers by :meth:`UnicycleFollowers.drive`. Then all robots
+    give way to one another (:func:`~apf_physics.tracking.give_way`), formations in the crowd's
+    order (one in a deadlock first), each leader before its followers.
+    """
+    count, m = states.shape[:2]
+    commands = np.zeros((count, m, 2))
+    for f in np.flatnonzero(moving).tolist():
+        size = crowd.sizes[f]
+        cap = followers[f].leader_cap(states[f, :size])
+        v, omega = track_safely(states[f, :1], leader_moves[f:f + 1], views[f], limits, speed_cap=cap)
+        commands[f, :size, 0], commands[f, :size, 1] = followers[f].drive(states[f, :size], v[0], omega[0])
+    flat_states = states.reshape(-1, 5)
+    flat = commands.reshape(-1, 2)
+    arcs = arc_points(flat_states, flat[:, 0], flat[:, 1], CHECK_SAMPLES)
+    order = sorted(range(count), key=lambda f: (crowd.first_until[f] < step, f))
+    robots = np.array([f * m + r for f in order for r in range(crowd.sizes[f])], np.intp)
+    contact = 2 * crowd.world.robot_radius + SAFETY
+    flat[:, 0] = give_way(arcs, flat[:, 0], robots, contact)
+    return flat.reshape(count, m, 2)

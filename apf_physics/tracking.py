@@ -262,6 +262,44 @@ class PathFollower:
         return np.hypot(*(np.asarray(state, float)[:, :2] - end).T) <= tolerance
 
 
+def give_way(arcs: np.ndarray, v: np.ndarray, order: np.ndarray, contact: float) -> np.ndarray:
+    """(R,) ``v`` with the robots stopped (v = 0) that must give way, decided one robot at a time in ``order``.
+
+    Each robot keeps its arc when at every sampled moment it stays ``contact`` (centre to centre)
+    from the arcs of the robots decided before it and from the robots not decided yet where they
+    stand (or, for robots already nearer at the start, no nearer than they are); otherwise it
+    stops where it is (it may still turn). Robots left out of ``order`` stand. Because every robot
+    decided before another kept clear of that one standing, stopping is always safe: no two robots'
+    arcs come within contact at the same moment.
+
+    Args:
+        arcs: (R, S + 1, 2) every robot's arc this step (:func:`~apf_physics.kinematics.arc_points`).
+        v: (R,) the robots' speeds (0: standing).
+        order: Robot indices, highest priority first.
+        contact: The least centre distance.
+    """
+    arcs = np.array(arcs, float)
+    v = np.array(v, float)
+    standing = np.repeat(arcs[:, :1], arcs.shape[1], axis=1)
+    decided = np.zeros(len(arcs), bool)
+    order = np.asarray(order, np.intp)
+    listed = np.zeros(len(arcs), bool)
+    listed[order] = True
+    v[~listed] = 0.0
+    arcs[~listed] = standing[~listed]
+    for k in order.tolist():
+        others = np.flatnonzero(listed & (np.arange(len(arcs)) != k))
+        paths = np.where(decided[others, None, None], arcs[others], standing[others])
+        if v[k] != 0 and len(others):
+            d = np.hypot(*(paths - arcs[k][None]).transpose(2, 0, 1))                   # (k, S + 1)
+            bar = np.minimum(contact, d[:, 0] - 1e-9)
+            if (d[:, 1:] < bar[:, None]).any():
+                v[k] = 0.0
+                arcs[k] = standing[k]
+        decided[k] = True
+    return v
+
+
 def slot_points(leader: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """(N, F, 2) the slots of a wedge or offsets formation behind leaders at poses ``leader`` (N, ≥3).
 

@@ -6,7 +6,8 @@ formations of unicycles, and ``eval`` / ``render --kinematics``.
   episodes carry the headings, and every step a robot either turns on the spot or drives forward.
 - :func:`track_safely` never drives an arc that comes nearer an obstacle than the straight move
   it tracks: next to a wall it turns on the spot first, then drives the straight move.
-- A formation of unicycles arrives with every link in range and no two robots touching.
+- A formation of unicycles arrives with every link in range and no two robots touching; several
+  formations of unicycles in one world cross without touching.
 - ``Formation-v0`` runs unicycle formations (the leader the agent's, the followers by the rule).
 - ``--kinematics unicycle`` reaches ``eval`` (JSON with headings) and ``render`` (a video);
   ``--kinematics holonomic`` overrides a unicycle world file; a bad value is a clear error.
@@ -23,7 +24,7 @@ from apf_physics import world_from_dict
 from apf_physics.cli import main
 from apf_physics.kinematics import UnicycleLimits, arc_points
 from apf_physics.planners import make_planner
-from apf_physics.rollout import robot_limits, rollout
+from apf_physics.rollout import robot_limits, rollout, rollout_formations
 from apf_physics.tracking import track_safely
 from conftest import simple_world_dict
 
@@ -153,3 +154,21 @@ def test_a_formation_of_unicycles_in_the_environment(action):
         assert gaps[~np.eye(len(positions), dtype=bool)].min() >= 2 * env.unwrapped.world.robot_radius - 1e-9
         if terminated or truncated:
             env.reset()
+
+
+def test_several_formations_of_unicycles_cross_without_touching():
+    """``rollout_formations`` with unicycles: two formations crossing each other's way arrive, no
+    two robots ever touch (they give way on their arcs), and the episodes carry the headings;
+    ``escape`` among other formations (whose discs near it come and go) runs too."""
+    world = world_from_dict({"name": "cross", "size": [16, 16], "field": "thesis-general",
+                             "obstacles": [{"circle": {"center": [8, 8], "radius": 1}}],
+                             "formations": [{"start": [2, 2], "target": [13, 13], "followers": 1, "shape": "line"},
+                                            {"start": [13, 2], "target": [2, 13], "followers": 1, "shape": "line"}]})
+    for name in ("astar", "escape"):
+        episodes = rollout_formations(world, make_planner(name), unicycle=True)
+        for e in episodes:
+            assert e.success and e.formation.robot_robot_collisions == 0
+            assert e.formation.headings.shape == e.formation.positions.shape[:2]
+        together = np.concatenate([e.formation.positions[-1] for e in episodes])
+        assert np.hypot(*(together[:, None] - together[None]).transpose(2, 0, 1))[~np.eye(4, dtype=bool)].min() \
+            >= 2 * world.robot_radius

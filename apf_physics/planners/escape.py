@@ -114,6 +114,20 @@ class EscapePlanner(Planner):
         return step, ok
 
     # -- boundary following -----------------------------------------------------------------
+    def _fit_bodies(self) -> None:
+        """Keep the followed-body marks in step with this step's bodies: among other formations
+        (``rollout_formations``) the crowd's discs near a robot come and go, so their number changes;
+        the world's own obstacles and the map's edges keep their marks, the crowd's are cleared."""
+        bodies = len(self._now.obstacles) + 4
+        sets = self._follow_set
+        if sets.shape[1] == bodies:
+            return
+        own = len(self.world.obstacles)
+        fitted = np.zeros((len(sets), bodies), bool)
+        fitted[:, :own] = sets[:, :own]
+        fitted[:, -4:] = sets[:, -4:]
+        self._follow_set = fitted
+
     def _body_distances(self, points: np.ndarray) -> np.ndarray:
         """(P, B) distance from each point to each body: every obstacle (and other robot), then the
         map's four edges. Static obstacles come from the world's index: those farther than its
@@ -146,7 +160,8 @@ class EscapePlanner(Planner):
         sets |= here < np.minimum(followed, self.join_distance)[:, None]
         self._follow_set[idx] = sets
         dist = np.where(sets[:, None, :], d, np.inf).min(axis=2)                  # (K, 5)
-        grad = np.column_stack([dist[:, 1] - dist[:, 2], dist[:, 3] - dist[:, 4]]) / (2 * h)
+        with np.errstate(invalid="ignore"):   # no followed body near (inf - inf): the fallback normal below
+            grad = np.column_stack([dist[:, 1] - dist[:, 2], dist[:, 3] - dist[:, 4]]) / (2 * h)
         norm = np.hypot(grad[:, 0], grad[:, 1])
         fallback = np.tile([1.0, 0.0], (len(points), 1))
         normal = np.where(norm[:, None] > 1e-9, grad / np.where(norm > 1e-9, norm, 1.0)[:, None], fallback)
@@ -206,6 +221,7 @@ class EscapePlanner(Planner):
     def act(self, positions: np.ndarray, active: np.ndarray, moment: Moment | None = None) -> np.ndarray:
         positions = np.asarray(positions, float).reshape(-1, 2)
         self._now = self._moment(moment)   # the world at this step, for every query of the step
+        self._fit_bodies()
         step = np.zeros_like(positions)
         u = self._now.potential(positions)
 
