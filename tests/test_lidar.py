@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from apf_physics import lidar
+from apf_physics import geometry, lidar
 from apf_physics.field import FieldParams
 from apf_physics.lidar import Lidar, LidarConfig, scan, teammates
 from apf_physics.obstacles import CircleObstacle, GridObstacle, Motion, PolygonObstacle
@@ -213,3 +213,145 @@ def test_one_cast_per_world():
     out = sensor.scan_worlds(both, world_of[[0, 3, 1, 4, 2]], poses[[0, 3, 1, 4, 2]])
     np.testing.assert_array_equal(out[[0, 2, 4]], sensor.scan(both[0], poses[:3]))
     np.testing.assert_array_equal(out[[1, 3]], sensor.scan(both[1], poses[3:]))
+
+
+# -- the cast's tables and approximations --------------------------------------------------------
+
+def random_world(seed: int) -> World:
+    """A world of random convex polygons, discs (one a point), a small occupancy grid, moving
+    polygons and discs and a crowd: every kind of shape the sensor casts against."""
+    rng = np.random.default_rng(seed)
+    size = (float(rng.uniform(12, 20)), float(rng.uniform(10, 16)))
+    obstacles = []
+    for _ in range(int(rng.integers(1, 5))):
+        centre = rng.uniform([2, 2], [size[0] - 2, size[1] - 2])
+        angles = np.sort(rng.uniform(0, 2 * math.pi, int(rng.integers(3, 7))))
+        obstacles.append(PolygonObstacle(centre + rng.uniform(0.3, 1.5) * np.column_stack([np.cos(angles), np.sin(angles)])))
+    for radius in (float(rng.uniform(0.2, 1.0)), 0.0):
+        obstacles.append(CircleObstacle(rng.uniform([1, 1], [size[0] - 1, size[1] - 1]), radius))
+    occupied = rng.random((int(rng.integers(4, 12)), int(rng.integers(4, 12)))) < 0.3
+    obstacles.append(GridObstacle(occupied, float(rng.uniform(0.3, 0.7)), tuple(rng.uniform(0, 4, 2))))
+    obstacles.append(CircleObstacle(rng.uniform([1, 1], [size[0] - 1, size[1] - 1]), 0.4,
+                                    Motion(rng.uniform(-3, 3, (2, 2)), 0.4, loop=True)))
+    obstacles.append(PolygonObstacle(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.5], [0.0, 0.5]]) + rng.uniform(2, 8, 2),
+                                     Motion(rng.uniform(-3, 3, (1, 2)), 0.3)))
+    world = World(name="random", size=size, robot_radius=0.25, goal_tolerance=0.5,
+                  field=FieldParams(2, 20, 8, 0.5, 8, 100), obstacles=tuple(obstacles),
+                  targets=np.array([[size[0] - 1, size[1] - 1]]), starts=np.zeros((0, 2)))
+    return world.among(rng.uniform([0, 0], size, (2, 2)))
+
+
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("by_cells", [False, True])
+def test_random_worlds_match_brute_force(seed, by_cells, monkeypatch):
+    """Random poses in random worlds, wide and narrow fields of view, robots at different steps and
+    in teams: the candidate beams picked from approximate angles (and segments cut to range,
+    grids cut into one-sided runs, the segments a robot tests looked up by its cell) lose no hit."""
+    if by_cells:
+        monkeypatch.setattr(lidar, "CELLS_ABOVE", 0)
+    world = random_world(seed)
+    rng = np.random.default_rng(100 + seed)
+    poses = free_poses(world, rng, 6)
+    others = teammates(poses[:, :2], rng.integers(2, size=6))
+    for config in (LidarConfig(beams=48, max_range=float(rng.uniform(2, 12))),
+                   LidarConfig(beams=17, fov=200.0, max_range=30.0)):
+        for t in (0.0, float(rng.uniform(0, 40))):
+            got = scan(world.at(t), poses, config, others=others)
+            np.testing.assert_allclose(got, reference(world, poses, config, t, others), rtol=0, atol=1e-9)
+
+
+def reference_runs(world: World, poses, config: LidarConfig) -> np.ndarray:
+    """Ranges against the map's edge and a grid's boundary runs (:func:`geometry.grid_boundary`, seen
+    from either side), one ray and one run at a time: what a robot in a wall reads."""
+    w, h = world.size
+    segments = outline(np.array([[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]]))
+    geo = lidar.static_geometry(world)
+    segments += [(a, a + e) for a, e in zip(geo.a, geo.e)]
+    out = np.empty((len(poses), config.beams))
+    for n, (x, y, theta) in enumerate(poses):
+        for k, angle in enumerate(theta + config.angles()):
+            c = np.array([math.cos(angle), math.sin(angle)])
+            out[n, k] = min([ray_segment(np.array([x, y]), c, a, b) for a, b in segments] + [config.max_range])
+    return out
+
+
+def test_robots_anywhere_on_a_grid_read_its_boundary_from_either_side():
+    """A robot in a wall (collided) reads where its beams leave the wall (the one-sided runs are
+    turned round for it: it tests all of them, not its cell's); one beyond the grid reads the
+    grid's outer boundary."""
+    world = worlds()["grid"]
+    assert len(lidar._outlines(world).a) > lidar.CELLS_ABOVE
+    rng = np.random.default_rng(7)
+    grid = world.obstacles[0]
+    walls = np.argwhere(grid.occupied)[:8]
+    in_walls = (walls[:, ::-1] + rng.uniform(0.1, 0.9, (8, 2))) * grid.cell + np.asarray(grid.origin)
+    anywhere = rng.uniform([0.0, 0.0], world.size, (8, 2))
+    positions = np.vstack([in_walls, anywhere])
+    poses = np.column_stack([positions, rng.uniform(-math.pi, math.pi, len(positions))])
+    config = LidarConfig(beams=24, max_range=6.0)
+    np.testing.assert_allclose(scan(world, poses, config), reference_runs(world, poses, config), rtol=0, atol=1e-9)
+
+
+def test_oriented_runs_bound_the_occupied_cells_on_their_left():
+    rng = np.random.default_rng(8)
+    for _ in range(20):
+        occupied = rng.random((int(rng.integers(1, 9)), int(rng.integers(1, 9)))) < rng.uniform(0.1, 0.9)
+        a, b = lidar._oriented_runs(occupied)
+        pieces = set()
+        for start, end in zip(a, b):
+            step = (end - start) / np.abs(end - start).sum()        # a unit step along the run
+            left = np.array([-step[1], step[0]])
+            for j in range(int(np.abs(end - start).sum())):
+                middle = start + (j + 0.5) * step
+                pieces.add(tuple(np.round(np.sort(np.stack([middle - step / 2, middle + step / 2]), axis=0), 6).ravel()))
+                inner = np.floor(middle + left / 2).astype(int)[::-1]      # (row, col) of the cell on the left
+                outer = np.floor(middle - left / 2).astype(int)[::-1]
+                inside = lambda cell: bool(0 <= cell[0] < occupied.shape[0] and 0 <= cell[1] < occupied.shape[1]
+                                           and occupied[cell[0], cell[1]])
+                assert inside(inner) and not inside(outer)
+        # the same unit sides as the runs grid_boundary cuts
+        expected = set()
+        for start, end in zip(*geometry.grid_boundary(occupied)):
+            step = (end - start) / max(np.abs(end - start).sum(), 1)
+            for j in range(int(np.abs(end - start).sum())):
+                expected.add(tuple(np.round(np.sort(np.stack([start + j * step, start + (j + 1) * step]), axis=0), 6).ravel()))
+        assert pieces == expected
+
+
+def test_approximate_angles_within_their_bound():
+    rng = np.random.default_rng(9)
+    x, y = rng.normal(size=(2, 20000)) * np.exp(rng.uniform(-20, 20, (2, 20000)))
+    axes = np.array([1.0, -1.0, 0.0, -0.0, 1.0, 1.0, -1.0, 3.0])
+    x, y = np.concatenate([x, axes]), np.concatenate([y, np.array([0.0, 0.0, 1.0, -1.0, 1.0, -1.0, -1.0, -0.0])])
+    error = np.abs((lidar._angle(x, y) - np.arctan2(y, x) + math.pi) % (2 * math.pi) - math.pi)
+    assert error.max() <= lidar.ANGLE_ERROR
+
+
+def test_inside_a_disc_reads_zero_on_every_beam_of_a_narrow_field():
+    """Every beam, however the field of view is laid (the interval of a disc around the robot is the whole turn)."""
+    world = worlds()["discs"]
+    poses = np.array([[3.2, 12.1, 2.5], [3.0, 11.5, -1.0]])               # in the disc at (3, 12), radius 0.8
+    for fov in (360.0, 270.0, 90.0, 7.5):
+        assert (scan(world, poses, LidarConfig(beams=9, fov=fov)) == 0).all()
+
+
+def test_robots_cast_in_parts_by_pairs_read_the_same(monkeypatch):
+    world = worlds()["grid"]
+    poses = free_poses(world, np.random.default_rng(10), 30)
+    config = LidarConfig(beams=20, max_range=5.0)
+    whole = scan(world, poses, config)
+    monkeypatch.setattr(lidar, "PAIRS_PER_CAST", 1000)           # a few robots at a time
+    np.testing.assert_array_equal(scan(world, poses, config), whole)
+
+
+def test_cells_hold_every_segment_a_robot_in_them_can_see():
+    """The table of :func:`lidar._cells` against the test of every segment, for robots all over a grid map."""
+    world = worlds()["grid"]
+    rng = np.random.default_rng(11)
+    pos = free_poses(world, rng, 200)[:, :2]
+    lines = lidar._outlines(world)
+    for reach in (1.5, 6.0):
+        every = lidar._seen(pos, lines.a, lines.e, reach, lines.grid, lines.grids)
+        by_cell = lidar._seen_static(pos, world, reach)
+        assert len(lidar._cells(world, reach).segment) < len(lines.a) * np.prod(lidar._cells(world, reach).shape)
+        assert set(zip(*[v.tolist() for v in every[:2]])) == set(zip(*[v.tolist() for v in by_cell[:2]]))
