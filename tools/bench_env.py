@@ -1,6 +1,6 @@
 """Benchmark the environments: Navigate-v0 beside CartPole-v1, and the vector env beside VMAS.
 
-    python tools/bench_env.py [--steps 20000] [--vmas] [--sizes 64 256 1024]
+    python tools/bench_env.py [--steps 20000] [--vmas] [--sizes 64 256 1024] [--robots-kinds]
 
 Prints, from one process:
 
@@ -11,6 +11,11 @@ Prints, from one process:
   continuous random actions, one torch thread) at the same N, stepped in alternating blocks,
   and their ratio by the wall clock and by this process's CPU time. Aims: ours
   never falls as N grows, and ≥ 400,000 robot-steps/s at N = 1024.
+- with ``--robots-kinds``, a second table from the same runs: robot-steps per second of the
+  window env beside ``NavigateVectorEnv`` with a unicycle, continuous ``(v, ω)`` actions and a
+  64-beam lidar observation (random actions in the box), their ratio (aim ≥ 0.5 at N = 1024),
+  and with ``--vmas`` VMAS's ``navigation`` with its lidar at 12 rays (its default, the first
+  table's) and at 64 (``n_lidar_rays=64``);
 - how many robots per step needed pymunk (the others moved without it);
 - the cost of an observation in fixed20 with 8 moving discs beside the same discs frozen
   (aim ≤ 2×);
@@ -48,13 +53,24 @@ def single_rate(env_id: str, steps: int, **kwargs) -> float:
     return steps / (time.perf_counter() - t)
 
 
-class OursVector:
-    """``NavigateVectorEnv`` on fixed20, random starts and actions, stepped in blocks."""
+LIDAR_ROBOT = {"action": "continuous", "kinematics": "unicycle", "observation": "lidar", "lidar": {"beams": 64}}
+"""The robot as real robots are driven (``--robots-kinds``): a unicycle given ``(v, ω)``, a 64-beam lidar."""
 
-    def __init__(self, num_envs: int, steps: int):
-        self.env = NavigateVectorEnv(world="fixed20", num_envs=num_envs, starts="random")
+
+class OursVector:
+    """``NavigateVectorEnv`` on fixed20, random starts and actions, stepped in blocks.
+
+    ``robot``: the env's robot options (default: the thesis's robot, nine moves and the window;
+    :data:`LIDAR_ROBOT`: a unicycle with continuous actions and the lidar, actions uniform in the box).
+    """
+
+    def __init__(self, num_envs: int, steps: int, robot: dict | None = None):
+        self.env = NavigateVectorEnv(world="fixed20", num_envs=num_envs, starts="random", **(robot or {}))
         self.env.reset(seed=0)
-        self.actions = np.random.default_rng(0).integers(0, 9, (steps, num_envs))
+        if robot and robot.get("action") == "continuous":
+            self.actions = np.random.default_rng(0).uniform(-1, 1, (steps, num_envs, 2)).astype(np.float32)
+        else:
+            self.actions = np.random.default_rng(0).integers(0, 9, (steps, num_envs))
         for a in self.actions[:10]:   # warm up (proxies created, rows indexed)
             self.env.step(a)
 
@@ -73,15 +89,19 @@ class OursVector:
 
 
 class VmasVector:
-    """VMAS's ``navigation`` scenario (CPU, one agent per env, continuous random actions, one torch thread)."""
+    """VMAS's ``navigation`` scenario (CPU, one agent per env, continuous random actions, one torch thread).
 
-    def __init__(self, num_envs: int, steps: int):
+    ``scenario``: the scenario's options (VMAS 1.5.2's ``navigation`` has a lidar whenever
+    ``collisions`` is on, the default: ``n_lidar_rays=12``, ``lidar_range=0.35``, sensing other agents).
+    """
+
+    def __init__(self, num_envs: int, steps: int, **scenario):
         import torch
         import vmas
 
         torch.set_num_threads(1)
         self.env = vmas.make_env("navigation", num_envs=num_envs, device="cpu", continuous_actions=True, n_agents=1,
-                                 seed=0)
+                                 seed=0, **scenario)
         self.env.reset()
         generator = torch.Generator().manual_seed(0)
         self.actions = [[torch.rand(num_envs, 2, generator=generator) * 2 - 1 for _ in self.env.agents]
@@ -94,16 +114,22 @@ class VmasVector:
             self.env.step(a)
 
 
-def vector_rates(num_envs: int, steps: int, vmas: bool, block: int = 25) -> dict:
+def vector_rates(num_envs: int, steps: int, vmas: bool, block: int = 25, kinds: bool = False) -> dict:
     """Robot-steps per second of ours (and VMAS's), wall clock and CPU time of this process.
 
-    The two are stepped in alternating blocks of ``block`` steps, so that a machine whose load
-    changes during the run slows both alike; the CPU-time rate is the steadier of the two on a
-    shared machine (it does not count the time the process waits for a core).
+    The runners are stepped in alternating blocks of ``block`` steps, so that a machine whose load
+    changes during the run slows all alike; the CPU-time rate is the steadier of the two on a
+    shared machine (it does not count the time the process waits for a core). ``kinds`` adds
+    our env with :data:`LIDAR_ROBOT` ("lidar") and, with ``vmas``, VMAS's navigation with a
+    64-ray lidar ("vmas lidar64").
     """
     runners = {"ours": OursVector(num_envs, steps)}
+    if kinds:
+        runners["lidar"] = OursVector(num_envs, steps, LIDAR_ROBOT)
     if vmas:
         runners["vmas"] = VmasVector(num_envs, steps)
+        if kinds:
+            runners["vmas lidar64"] = VmasVector(num_envs, steps, n_lidar_rays=64)
     wall = dict.fromkeys(runners, 0.0)
     cpu = dict.fromkeys(runners, 0.0)
     for first in range(0, steps, block):
@@ -209,12 +235,36 @@ def contacts_hold(robots_per_slot: int, slots: int, steps: int, seed: int = 0) -
     return counts
 
 
+def print_kinds(rows: list, vmas: bool) -> None:
+    """The table of ``--robots-kinds``: robot-steps/s of each kind (wall clock), and ratios (wall, CPU)."""
+    print("robots as real robots are driven (same runs, same blocks): NavigateVectorEnv on fixed20, the window "
+          "env (nine moves, 11x11 window) beside a unicycle with continuous (v, w) and a 64-beam lidar "
+          "(K + 5 = 69 values)" + (", and VMAS 'navigation' with its lidar of 12 rays (default) and of 64 rays "
+                                   "(n_lidar_rays=64)" if vmas else ""))
+    header = f"  {'N':>5} {'window env':>12} {'lidar env':>12} {'lidar/window':>13} {'(CPU time)':>11}"
+    if vmas:
+        header += f" {'VMAS 12 rays':>13} {'VMAS 64 rays':>13} {'lidar env/VMAS 64':>18} {'(CPU time)':>11}"
+    print(header + "   (robot-steps/s; aim: lidar/window >= 0.5 at N = 1024)")
+    for n, r in rows:
+        line = (f"  {n:>5} {r['ours wall']:>12,.0f} {r['lidar wall']:>12,.0f} {r['lidar wall'] / r['ours wall']:>13.2f}"
+                f" {r['lidar cpu'] / r['ours cpu']:>11.2f}")
+        if vmas:
+            line += (f" {r['vmas wall']:>13,.0f} {r['vmas lidar64 wall']:>13,.0f}"
+                     f" {r['lidar wall'] / r['vmas lidar64 wall']:>18.2f}"
+                     f" {r['lidar cpu'] / r['vmas lidar64 cpu']:>11.2f}")
+        print(line)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=20000, help="single-environment steps (default 20000)")
     parser.add_argument("--vmas", action="store_true", help="also run VMAS's navigation scenario (pip install vmas)")
     parser.add_argument("--sizes", type=int, nargs="+", default=[64, 256, 1024], help="numbers of environments")
     parser.add_argument("--vector-steps", type=int, default=300, help="vector steps per size (default 300)")
+    parser.add_argument("--robots-kinds", action="store_true",
+                        help="also step our vector env with a unicycle, continuous actions and a 64-beam lidar beside "
+                             "the window env (and, with --vmas, VMAS's navigation with 64 lidar rays), and print "
+                             "their rates and the ratio lidar env / window env")
     parser.add_argument("--contacts", type=int, default=0, metavar="STEPS",
                         help="also count contacts that do not hold over STEPS steps of random crowds (e.g. 200)")
     args = parser.parse_args()
@@ -241,13 +291,17 @@ def main() -> None:
           + (" beside VMAS 'navigation' (CPU, 1 agent, 1 torch thread), in alternating blocks of 25 steps"
              if args.vmas else ""))
     print(header)
+    kinds = []
     for n in args.sizes:
-        r = vector_rates(n, args.vector_steps, args.vmas)
+        r = vector_rates(n, args.vector_steps, args.vmas, kinds=args.robots_kinds)
+        kinds.append((n, r))
         line = f"  {n:>5} {r['ours wall']:>20,.0f} {r['via pymunk']:>10.1%}"
         if args.vmas:
             line += (f" {r['vmas wall']:>17,.0f} {r['ours wall'] / r['vmas wall']:>12.2f}"
                      f" {r['ours cpu'] / r['vmas cpu']:>11.2f}")
         print(line)
+    if args.robots_kinds:
+        print_kinds(kinds, args.vmas)
     frozen, moving = observation_cost(moving_world(True)), observation_cost(moving_world(False))
     print("observations (256 robots, one call) in fixed20 with 8 discs")
     print(f"  discs frozen (in the static raster)     {frozen:7.2f} us/robot")

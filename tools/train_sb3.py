@@ -18,7 +18,8 @@ checkpointed to ``OUT/model.zip`` every ``--checkpoint-minutes`` and at the end,
 Evaluation (also ``--eval-only MODEL``): the deterministic policy from each of the world's
 own starts (``reset(options={"start": i})``) and from ``--random-starts`` random free starts
 drawn from ``--eval-seed``; the step limit is the registration's (100, as in training).
-Prints success / collision / timeout counts and writes them to ``OUT/eval.json``.
+Prints success / collision / timeout counts and writes them to ``OUT/eval.json``
+(``--stochastic-too``: also of the stochastic policy, actions sampled, on the same starts).
 """
 
 from __future__ import annotations
@@ -239,23 +240,23 @@ def train(args) -> Path:
     return model_path
 
 
-def run_episode(env, model, options: dict | None = None, seed: int | None = None) -> str:
+def run_episode(env, model, options: dict | None = None, seed: int | None = None, deterministic: bool = True) -> str:
     obs, _ = env.reset(seed=seed, options=options)
     while True:
-        action, _ = model.predict(obs, deterministic=True)
+        action, _ = model.predict(obs, deterministic=deterministic)
         obs, _, terminated, truncated, info = env.step(action)
         if terminated or truncated:
             return "success" if info["success"] else "collision" if info["collision"] else "timeout"
 
 
-def random_start_outcomes(args, model) -> dict:
+def random_start_outcomes(args, model, deterministic: bool = True) -> dict:
     """Outcomes of the first episode of each of ``--random-starts`` copies of the vector env,
     copy ``i`` seeded ``eval_seed + i``: the start ``Navigate-v0`` draws at ``reset(seed=eval_seed + i)``."""
     env = NavigateVectorEnv(num_envs=args.random_starts, **env_kwargs(args, "random"))
     obs, _ = env.reset(seed=args.eval_seed)
     outcome = np.full(args.random_starts, "", dtype=object)
     while (outcome == "").any():
-        action, _ = model.predict(obs, deterministic=True)
+        action, _ = model.predict(obs, deterministic=deterministic)
         obs, _, terminated, truncated, info = env.step(action)
         for i in np.flatnonzero((terminated | truncated) & (outcome == "")).tolist():
             outcome[i] = ("success" if info["success"][i] else "collision" if info["collision"][i] else "timeout")
@@ -270,19 +271,22 @@ def evaluate(args, model_path: str) -> dict:
     results = {}
     env = gym.make(ENV_ID, **env_kwargs(args, "world"))
     world = env.unwrapped.worlds[0]
-    counts = dict.fromkeys(("success", "collision", "timeout"), 0)
-    per_start = []
-    for i in range(len(world.starts)):
-        outcome = run_episode(env, model, options={"start": i}, seed=args.eval_seed if i == 0 else None)
-        counts[outcome] += 1
-        per_start.append(outcome)
-    results["world starts"] = dict(episodes=len(world.starts), **counts, outcomes=per_start)
-    counts = random_start_outcomes(args, model)
-    results[f"random starts (seed {args.eval_seed}+i)"] = dict(episodes=args.random_starts, **counts)
-    print(f"evaluation of {model_path} (deterministic, {args.world}, {args.kinematics}, {args.action}, "
+    for deterministic in (True, False) if args.stochastic_too else (True,):
+        policy = "" if deterministic else " (stochastic)"
+        counts = dict.fromkeys(("success", "collision", "timeout"), 0)
+        per_start = []
+        for i in range(len(world.starts)):
+            outcome = run_episode(env, model, options={"start": i}, seed=args.eval_seed if i == 0 else None,
+                                  deterministic=deterministic)
+            counts[outcome] += 1
+            per_start.append(outcome)
+        results["world starts" + policy] = dict(episodes=len(world.starts), **counts, outcomes=per_start)
+        counts = random_start_outcomes(args, model, deterministic)
+        results[f"random starts (seed {args.eval_seed}+i)" + policy] = dict(episodes=args.random_starts, **counts)
+    print(f"evaluation of {model_path} ({args.world}, {args.kinematics}, {args.action}, "
           f"{args.observation}, step limit 100)")
     for name, r in results.items():
-        print(f"  {name:<26} {r['episodes']:>4} episodes: success {r['success']:>4}  "
+        print(f"  {name:<42} {r['episodes']:>4} episodes: success {r['success']:>4}  "
               f"collision {r['collision']:>4}  timeout {r['timeout']:>4}")
     return results
 
@@ -306,6 +310,8 @@ def main(argv=None) -> None:
     parser.add_argument("--eval-only", metavar="MODEL", help="evaluate this model, do not train")
     parser.add_argument("--eval-seed", type=int, default=12345, help="seed of the random evaluation starts")
     parser.add_argument("--random-starts", type=int, default=200, help="random evaluation starts (default 200)")
+    parser.add_argument("--stochastic-too", action="store_true",
+                        help="also evaluate the stochastic policy (sampled actions) on the same starts")
     parser.add_argument("--checkpoint-minutes", type=float, default=2.0)
     parser.add_argument("--envs", type=int, default=8, help="env copies (default 8)")
     parser.add_argument("--vector", choices=("apf", "dummy"), default="apf",
