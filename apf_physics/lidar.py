@@ -28,10 +28,10 @@ casts" below): the map's edge is solved for every beam in closed form; every oth
 first paired with the robots that can see it (a polygon's edge from outside, within range), each
 pair is turned into the beams within the angle the shape subtends from the robot, and only those
 (robot, beam, shape) candidates are solved, exactly, the nearest hit of each beam kept. Robots
-are cast :data:`ROBOTS_PER_CAST` at a time, fewer on a map of many segments
-(:data:`PAIRS_PER_CAST`). Each world's static segments and discs are built once and kept with
-the world (:meth:`~apf_physics.world.World.cached`, one entry per world, shared by the worlds of
-other targets on the same map).
+are cast :data:`ROBOTS_PER_CAST` at a time (bounding the temporaries). Each world's static
+segments and discs (and, on a map of many segments, a table of those seen from each cell of the
+map) are built once and kept with the world (:meth:`~apf_physics.world.World.cached`, shared
+by the worlds of other targets on the same map).
 Optional Gaussian noise (:attr:`LidarConfig.noise`) comes from a seeded generator; noisy ranges
 are clipped to ``[0, max_range]``.
 """
@@ -50,10 +50,6 @@ from apf_physics.world import Moment, World
 
 ROBOTS_PER_CAST = 2048
 """Most robots cast at a time (bounds the temporaries)."""
-PAIRS_PER_CAST = 2 ** 17
-"""Most (robot, static segment) pairs tested at a time: with many segments (a grid map) fewer robots
-are cast at a time, so that the temporaries stay within the processor's cache (on ros_arena
-about twice as fast as all at once)."""
 
 
 @dataclass(frozen=True)
@@ -191,10 +187,10 @@ def moving_geometry(world: World) -> _Moving:
 #
 # Cost (tools/bench_lidar.py): a beam of fixed20 solves about 0.4 candidates besides the map's
 # edge; the arrays are a few times the robots × beams. On a grid map every run within range and
-# facing the robot is a pair (there is no occlusion: about 86 of ros_arena's 316 runs per robot),
-# and the robots are cast in parts small enough for the temporaries to stay in cache. A DDA over
-# the grid's cells was tried and is slower there: a beam crosses about 25 cells of a 0.2 grid
-# before it meets a wall, a step of the walk costing about as much as a candidate.
+# facing the robot is a pair (there is no occlusion: about 86 of ros_arena's 316 runs per robot,
+# found among the 64 or so of its cell's table). A DDA over the grid's cells was tried and is
+# slower there: a beam crosses about 25 cells of a 0.2 grid before it meets a wall, a step of
+# the walk costing about as much as a candidate.
 
 ANGLE_ERROR = 2e-3
 """Bound [rad] on the error of :func:`_angle` (the approximation's own error is below 1.6e-3):
@@ -671,9 +667,8 @@ def scan(where: World | Moment, poses: np.ndarray, config: LidarConfig = LidarCo
     t = np.broadcast_to(np.asarray(t, float), (n,))
     others = None if others is None or not np.size(others) else np.asarray(others, float).reshape(n, -1, 2)
     best = np.empty((n, config.beams))
-    step = max(1, min(ROBOTS_PER_CAST, PAIRS_PER_CAST // max(len(_outlines(world).a), 1)))
-    for first in range(0, n, step):
-        part = slice(first, min(first + step, n))
+    for first in range(0, n, ROBOTS_PER_CAST):
+        part = slice(first, min(first + ROBOTS_PER_CAST, n))
         best[part] = _cast(world, poses[part], config, t[part], None if others is None else others[part])
     ranges = best
     if config.noise > 0:

@@ -335,15 +335,6 @@ def test_inside_a_disc_reads_zero_on_every_beam_of_a_narrow_field():
         assert (scan(world, poses, LidarConfig(beams=9, fov=fov)) == 0).all()
 
 
-def test_robots_cast_in_parts_by_pairs_read_the_same(monkeypatch):
-    world = worlds()["grid"]
-    poses = free_poses(world, np.random.default_rng(10), 30)
-    config = LidarConfig(beams=20, max_range=5.0)
-    whole = scan(world, poses, config)
-    monkeypatch.setattr(lidar, "PAIRS_PER_CAST", 1000)           # a few robots at a time
-    np.testing.assert_array_equal(scan(world, poses, config), whole)
-
-
 def test_cells_hold_every_segment_a_robot_in_them_can_see():
     """The table of :func:`lidar._cells` against the test of every segment, for robots all over a grid map."""
     world = worlds()["grid"]
