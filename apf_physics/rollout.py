@@ -30,7 +30,7 @@ from apf_physics.errors import UserError
 from apf_physics.formation import FormationCrowd, FormationTeam, formation_spec, formation_success, links_in_range
 from apf_physics.kinematics import UnicycleLimits, arc_points
 from apf_physics.planners.base import Planner
-from apf_physics.tracking import CHECK_SAMPLES, UnicycleFollowers, give_way, track_safely
+from apf_physics.tracking import CHECK_SAMPLES, UnicycleFollowers, detour_arcs, give_way, track_safely
 from apf_physics.world import World
 
 KINEMATICS = ("holonomic", "unicycle")
@@ -461,5 +461,8 @@ def crowd_unicycle_commands(crowd: FormationCrowd, states: np.ndarray, leader_mo
     order = sorted(range(count), key=lambda f: (crowd.first_until[f] < step, f))
     robots = np.array([f * m + r for f in order for r in range(crowd.sizes[f])], np.intp)
     contact = 2 * crowd.world.robot_radius + SAFETY
-    flat[:, 0] = give_way(arcs, flat[:, 0], robots, contact)
+    detours, detour_commands = detour_arcs(flat_states, arcs, limits, crowd.world.at(step))
+    flat[:, 0], choice = give_way(arcs, flat[:, 0], robots, contact, detours)
+    took = np.flatnonzero(choice >= 0)
+    flat[took] = detour_commands[took, choice[took]]
     return flat.reshape(count, m, 2)

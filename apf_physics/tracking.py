@@ -262,24 +262,33 @@ class PathFollower:
         return np.hypot(*(np.asarray(state, float)[:, :2] - end).T) <= tolerance
 
 
-def give_way(arcs: np.ndarray, v: np.ndarray, order: np.ndarray, contact: float) -> np.ndarray:
-    """(R,) ``v`` with the robots stopped (v = 0) that must give way, decided one robot at a time in ``order``.
+def give_way(arcs: np.ndarray, v: np.ndarray, order: np.ndarray, contact: float,
+             detours: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Which robots keep their arc, take a detour, or stop, decided one robot at a time in ``order``.
 
     Each robot keeps its arc when at every sampled moment it stays ``contact`` (centre to centre)
     from the arcs of the robots decided before it and from the robots not decided yet where they
-    stand (or, for robots already nearer at the start, no nearer than they are); otherwise it
-    stops where it is (it may still turn). Robots left out of ``order`` stand. Because every robot
-    decided before another kept clear of that one standing, stopping is always safe: no two robots'
-    arcs come within contact at the same moment.
+    stand (or, for robots already nearer at the start, no nearer than they are); otherwise it takes
+    the first of its ``detours`` that does (the caller gives only detours clear of the obstacles,
+    best first: what a holonomic robot's right of way does by stepping aside), else it stops where
+    it is (it may still turn). Robots left out of ``order`` stand. Because every robot decided
+    before another kept clear of that one standing, stopping is always safe: no two robots' arcs
+    come within contact at the same moment.
 
     Args:
         arcs: (R, S + 1, 2) every robot's arc this step (:func:`~apf_physics.kinematics.arc_points`).
         v: (R,) the robots' speeds (0: standing).
         order: Robot indices, highest priority first.
         contact: The least centre distance.
+        detours: (R, K, S + 1, 2) other arcs each robot may take instead, best first, NaN where none.
+
+    Returns:
+        ``(v, choice)``: (R,) ``v`` with the robots that stop set to 0, and (R,) what each robot
+        does: -1 its arc (or standing), -2 stops, ``k`` its detour ``k``.
     """
     arcs = np.array(arcs, float)
     v = np.array(v, float)
+    choice = np.full(len(arcs), -1)
     standing = np.repeat(arcs[:, :1], arcs.shape[1], axis=1)
     decided = np.zeros(len(arcs), bool)
     order = np.asarray(order, np.intp)
@@ -287,17 +296,56 @@ def give_way(arcs: np.ndarray, v: np.ndarray, order: np.ndarray, contact: float)
     listed[order] = True
     v[~listed] = 0.0
     arcs[~listed] = standing[~listed]
+
+    def meets(arc: np.ndarray, others: np.ndarray, paths: np.ndarray) -> bool:
+        if not len(others):
+            return False
+        d = np.hypot(*(paths - arc[None]).transpose(2, 0, 1))                           # (k, S + 1)
+        bar = np.minimum(contact, d[:, 0] - 1e-9)
+        return bool((d[:, 1:] < bar[:, None]).any())
+
     for k in order.tolist():
         others = np.flatnonzero(listed & (np.arange(len(arcs)) != k))
         paths = np.where(decided[others, None, None], arcs[others], standing[others])
-        if v[k] != 0 and len(others):
-            d = np.hypot(*(paths - arcs[k][None]).transpose(2, 0, 1))                   # (k, S + 1)
-            bar = np.minimum(contact, d[:, 0] - 1e-9)
-            if (d[:, 1:] < bar[:, None]).any():
-                v[k] = 0.0
-                arcs[k] = standing[k]
+        if v[k] != 0 and meets(arcs[k], others, paths):
+            v[k] = 0.0
+            arcs[k] = standing[k]
+            choice[k] = -2
+            for j, detour in enumerate(detours[k] if detours is not None else ()):
+                if np.isfinite(detour).all() and not meets(detour, others, paths):
+                    arcs[k] = detour
+                    choice[k] = j
+                    break
         decided[k] = True
-    return v
+    return v, choice
+
+
+DETOURS = np.array([[0.5, 0.5], [0.5, -0.5], [0.5, 1.0], [0.5, -1.0], [-1.0, 0.0]])
+"""The detours a unicycle that must give way tries (:func:`give_way`), as shares of its limits
+(:meth:`~apf_physics.kinematics.UnicycleLimits.from_unit`): half speed turning 45° or 90° either
+way, or straight back at the top reverse speed."""
+
+
+def detour_arcs(states: np.ndarray, arcs: np.ndarray, limits: UnicycleLimits, where: Moment,
+                samples: int = CHECK_SAMPLES) -> tuple[np.ndarray, np.ndarray]:
+    """:data:`DETOURS` of each robot, within its limits (against its last command), best first (ending
+    nearest where its own arc ends), NaN where one comes nearer than ``robot_radius + SAFETY`` to an
+    obstacle or the map's edge at ``where``.
+
+    Returns:
+        ``(detours (R, K, S + 1, 2), commands (R, K, 2))`` for :func:`give_way`.
+    """
+    states = np.asarray(states, float).reshape(-1, 5)
+    n, k = len(states), len(DETOURS)
+    v, omega = limits.from_unit(np.tile(DETOURS, (n, 1)))
+    v, omega = limits.clamp(v, omega, np.repeat(states[:, 3], k), np.repeat(states[:, 4], k))
+    paths = arc_points(np.repeat(states, k, axis=0), v, omega, samples).reshape(n, k, samples + 1, 2)
+    clear = where.clearance(paths.reshape(-1, 2)).reshape(n, k, -1).min(axis=2)
+    paths = np.where((clear >= where.world.robot_radius + SAFETY)[..., None, None], paths, np.nan)
+    miss = np.hypot(*(np.nan_to_num(paths[:, :, -1], nan=1e9) - arcs[:, None, -1]).transpose(2, 0, 1))
+    best = np.argsort(miss, axis=1, kind="stable")
+    rows = np.arange(n)[:, None]
+    return paths[rows, best], np.stack([v.reshape(n, k), omega.reshape(n, k)], axis=-1)[rows, best]
 
 
 def slot_points(leader: np.ndarray, offsets: np.ndarray) -> np.ndarray:
