@@ -461,8 +461,14 @@ def crowd_unicycle_commands(crowd: FormationCrowd, states: np.ndarray, leader_mo
     order = sorted(range(count), key=lambda f: (crowd.first_until[f] < step, f))
     robots = np.array([f * m + r for f in order for r in range(crowd.sizes[f])], np.intp)
     contact = 2 * crowd.world.robot_radius + SAFETY
-    detours, detour_commands = detour_arcs(flat_states, arcs, limits, crowd.world.at(step))
-    flat[:, 0], choice = give_way(arcs, flat[:, 0], robots, contact, detours)
+    now = crowd.world.at(step)
+    detours, detour_commands = detour_arcs(flat_states, arcs, limits, now)
+    # a robot pushed off its planner's path (a detour) may be given a move that nears an obstacle:
+    # none comes nearer than the planners' margin, or than it already is
+    clear = now.clearance(arcs.reshape(-1, 2)).reshape(len(arcs), -1)
+    blocked = (clear[:, 1:].min(axis=1) < np.minimum(now.world.robot_radius + SAFETY, clear[:, 0] - 1e-9)) \
+        & (flat[:, 0] != 0)
+    flat[:, 0], choice = give_way(arcs, flat[:, 0], robots, contact, detours, blocked)
     took = np.flatnonzero(choice >= 0)
     flat[took] = detour_commands[took, choice[took]]
     return flat.reshape(count, m, 2)

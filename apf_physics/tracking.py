@@ -263,7 +263,7 @@ class PathFollower:
 
 
 def give_way(arcs: np.ndarray, v: np.ndarray, order: np.ndarray, contact: float,
-             detours: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+             detours: np.ndarray | None = None, blocked: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Which robots keep their arc, take a detour, or stop, decided one robot at a time in ``order``.
 
     Each robot keeps its arc when at every sampled moment it stays ``contact`` (centre to centre)
@@ -281,6 +281,8 @@ def give_way(arcs: np.ndarray, v: np.ndarray, order: np.ndarray, contact: float,
         order: Robot indices, highest priority first.
         contact: The least centre distance.
         detours: (R, K, S + 1, 2) other arcs each robot may take instead, best first, NaN where none.
+        blocked: (R,) bool, robots whose own arc is not to be driven (it nears an obstacle): they
+            take a detour or stop as if it met another robot.
 
     Returns:
         ``(v, choice)``: (R,) ``v`` with the robots that stop set to 0, and (R,) what each robot
@@ -307,7 +309,7 @@ def give_way(arcs: np.ndarray, v: np.ndarray, order: np.ndarray, contact: float,
     for k in order.tolist():
         others = np.flatnonzero(listed & (np.arange(len(arcs)) != k))
         paths = np.where(decided[others, None, None], arcs[others], standing[others])
-        if v[k] != 0 and meets(arcs[k], others, paths):
+        if v[k] != 0 and ((blocked is not None and blocked[k]) or meets(arcs[k], others, paths)):
             v[k] = 0.0
             arcs[k] = standing[k]
             choice[k] = -2
