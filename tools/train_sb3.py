@@ -301,8 +301,10 @@ def main(argv=None) -> None:
     parser.add_argument("--observation", choices=("window", "lidar", "window+lidar"), default="lidar")
     parser.add_argument("--beams", type=int, default=64, help="lidar beams (default 64)")
     parser.add_argument("--max-range", type=float, default=8.0, help="lidar range (default 8)")
-    parser.add_argument("--reward", default="thesis-general", help="reward preset (default thesis-general)")
-    parser.add_argument("--reward-scale", type=float, default=1.0, help="multiply rewards by this (default 1)")
+    parser.add_argument("--reward", default="general",
+                        help="reward preset of apf_physics/envs/reward.py (default general: Table 3's weights and "
+                             "the revisit and length terms; thesis-fixed lets SAC learn to circle in a well)")
+    parser.add_argument("--reward-scale", type=float, default=0.01, help="multiply rewards by this (default 0.01)")
     parser.add_argument("--minutes", type=float, default=20.0, help="wall-clock training budget (default 20)")
     parser.add_argument("--steps", type=int, default=10**9, help="env-step budget (default: the clock's)")
     parser.add_argument("--seed", type=int, default=0)
@@ -313,7 +315,7 @@ def main(argv=None) -> None:
     parser.add_argument("--stochastic-too", action="store_true",
                         help="also evaluate the stochastic policy (sampled actions) on the same starts")
     parser.add_argument("--checkpoint-minutes", type=float, default=2.0)
-    parser.add_argument("--envs", type=int, default=8, help="env copies (default 8)")
+    parser.add_argument("--envs", type=int, default=16, help="env copies (default 16)")
     parser.add_argument("--vector", choices=("apf", "dummy"), default="apf",
                         help="apf: NavigateVectorEnv (one batch) adapted to SB3 (default); dummy: SB3's DummyVecEnv "
                              "of Navigate-v0 copies")
@@ -325,7 +327,7 @@ def main(argv=None) -> None:
     parser.add_argument("--batch", type=int, default=256)
     parser.add_argument("--buffer", type=int, default=300_000)
     parser.add_argument("--learning-starts", type=int, default=2000)
-    parser.add_argument("--gradient-steps", type=int, default=2, help="SAC updates per vector step (default 2)")
+    parser.add_argument("--gradient-steps", type=int, default=4, help="SAC updates per vector step (default 4)")
     parser.add_argument("--n-steps", type=int, default=256, help="PPO rollout per env (default 256)")
     parser.add_argument("--ent-coef", type=float, default=0.01, help="PPO entropy bonus (default 0.01)")
     args = parser.parse_args(argv)
