@@ -396,11 +396,26 @@ class UnicycleFollowers:
     def leader_cap(self, states: np.ndarray) -> float:
         """The leader's top speed this step [units/step] so that its followers keep up: full speed
         while every link is at least :data:`LINK_MARGIN` + 1 within the communication range, down
-        to 0 at :data:`LINK_MARGIN` within it (a unicycle follower turning on the spot falls behind)."""
+        to 0 at :data:`LINK_MARGIN` within it (a unicycle follower turning on the spot falls behind).
+
+        Except when every follower is within :data:`SETTLED` of where the rule pulls it (its
+        anchor): the rule moves a follower by unit moves only, so it would not move before the
+        leader does, and a formation whose links are long by design (an offsets slot 2 back with a
+        range of 3) would wait for ever; then the leader may go :data:`SETTLED`, as long as
+        every link stays :data:`SETTLED` / 2 within the range."""
         states = np.asarray(states, float).reshape(-1, 5)
-        links = link_lengths(states[:, :2], self.controller.spec.followed)
-        room = self.controller.spec.comm_range - LINK_MARGIN - float(links.max(initial=0.0))
-        return float(np.clip(room, 0.0, self.limits.max_speed))
+        spec = self.controller.spec
+        links = link_lengths(states[:, :2], spec.followed)
+        longest = float(links.max(initial=0.0))
+        room = float(np.clip(spec.comm_range - LINK_MARGIN - longest, 0.0, self.limits.max_speed))
+        if room < self.SETTLED and len(links):
+            anchors = self.controller.anchors(states[:, :2], self.controller.heading)
+            if np.hypot(*(states[1:, :2] - anchors).T).max() < self.SETTLED:
+                room = max(room, float(np.clip(spec.comm_range - self.SETTLED / 2 - longest, 0.0, self.SETTLED)))
+        return room
+
+    SETTLED = 0.5
+    """:meth:`leader_cap`: a follower this near its anchor [units] is where the rule wants it."""
 
     def waypoints(self, states: np.ndarray, leader_v: float, leader_omega: float) -> np.ndarray:
         """(F, 2) where each follower should be after this step (advances the rule's trails)."""
