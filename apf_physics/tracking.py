@@ -424,6 +424,30 @@ class UnicycleFollowers:
         moves = self.controller.act(states[:, :2], leader_move)
         return states[1:, :2] + moves
 
+    def _close_in(self, states: np.ndarray, waypoints: np.ndarray, leader_v: float, leader_omega: float) -> np.ndarray:
+        """(F, 2) ``waypoints`` with each follower that the rule keeps where it is sent instead to
+        its anchor when that is less than a unit away and in clear sight (``robot_radius + SAFETY``
+        along the way): the rule's unit moves overshoot an anchor that near, so the follower would
+        not move, and a leader waiting for it (:meth:`leader_cap`) would wait for ever; a unicycle
+        can drive part of a unit."""
+        positions = states[:, :2]
+        staying = np.hypot(*(waypoints - positions[1:]).T) < ARRIVE
+        if not staying.any():
+            return waypoints
+        ahead = np.vstack([positions[:1] + arc_displacement(states[0, 2], leader_v, leader_omega), waypoints])
+        anchors = self.controller.anchors(ahead, self.controller.heading)
+        gap = np.hypot(*(anchors - positions[1:]).T)
+        near = np.flatnonzero(staying & (gap > ARRIVE) & (gap < 1.0))
+        if not len(near):
+            return waypoints
+        world = self.controller.world
+        sight = world.path_clearance(positions[1:][near], anchors[near], 0.1)
+        now = world.clearance(positions[1:][near])
+        ok = near[sight >= np.minimum(world.robot_radius + SAFETY, now)]
+        waypoints = waypoints.copy()
+        waypoints[ok] = anchors[ok]
+        return waypoints
+
     def commands(self, states: np.ndarray, leader_v: float, leader_omega: float) -> tuple[np.ndarray, np.ndarray]:
         """``(v, ω)`` (F,), (F,) of the followers this step, given the leader's command.
 
@@ -484,11 +508,12 @@ class UnicycleFollowers:
         followers, is checked too: when its arc comes within contact of a follower's (a follower
         turning on the spot, or stopped), the leader only turns this step and the followers are
         checked again against it standing. So no two robots' arcs come within contact at the
-        same moment (at :data:`CHECK_SAMPLES` points of the step).
+        same moment (at :data:`CHECK_SAMPLES` points of the step). A follower the rule keeps where
+        it is while its anchor is less than a unit away drives to the anchor (:meth:`_close_in`).
         """
         states = np.asarray(states, float).reshape(-1, 5)
-        v, omega = pursue(states[1:], self.waypoints(states, leader_v, leader_omega), self.limits,
-                          self.turn_in_place)
+        waypoints = self._close_in(states, self.waypoints(states, leader_v, leader_omega), leader_v, leader_omega)
+        v, omega = pursue(states[1:], waypoints, self.limits, self.turn_in_place)
         v_all = np.concatenate([[float(leader_v)], v])
         omega_all = np.concatenate([[float(leader_omega)], omega])
         arcs = arc_points(states, v_all, omega_all, CHECK_SAMPLES)
