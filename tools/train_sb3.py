@@ -240,13 +240,19 @@ def train(args) -> Path:
     return model_path
 
 
-def run_episode(env, model, options: dict | None = None, seed: int | None = None, deterministic: bool = True) -> str:
-    obs, _ = env.reset(seed=seed, options=options)
+def run_episode(env, model, options: dict | None = None, seed: int | None = None,
+                deterministic: bool = True) -> tuple[str, int, float]:
+    """``(outcome, steps, path length)`` of one episode."""
+    obs, info = env.reset(seed=seed, options=options)
+    steps, length, position = 0, 0.0, info["position"]
     while True:
         action, _ = model.predict(obs, deterministic=deterministic)
         obs, _, terminated, truncated, info = env.step(action)
+        steps += 1
+        length += float(np.hypot(*(info["position"] - position)))
+        position = info["position"]
         if terminated or truncated:
-            return "success" if info["success"] else "collision" if info["collision"] else "timeout"
+            return ("success" if info["success"] else "collision" if info["collision"] else "timeout"), steps, length
 
 
 def random_start_outcomes(args, model, deterministic: bool = True) -> dict:
@@ -274,20 +280,28 @@ def evaluate(args, model_path: str) -> dict:
     for deterministic in (True, False) if args.stochastic_too else (True,):
         policy = "" if deterministic else " (stochastic)"
         counts = dict.fromkeys(("success", "collision", "timeout"), 0)
-        per_start = []
+        per_start, steps, lengths = [], [], []
         for i in range(len(world.starts)):
-            outcome = run_episode(env, model, options={"start": i}, seed=args.eval_seed if i == 0 else None,
-                                  deterministic=deterministic)
+            outcome, n, length = run_episode(env, model, options={"start": i},
+                                             seed=args.eval_seed if i == 0 else None, deterministic=deterministic)
             counts[outcome] += 1
             per_start.append(outcome)
-        results["world starts" + policy] = dict(episodes=len(world.starts), **counts, outcomes=per_start)
+            if outcome == "success":
+                steps.append(n)
+                lengths.append(length)
+        results["world starts" + policy] = dict(
+            episodes=len(world.starts), **counts, outcomes=per_start,
+            mean_steps=round(float(np.mean(steps)), 2) if steps else None,
+            mean_length=round(float(np.mean(lengths)), 2) if lengths else None)
         counts = random_start_outcomes(args, model, deterministic)
         results[f"random starts (seed {args.eval_seed}+i)" + policy] = dict(episodes=args.random_starts, **counts)
     print(f"evaluation of {model_path} ({args.world}, {args.kinematics}, {args.action}, "
           f"{args.observation}, step limit 100)")
     for name, r in results.items():
+        means = (f"  (successes: {r['mean_steps']} steps, path {r['mean_length']} on average)"
+                 if r.get("mean_steps") else "")
         print(f"  {name:<42} {r['episodes']:>4} episodes: success {r['success']:>4}  "
-              f"collision {r['collision']:>4}  timeout {r['timeout']:>4}")
+              f"collision {r['collision']:>4}  timeout {r['timeout']:>4}{means}")
     return results
 
 
