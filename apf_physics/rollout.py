@@ -342,14 +342,14 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
     the obstacles, and the other formations' robots as discs where they stand); followers
     follow; every move gets the right of way of :class:`~apf_physics.formation.FormationCrowd`.
 
-    Returns:
-        One episode per formation, in the world's order (:attr:`FormationRecord.crowd` names the world).
-
     Unicycles (``unicycle``, default the world file's robot kind): each leader's move is driven
     by :func:`~apf_physics.tracking.track_safely` in its own field, its followers by
     :meth:`~apf_physics.tracking.UnicycleFollowers.drive`; then every robot of every formation
-    gives way (:func:`~apf_physics.tracking.give_way`, in the crowd's order: a deadlocked
-    formation first) so that no two robots' arcs meet.
+    gives way (:func:`crowd_unicycle_commands`: a detour, else a stop, in the crowd's order, a
+    deadlocked formation first) so that no two robots' arcs meet.
+
+    Returns:
+        One episode per formation, in the world's order (:attr:`FormationRecord.crowd` names the world).
     """
     crowd = FormationCrowd(world)
     count, m = crowd.count, crowd.robots
