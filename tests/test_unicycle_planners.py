@@ -172,3 +172,16 @@ def test_several_formations_of_unicycles_cross_without_touching():
         together = np.concatenate([e.formation.positions[-1] for e in episodes])
         assert np.hypot(*(together[:, None] - together[None]).transpose(2, 0, 1))[~np.eye(4, dtype=bool)].min() \
             >= 2 * world.robot_radius
+
+
+def test_render_draws_several_formations_of_unicycles(tmp_path, capsys):
+    world = {"name": "cross", "size": [16, 16], "field": "thesis-general",
+             "obstacles": [{"circle": {"center": [8, 8], "radius": 1}}],
+             "formations": [{"start": [2, 2], "target": [13, 13], "followers": 1, "shape": "line"},
+                            {"start": [13, 2], "target": [2, 13], "followers": 1, "shape": "line"}]}
+    path = tmp_path / "cross.yaml"
+    path.write_text(json.dumps(world))
+    video = tmp_path / "cross.avi"
+    assert main(["render", str(path), "--formation", "--planner", "astar", "--kinematics", "unicycle",
+                 "--out", str(video), "--size", "96", "--hold", "0", "--no-progress"]) == 0
+    assert video.stat().st_size > 0 and "reached 2" in capsys.readouterr().out

@@ -137,8 +137,10 @@ def write_headed_video(world, episodes: Sequence, out: str | Path, png: str | Pa
 def clip_headings(members: Sequence, trajectory: np.ndarray) -> np.ndarray:
     """(T, R) the headings of a clip's robots (the episodes of :func:`clip_members`), matching its trajectory."""
     formations = [e.formation for e in members if e.formation is not None]
-    if formations:
-        headings = np.concatenate([f.headings for f in formations], axis=1)
+    if formations:   # several formations in one clip: each held at its last headings, as their positions
+        steps = len(trajectory)
+        headings = np.concatenate([np.concatenate([f.headings, np.repeat(f.headings[-1:], steps - len(f.headings), axis=0)])
+                                   for f in formations], axis=1)
     else:
         headings = stack_headings([e.headings for e in members])
     return headings.reshape(len(trajectory), -1)
