@@ -416,8 +416,10 @@ class FieldImage:
             cv2.circle(image, c, r, colour, ring, cv2.LINE_AA, _SHIFT)
 
     def draw_headings(self, image: np.ndarray, centres: np.ndarray, headings: np.ndarray) -> None:
-        """Draw each robot's heading onto ``image`` in place: a dark line from its centre to its rim."""
-        tips = centres + self.robot_radius * np.column_stack([np.cos(headings), np.sin(headings)])
+        """Draw each robot's heading onto ``image`` in place: a dark line from its centre to the rim
+        of its disc as drawn (``robot_radius`` is in pixels: the tip is that far in world units)."""
+        reach = self.robot_radius / self.scale
+        tips = centres + reach * np.column_stack([np.cos(headings), np.sin(headings)])
         for a, b in zip(self._fixed(centres), self._fixed(tips)):
             cv2.line(image, tuple(int(v) for v in a), tuple(int(v) for v in b), (20, 20, 20),
                      max(1, self.line_width), cv2.LINE_AA, _SHIFT)

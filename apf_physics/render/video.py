@@ -22,7 +22,7 @@ prints nothing.
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterable, Iterator, Sequence
@@ -32,7 +32,6 @@ import numpy as np
 from tqdm import tqdm
 
 from apf_physics.errors import UserError
-from apf_physics.kinematics import heading_vectors
 from apf_physics.render.drawing import FieldImage, Snapshot, TrailLayer, draw_frame, field_image
 from apf_physics.safefile import Replacement, check_writable, write_bytes
 
@@ -438,37 +437,14 @@ def render_trajectory(
     for snapshot in trajectory_snapshots(trajectory, roles, overlay=overlay, final_overlay=final_overlay,
                                          trails=False, hold=hold, families=families, events=events,
                                          headings=headings):
-        # the headings are drawn here (draw_heading_lines), not by the drawing module's
-        drawn = snapshot if snapshot.headings is None else replace(snapshot, headings=None)
         if not trails:
-            frame = draw_frame(image, drawn)
+            frame = draw_frame(image, snapshot)
         else:
             if layer is None:
                 layer = TrailLayer(image, snapshot.roles, snapshot.families)
             layer.extend(snapshot.positions)
-            frame = layer.frame(drawn)
-        if snapshot.headings is not None:
-            draw_heading_lines(image, frame, snapshot.positions, snapshot.headings)
+            frame = layer.frame(snapshot)
         yield frame
-
-
-HEADING_COLOUR = (20, 20, 20)
-"""RGB of the line that shows a unicycle's heading."""
-
-
-def draw_heading_lines(image: FieldImage, frame: np.ndarray, centres: np.ndarray, headings: np.ndarray) -> None:
-    """Draw each robot's heading onto ``frame`` in place: a dark line from its centre to its disc's rim.
-
-    (``FieldImage.draw_headings`` adds the radius in pixels to world coordinates, which draws
-    lines several units long; this converts it to world units first.)
-    """
-    centres = np.asarray(centres, float).reshape(-1, 2)
-    reach = image.robot_radius / image.scale                             # the disc's radius drawn, in world units
-    tips = centres + reach * heading_vectors(np.asarray(headings, float).reshape(-1))
-    shift = 4
-    for a, b in zip(image.to_pixels(centres), image.to_pixels(tips)):
-        a, b = (tuple(int(v) for v in np.round((p - 0.5) * (1 << shift))) for p in (a, b))
-        cv2.line(frame, a, b, HEADING_COLOUR, max(1, image.line_width), cv2.LINE_AA, shift)
 
 
 def stack_headings(headings: Sequence[np.ndarray]) -> np.ndarray:
