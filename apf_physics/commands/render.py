@@ -4,18 +4,12 @@ from __future__ import annotations
 
 import argparse
 from collections import Counter
-from pathlib import Path
-from typing import Iterator, Sequence
-
-import numpy as np
 
 from apf_physics.errors import UserError
 from apf_physics.planners import make_planner
-from apf_physics.render.drawing import FieldImage
-from apf_physics.render.episodes import clip_members, collision_events, episode_clips, write_episode_video
+from apf_physics.render.episodes import write_episode_video
 from apf_physics.safefile import check_writable
-from apf_physics.render.video import (VIDEO_EXTENSIONS, choose_codec, render_trajectory, stack_headings, write_png,
-                                      write_video)
+from apf_physics.render.video import VIDEO_EXTENSIONS, choose_codec
 from apf_physics.rollout import KINEMATICS, kinematics_option, rollout, rollout_formations
 from apf_physics.worldfile import load_world
 
@@ -91,8 +85,7 @@ def run(args: argparse.Namespace) -> int:
         episodes = rollout(world, planner, starts, max_steps=args.max_steps, formation=bool(args.formation),
                            unicycle=unicycle)
 
-    write = write_headed_video if any(e.headings is not None for e in episodes) else write_episode_video
-    written = write(world, episodes, out, png=png, fps=args.fps, size=args.size, hold=args.hold,
+    written = write_episode_video(world, episodes, out, png=png, fps=args.fps, size=args.size, hold=args.hold,
                                   overlay=(f"world {world.name}", f"planner {args.planner}"),
                                   formation=bool(args.formation),
                                   start_index=None if args.all_starts else args.start,
@@ -105,42 +98,3 @@ def run(args: argparse.Namespace) -> int:
           + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) + ")"
           + (f" and {png}" if png is not None else ""))
     return 0
-
-
-def write_headed_video(world, episodes: Sequence, out: str | Path, png: str | Path | None = None, fps: float = 10.0,
-                       size: int = 512, hold: float = 1.0, overlay: tuple[str, ...] = (), formation: bool = False,
-                       start_index: int | None = None, codec: str | None = None, progress: bool = True) -> int:
-    """:func:`~apf_physics.render.episodes.write_episode_video` for unicycles' episodes: the same
-    clips, each robot drawn with its heading (:attr:`Episode.headings`,
-    :attr:`FormationRecord.headings`). Returns the number of frames written."""
-    image = FieldImage.from_world(world, size)
-    hold_frames = max(0, int(round(hold * fps)))
-    clips = list(zip(episode_clips(episodes, overlay, formation, start_index), clip_members(episodes, formation)))
-    total = sum(len(clip[0]) + hold_frames for clip, _ in clips)
-    last: list[np.ndarray] = []
-
-    def frames() -> Iterator[np.ndarray]:
-        frame = None
-        for (trajectory, roles, lines, final, families), members in clips:
-            for frame in render_trajectory(world, trajectory, roles, overlay=lines, final_overlay=final,
-                                           families=families, hold=hold_frames, image=image,
-                                           events=collision_events(members), headings=clip_headings(members, trajectory)):
-                yield frame
-        last.append(frame)
-
-    written = write_video(frames(), out, fps, codec=codec, progress=progress, total=total)
-    if png is not None:
-        write_png(last[-1], png)
-    return written
-
-
-def clip_headings(members: Sequence, trajectory: np.ndarray) -> np.ndarray:
-    """(T, R) the headings of a clip's robots (the episodes of :func:`clip_members`), matching its trajectory."""
-    formations = [e.formation for e in members if e.formation is not None]
-    if formations:   # several formations in one clip: each held at its last headings, as their positions
-        steps = len(trajectory)
-        headings = np.concatenate([np.concatenate([f.headings, np.repeat(f.headings[-1:], steps - len(f.headings), axis=0)])
-                                   for f in formations], axis=1)
-    else:
-        headings = stack_headings([e.headings for e in members])
-    return headings.reshape(len(trajectory), -1)

@@ -9,7 +9,7 @@ from typing import Iterator, Sequence
 import numpy as np
 
 from apf_physics.render.drawing import FieldImage, formation_roles
-from apf_physics.render.video import render_trajectory, stack_paths, write_png, write_video
+from apf_physics.render.video import render_trajectory, stack_headings, stack_paths, write_png, write_video
 
 
 def write_episode_video(world, episodes: Sequence, out: str | Path, png: str | Path | None = None, fps: float = 10.0,
@@ -20,7 +20,8 @@ def write_episode_video(world, episodes: Sequence, out: str | Path, png: str | P
     Single robots from several starts share one clip (all move at once); each formation
     episode is a clip of its own. ``codec`` is a name from
     :data:`~apf_physics.render.video.CODECS` (default: the extension's); ``progress`` shows
-    a bar of frames on stderr when it is a terminal. Returns the number of frames written.
+    a bar of frames on stderr when it is a terminal. Unicycles' episodes (with ``headings``)
+    draw each robot's heading. Returns the number of frames written.
     """
     image = FieldImage.from_world(world, size)
     hold_frames = max(0, int(round(hold * fps)))
@@ -32,7 +33,8 @@ def write_episode_video(world, episodes: Sequence, out: str | Path, png: str | P
         frame = None
         for (trajectory, roles, lines, final, families), members in clips:
             for frame in render_trajectory(world, trajectory, roles, overlay=lines, final_overlay=final, families=families,
-                                           hold=hold_frames, image=image, events=collision_events(members)):
+                                           hold=hold_frames, image=image, events=collision_events(members),
+                                           headings=clip_headings(members, trajectory)):
                 yield frame
         last.append(frame)
 
@@ -94,6 +96,21 @@ def clip_members(episodes: Sequence, formation: bool) -> list[list]:
     if not formation and all(p.ndim == 2 for p in paths):
         return [list(episodes)]
     return [[episode] for episode in episodes]
+
+
+def clip_headings(members: Sequence, trajectory: np.ndarray) -> np.ndarray | None:
+    """(T, R) the headings of a clip's robots (the episodes of :func:`clip_members`), matching its
+    trajectory; None for holonomic robots (no headings)."""
+    if any(e.headings is None for e in members):
+        return None
+    formations = [e.formation for e in members if e.formation is not None]
+    if formations:   # formations: each held at its last headings, as their positions
+        steps = len(trajectory)
+        headings = np.concatenate([np.concatenate([f.headings, np.repeat(f.headings[-1:], steps - len(f.headings), axis=0)])
+                                   for f in formations], axis=1)
+    else:
+        headings = stack_headings([e.headings for e in members])
+    return headings.reshape(len(trajectory), -1)
 
 
 def _crowds(episodes: Sequence) -> dict[str, list]:
