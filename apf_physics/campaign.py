@@ -179,7 +179,8 @@ def _model_copy(data: bytes, name: str) -> Path:
 
 def evaluate_batch(planners: Sequence[str], worlds: Sequence[World], starts: Optional[dict[str, np.ndarray]],
                    max_steps: Optional[int], formation: bool, model: Optional[str] = None,
-                   model_bytes: Optional[bytes] = None) -> dict[str, tuple[str, list[list[Episode]], float]]:
+                   model_bytes: Optional[bytes] = None,
+                   kinematics: Optional[str] = None) -> dict[str, tuple[str, list[list[Episode]], float]]:
     """One task: every planner on some worlds, as :func:`~apf_physics.evaluate.evaluate` runs it (on a Ray worker).
 
     Args:
@@ -191,6 +192,7 @@ def evaluate_batch(planners: Sequence[str], worlds: Sequence[World], starts: Opt
         model: The model file of the learned planners, as the user named it.
         model_bytes: Its contents, shipped to the worker (a cluster's nodes need not share files);
             None: ``model`` is opened where the task runs.
+        kinematics: The robot kind (None: each world file's).
 
     Returns:
         Per planner: the evaluation's label, each world's episodes, and the CPU seconds taken.
@@ -205,7 +207,7 @@ def evaluate_batch(planners: Sequence[str], worlds: Sequence[World], starts: Opt
             made = make_planner(name, model=model if local is None else str(local))
             label, episodes = made.name + ("+formation" if formation else ""), []
             for world in worlds:   # one planner through the worlds in turn, as evaluate() runs it
-                ev = evaluate(made, [world], starts, max_steps=max_steps, formation=formation)
+                ev = evaluate(made, [world], starts, max_steps=max_steps, formation=formation, kinematics=kinematics)
                 label = ev.planner
                 episodes.append(ev.episodes)
             out[name] = (label, episodes, time.process_time() - cpu)
@@ -228,7 +230,8 @@ def _timed_batch(*args) -> tuple[dict, float, float, str, int]:
 def evaluate_on_ray(planners: Sequence[str], worlds: Sequence[World], starts: Optional[dict[str, np.ndarray]] = None,
                     model: Optional[str] = None, max_steps: Optional[int] = None, formation: bool = False,
                     address: Optional[str] = None, worlds_per_task: Optional[int] = None,
-                    num_cpus: Optional[int] = None, timings: Optional[list[TaskTiming]] = None) -> list[Evaluation]:
+                    num_cpus: Optional[int] = None, timings: Optional[list[TaskTiming]] = None,
+                    kinematics: Optional[str] = None) -> list[Evaluation]:
     """Evaluate several planners over worlds as Ray tasks: the same evaluations as a local run.
 
     Args:
@@ -242,6 +245,7 @@ def evaluate_on_ray(planners: Sequence[str], worlds: Sequence[World], starts: Op
         worlds_per_task: Worlds per task (default: :func:`task_count`'s rule).
         num_cpus: CPUs of a local Ray started for the run (default: all).
         timings: A list to append a :class:`TaskTiming` per task to.
+        kinematics: The robot kind (None: each world file's).
 
     Returns:
         One :class:`~apf_physics.evaluate.Evaluation` per planner, in order, as
@@ -272,7 +276,7 @@ def evaluate_on_ray(planners: Sequence[str], worlds: Sequence[World], starts: Op
         for part in parts:
             chosen = [worlds[i] for i in part]
             mine = None if starts is None else {w.name: starts[w.name] for w in chosen}
-            futures.append(task.remote(names, chosen, mine, max_steps, formation, model, shipped))
+            futures.append(task.remote(names, chosen, mine, max_steps, formation, model, shipped, kinematics))
         try:
             results = ray.get(futures)
         except ray.exceptions.RayTaskError as exc:

@@ -199,3 +199,11 @@ def test_a_map_preset_sweep_trains_the_map_network(local_ray, tmp_path):
     best = json.loads((tmp_path / "sweep" / "best.json").read_text())
     assert best["config"]["method"] == "imitation" and best["config"]["preset"] == "map"
     assert isinstance(load_policy(tmp_path / "sweep" / "best.pt"), MapPolicy)
+
+
+def test_eval_on_ray_drives_unicycles_as_the_local_run_does(local_ray):
+    worlds = [load_world("local_minimum"), load_world("three_targets")]
+    (on_ray,) = evaluate_on_ray(["gradient"], worlds, kinematics="unicycle", worlds_per_task=1)
+    local = evaluate(make_planner("gradient"), worlds, kinematics="unicycle")
+    assert [e.to_dict() for e in on_ray.episodes] == [e.to_dict() for e in local.episodes]
+    assert all(e.headings is not None for e in on_ray.episodes)

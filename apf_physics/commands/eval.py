@@ -141,8 +141,6 @@ def run(args: argparse.Namespace) -> int:
     kinematics_option(args.kinematics)   # a clear error for an unknown kind, before any work
     if args.kinematics is not None and args.scen is not None:
         raise UserError("--kinematics: not with --scen (MovingAI scenarios run holonomic robots)")
-    if args.kinematics is not None and args.ray is not None:
-        raise UserError("--kinematics: not with --ray yet (run without --ray)")
     if args.scen is not None:
         return run_scenarios(args)
     for flag in ("buckets", "limit"):
@@ -165,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
     if args.ray is not None:
         evaluations = evaluate_on_ray(names, worlds, starts, model=args.model, max_steps=args.max_steps,
                                       formation=args.formation, address=args.ray or None,
-                                      worlds_per_task=args.ray_batch)
+                                      worlds_per_task=args.ray_batch, kinematics=args.kinematics)
     else:
         evaluations = []
         for name in names:
