@@ -293,8 +293,9 @@ def evaluate(args, model_path: str) -> dict:
             episodes=len(world.starts), **counts, outcomes=per_start,
             mean_steps=round(float(np.mean(steps)), 2) if steps else None,
             mean_length=round(float(np.mean(lengths)), 2) if lengths else None)
-        counts = random_start_outcomes(args, model, deterministic)
-        results[f"random starts (seed {args.eval_seed}+i)" + policy] = dict(episodes=args.random_starts, **counts)
+        if args.random_starts > 0:
+            counts = random_start_outcomes(args, model, deterministic)
+            results[f"random starts (seed {args.eval_seed}+i)" + policy] = dict(episodes=args.random_starts, **counts)
     print(f"evaluation of {model_path} ({args.world}, {args.kinematics}, {args.action}, "
           f"{args.observation}, step limit 100)")
     for name, r in results.items():
