@@ -1,4 +1,4 @@
-"""A range sensor: K beams cast from many robots at once against everything a robot can meet (issue 27).
+"""A range sensor: K beams cast from many robots at once against everything a robot can meet.
 
 A robot at pose ``(x, y, θ)`` casts :attr:`LidarConfig.beams` rays over its field of view and
 reads, per beam, the distance from its **centre** to the first thing the ray meets, or
