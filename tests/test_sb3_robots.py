@@ -3,6 +3,8 @@
 - SB3's ``check_env`` passes for every combination of action × kinematics × observation, with
   no warning but the ones SB3 gives every float window of shape (1, k, k) (it takes any 3-D
   ``Box`` for an image; ``MlpPolicy`` flattens it, ``CnnPolicy`` is not for these windows).
+- ``tools/train_sb3.py``'s ``SB3Vector`` (the vector env seen by SB3) steps as SB3's
+  ``DummyVecEnv`` of single envs does, to the last bit.
 - Observations stay inside the observation space over random episodes (SAC and PPO do not
   check it, and a lidar value outside the ``Box`` would go unnoticed).
 - SAC (continuous actions, lidar of 8 beams) and PPO (nine moves, the 5 × 5 potential window on
@@ -147,3 +149,40 @@ def test_ppo_learns_to_reach_the_target_with_the_window():
     before, after = before_and_after("ppo", SEED, PPO_STEPS)
     assert before <= UNTRAINED_AT_MOST, before
     assert after >= FLOOR, (before, after)
+
+
+def flat(observation):
+    """An observation (or a batch), a Dict's entries in key order, as one flat array."""
+    if isinstance(observation, dict):
+        return np.concatenate([np.ravel(observation[k]) for k in sorted(observation)])
+    return np.ravel(observation)
+
+
+@pytest.mark.parametrize("robot", [dict(action="discrete", observation="window"),
+                                   dict(action="continuous", kinematics="unicycle", observation="window+lidar",
+                                        lidar={"beams": 16})])
+def test_the_vector_env_seen_by_sb3_steps_as_sb3s_own_vector_of_single_envs(robot):
+    """``SB3Vector`` (one ``NavigateVectorEnv``, ended copies restarted in the same step) and SB3's
+    ``DummyVecEnv`` of ``Navigate-v0`` copies, seeded alike and given the same actions, return
+    the same observations, rewards, ends and final observations."""
+    from stable_baselines3.common.env_util import make_vec_env
+
+    kwargs = dict(world="fixed20", starts="random", **robot)
+    ours = train_sb3().SB3Vector(NavigateVectorEnv(num_envs=4, **kwargs))
+    theirs = make_vec_env("apf_physics/Navigate-v0", n_envs=4, env_kwargs=kwargs)
+    ours.seed(7)
+    theirs.seed(7)
+    ours.action_space.seed(0)
+    np.testing.assert_array_equal(flat(ours.reset()), flat(theirs.reset()))
+    ended = 0
+    for _ in range(150):
+        actions = np.stack([ours.action_space.sample() for _ in range(4)])
+        (a, ra, da, ia), (b, rb, db, ib) = ours.step(actions), theirs.step(actions)
+        np.testing.assert_array_equal(flat(a), flat(b))
+        np.testing.assert_allclose(ra, rb, rtol=1e-6)
+        np.testing.assert_array_equal(da, db)
+        for i in np.flatnonzero(da).tolist():
+            ended += 1
+            assert ia[i]["TimeLimit.truncated"] == ib[i].get("TimeLimit.truncated", False)
+            np.testing.assert_array_equal(flat(ia[i]["terminal_observation"]), flat(ib[i]["terminal_observation"]))
+    assert ended > 4
