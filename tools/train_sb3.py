@@ -9,15 +9,17 @@ Training: ``--envs`` copies of ``Navigate-v0`` in one :class:`NavigateVectorEnv`
 :class:`SB3Vector` (``--vector dummy``: SB3's ``make_vec_env``, a ``DummyVecEnv`` of single envs),
 random starts (``starts="random"``), the robot given by ``--action`` (default: continuous for SAC,
 discrete for PPO), ``--kinematics`` and ``--observation`` (lidar of ``--beams`` beams), the
-env's reward preset ``--reward`` (``apf_physics/envs/reward.py``) with every reward multiplied by
+env's reward preset ``--reward`` (``apf_physics/envs/reward.py``; default ``general``: on fixed20
+SAC learned with ``thesis-fixed`` to circle in a well, where W4 pays nothing) with every reward multiplied by
 ``--reward-scale`` (SB3 sees the scaled reward; the env's own reward is unchanged), for
 ``--minutes`` of wall clock (or ``--steps`` env steps, whichever comes first). The model is
 checkpointed to ``OUT/model.zip`` every ``--checkpoint-minutes`` and at the end, atomically
 (written beside it, then renamed), with ``OUT/run.json`` (the options, steps, time).
 
 Evaluation (also ``--eval-only MODEL``): the deterministic policy from each of the world's
-own starts (``reset(options={"start": i})``) and from ``--random-starts`` random free starts
-drawn from ``--eval-seed``; the step limit is the registration's (100, as in training).
+own starts (``reset(options={"start": i})``) and from ``--random-starts`` random free starts (the
+first episode of copy ``i`` of a vector env seeded ``eval_seed + i``: the start ``Navigate-v0``
+draws at ``reset(seed=eval_seed + i)``); the step limit is the registration's (100, as in training).
 Prints success / collision / timeout counts and writes them to ``OUT/eval.json``
 (``--stochastic-too``: also of the stochastic policy, actions sampled, on the same starts).
 """
