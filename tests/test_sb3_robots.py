@@ -131,10 +131,11 @@ def before_and_after(algo, seed, steps):
     return before, successes(model, algo)
 
 
-# Budgets and floors. Measured (successes of 30, untrained -> trained), seeds 0-4 (PPO 0-7):
-#   SAC 1,600 steps: 0->30, 3->30, 0->30, 3->30, 1->30  (1,600 steps with 2 updates per 8: ~300 updates)
-#   PPO 6,144 steps: 0->30, 0->30, 0->30, 3->30, 0->30  (at 4,096: 0->30, 0->30, 0->22, 3->26, 0->30,
-#   0->30, 2->29, 0->28). About 4-5 s of CPU each; the wall clock is what the machine's load makes it.
+# Budgets and floors. Measured (successes of 30, untrained -> trained), seeds 0-7:
+#   SAC 1,600 steps: 0->30, 3->30, 0->30, 3->30, 1->30, 0->30, 1->30, 3->30  (2 updates per 8 steps: ~300)
+#   PPO 6,144 steps: 0->30, 0->30, 0->30, 3->30, 0->30, 0->30, 2->30, 0->29  (at 4,096 steps, seeds 0-7:
+#   0->30, 0->30, 0->22, 3->26, 0->30, 0->30, 2->29, 0->28). About 3-6 s of CPU each; the wall clock is
+#   what the machine's load makes it (5-50 s at load averages 1-11 on 2 cores).
 SEED, FLOOR, UNTRAINED_AT_MOST = 0, 20, 10
 SAC_STEPS, PPO_STEPS = 1600, 6144
 
