@@ -258,6 +258,11 @@ class Raster:
                 + fy * ((1 - fx) * v[r0 + 1, c0] + fx * v[r0 + 1, c0 + 1]))
 
 
+SAMPLE_ROW = 512
+"""Points per row of the map :meth:`Atlas.sample` hands ``cv2.remap``: a column of N points (one
+per row) cost OpenCV 3–4 times as much as rows of 512 (its work is split by rows, and a row of
+one point is mostly overhead), and a map may not have 32,767 rows."""
+
 class Atlas:
     """Several rasters of one resolution packed into one float32 image, sampled in one call.
 
@@ -335,9 +340,14 @@ class Atlas:
         index = (points * self.resolution + self._shift[ids]).astype(np.float32)
         if not len(index):  # no points (e.g. a batch step where every slot is restarting): remap refuses empty maps
             return np.zeros(0 if offsets is None else (0, len(offsets)), np.float32)
-        if offsets is None:   # one two-channel map: (N, 1, 2)
-            return cv2.remap(self._image, index.reshape(-1, 1, 2), None, cv2.INTER_LINEAR,
-                             borderMode=cv2.BORDER_REPLICATE)[:, 0]
+        if offsets is None:   # one two-channel map, in rows of up to SAMPLE_ROW points
+            n = len(index)
+            width = min(n, SAMPLE_ROW)
+            rows = -(-n // width)
+            if rows * width != n:
+                index = np.concatenate([index, np.zeros((rows * width - n, 2), np.float32)])
+            return cv2.remap(self._image, index.reshape(rows, width, 2), None, cv2.INTER_LINEAR,
+                             borderMode=cv2.BORDER_REPLICATE).reshape(-1)[:n]
         # x and y maps apart: broadcasting over a last axis of 2 is several times slower
         scaled = self._scaled_offsets(offsets)
         map_x = index[:, 0:1] + scaled[0]

@@ -5,6 +5,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+import apf_physics
 from apf_physics import field as apf
 from apf_physics import world_from_dict
 from apf_physics.geometry import points_in_polygon
@@ -239,3 +240,19 @@ def test_raster_sample_clamps_points_outside_to_the_edge():
     np.testing.assert_allclose(raster.sample(outside), raster.sample(inside))
     # the edge's own values: row 1 at its ends, rows 0 and 2 halfway between columns 1 and 2, two corners
     np.testing.assert_allclose(raster.sample(inside), [16.0, 49.0, 2.5, 90.5, 0.0, 121.0])
+
+
+def test_point_samples_are_the_same_in_rows_as_in_a_column_and_beyond_remaps_row_limit():
+    # Atlas.sample hands remap rows of SAMPLE_ROW points (a column of one point per row is slower,
+    # and remap refuses 32,767 rows or more): the values are those of one point per row, exactly
+    import cv2
+    world = apf_physics.load_world("fixed20")
+    atlas = apf.Atlas(4)
+    i = atlas.add(world.raster(resolution=4))
+    points = np.random.default_rng(0).random((40_001, 2)) * 22 - 1
+    got = atlas.sample(points, i)
+    index = (points * atlas.resolution + atlas._shift[i]).astype(np.float32)
+    column = np.concatenate([cv2.remap(atlas._image, part.reshape(-1, 1, 2), None, cv2.INTER_LINEAR,
+                                       borderMode=cv2.BORDER_REPLICATE)[:, 0]
+                             for part in np.array_split(index, 4)])
+    assert got.shape == (40_001,) and np.array_equal(got, column)
