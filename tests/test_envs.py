@@ -8,6 +8,7 @@ import apf_physics  # noqa: F401  (registers the ids)
 from apf_physics import world_from_dict
 from apf_physics.actions import ACTIONS
 from apf_physics.envs import NavigateVectorEnv, register_envs
+from apf_physics.errors import UserError
 
 
 @pytest.fixture
@@ -234,3 +235,43 @@ def test_sb3_dqn_learns_to_reach_a_target():
     chance = successes(lambda obs: int(rng.integers(9)))
     torch.set_num_threads(threads)
     assert learned >= 5 and learned > chance
+
+
+def test_same_step_autoreset_gives_what_next_step_gives_one_step_earlier():
+    options = dict(world="fixed20", num_envs=6, starts="random", observation="window+lidar", lidar={"beams": 8})
+    nxt = NavigateVectorEnv(**options)
+    same = NavigateVectorEnv(autoreset_mode="same_step", **options)
+    assert same.metadata["autoreset_mode"].value == "SameStep"
+    nxt.reset(seed=7)
+    same.reset(seed=7)
+    rng = np.random.default_rng(0)
+    ended_once = 0
+    for _ in range(60):
+        actions = rng.integers(0, 9, 6)
+        actions[nxt._needs_reset] = 8   # ignored by the next-step env at its reset step
+        o1, r1, te1, tr1, info1 = nxt.step(actions)
+        if nxt._needs_reset.any():   # the next-step env resets them at its next step: catch up
+            ended = te1 | tr1
+            o2, r2, te2, tr2, info2 = same.step(actions)
+            np.testing.assert_array_equal(info2["_final_obs"], ended)
+            for i in np.flatnonzero(ended).tolist():
+                np.testing.assert_array_equal(info2["final_obs"][i]["window"], o1["window"][i])
+                assert info2["final_info"]["success"][i] == info1["success"][i]
+            np.testing.assert_array_equal(r1, r2)
+            o1, *_ = nxt.step(np.full(6, 8))   # resets the ended copies (the others stand still ...)
+            for i in np.flatnonzero(ended).tolist():
+                np.testing.assert_array_equal(o2["lidar"][i], o1["lidar"][i])
+                np.testing.assert_array_equal(o2["window"][i], o1["window"][i])
+            ended_once += int(ended.sum())
+            # ... so the running copies of the two envs went apart: start both again alike
+            nxt.reset(seed=ended_once)
+            same.reset(seed=ended_once)
+        else:
+            o2, r2, *_ = same.step(actions)
+            np.testing.assert_array_equal(o1["window"], o2["window"])
+    assert ended_once > 3
+
+
+def test_a_bad_autoreset_mode_is_named():
+    with pytest.raises(UserError, match="autoreset_mode must be one of next_step, same_step"):
+        NavigateVectorEnv(world="fixed20", num_envs=2, autoreset_mode="sometimes")

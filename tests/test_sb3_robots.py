@@ -112,7 +112,7 @@ def successes(model, algo, episodes=30, seed=1000):
 def learner(algo, seed):
     """An untrained SB3 learner of ``algo`` on 8 copies of the open world (rewards × 0.01)."""
     env = NavigateVectorEnv(num_envs=8, world=open_world(), starts="random", reward="thesis-fixed",
-                            max_episode_steps=STEP_LIMIT, **ROBOTS[algo])
+                            max_episode_steps=STEP_LIMIT, autoreset_mode="same_step", **ROBOTS[algo])
     vec = train_sb3().SB3Vector(env, reward_scale=0.01)
     vec.seed(seed)
     if algo == "sac":
@@ -169,7 +169,7 @@ def test_the_vector_env_seen_by_sb3_steps_as_sb3s_own_vector_of_single_envs(robo
     from stable_baselines3.common.env_util import make_vec_env
 
     kwargs = dict(world="fixed20", starts="random", **robot)
-    ours = train_sb3().SB3Vector(NavigateVectorEnv(num_envs=4, **kwargs))
+    ours = train_sb3().SB3Vector(NavigateVectorEnv(num_envs=4, autoreset_mode="same_step", **kwargs))
     theirs = make_vec_env("apf_physics/Navigate-v0", n_envs=4, env_kwargs=kwargs)
     ours.seed(7)
     theirs.seed(7)

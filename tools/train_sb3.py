@@ -36,6 +36,7 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.vector import AutoresetMode
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -68,7 +69,8 @@ class ScaleReward(gym.RewardWrapper):
 
 def sb3_vec_env(args, starts: str = "random", seed: int = 0) -> "SB3Vector":
     """``NavigateVectorEnv`` (``--envs`` copies in one batch) as an SB3 ``VecEnv``."""
-    vec = SB3Vector(NavigateVectorEnv(num_envs=args.envs, **env_kwargs(args, starts)), args.reward_scale)
+    vec = SB3Vector(NavigateVectorEnv(num_envs=args.envs, autoreset_mode="same_step", **env_kwargs(args, starts)),
+                    args.reward_scale)
     vec.seed(seed)
     return vec
 
@@ -77,15 +79,17 @@ class SB3Vector(VecEnv):
     """A :class:`~apf_physics.envs.NavigateVectorEnv` seen by Stable-Baselines3 (one batch for all copies).
 
     SB3 resets an ended copy in the step that ends it (the final observation goes to
-    ``info["terminal_observation"]``, a step limit's end is marked ``"TimeLimit.truncated"``);
-    Gymnasium's vector env resets it at the next step (``NEXT_STEP``). So the copies that ended
-    are restarted here at once, through the env's own ``_start`` (the draws a reset makes), and
-    their new observations returned. ``infos`` also carry ``success``/``is_success`` and
-    ``collision`` of the episodes that ended. Rewards are multiplied by ``reward_scale``.
-    ``seed(s)`` seeds copy ``i`` with ``s + i`` at the next reset, as SB3's vector envs do.
+    ``info["terminal_observation"]``, a step limit's end is marked ``"TimeLimit.truncated"``):
+    the env's ``autoreset_mode="same_step"`` (required) does that reset, and its
+    ``info["final_obs"]`` gives the final observations. ``infos`` also carry
+    ``success``/``is_success`` and ``collision`` of the episodes that ended. Rewards are
+    multiplied by ``reward_scale``. ``seed(s)`` seeds copy ``i`` with ``s + i`` at the next
+    reset, as SB3's vector envs do.
     """
 
     def __init__(self, env: NavigateVectorEnv, reward_scale: float = 1.0):
+        if env.autoreset_mode != AutoresetMode.SAME_STEP:
+            raise ValueError("SB3Vector needs NavigateVectorEnv(..., autoreset_mode='same_step')")
         self.env = env
         self.reward_scale = float(reward_scale)
         self.render_mode = None
@@ -106,15 +110,11 @@ class SB3Vector(VecEnv):
         done = terminated | truncated
         infos = [{} for _ in range(self.num_envs)]
         ended = np.flatnonzero(done)
-        if len(ended):
-            for i in ended.tolist():
-                final = {k: v[i] for k, v in obs.items()} if isinstance(obs, dict) else obs[i]
-                success = bool(info["success"][i])
-                infos[i] = {"terminal_observation": final,
-                            "TimeLimit.truncated": bool(truncated[i] and not terminated[i]),
-                            "success": success, "is_success": success, "collision": bool(info["collision"][i])}
-            self.env._start(ended)       # SB3's same-step reset
-            obs = self.env._task.observation()
+        for i in ended.tolist():   # the env has restarted them (same_step); what they ended with:
+            success = bool(info["success"][i])
+            infos[i] = {"terminal_observation": info["final_obs"][i],
+                        "TimeLimit.truncated": bool(truncated[i] and not terminated[i]),
+                        "success": success, "is_success": success, "collision": bool(info["collision"][i])}
         return obs, reward * self.reward_scale, done, infos
 
     def close(self) -> None:

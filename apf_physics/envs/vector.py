@@ -2,8 +2,12 @@
 
 Every copy is a slot of one :class:`~apf_physics.envs.task.NavigationTask`, so a step is
 one physics call and one observation call for all copies. Autoreset follows Gymnasium ≥ 1.0
-(``NEXT_STEP``): the step after an episode ends returns that copy's reset observation with
-reward 0 and ``terminated = truncated = False``, ignoring its action. Copy ``i`` seeded with
+(``NEXT_STEP``, the default): the step after an episode ends returns that copy's reset
+observation with reward 0 and ``terminated = truncated = False``, ignoring its action. With
+``autoreset_mode="same_step"`` (what Stable-Baselines3 and most RL libraries expect) a copy
+whose episode ends is reset in the same step: the step returns its new episode's observation,
+the last one in ``info["final_obs"]`` and the step's info in ``info["final_info"]`` (masks
+``_final_obs``, ``_final_info``), as Gymnasium's ``SAME_STEP`` mode does. Copy ``i`` seeded with
 ``seed + i`` gives the same observations, rewards and positions as a ``Navigate-v0`` reset
 with ``seed + i`` and driven by the same actions.
 
@@ -26,6 +30,7 @@ from gymnasium.vector.utils import batch_space
 from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, resolve_worlds, robot_options
 from apf_physics.envs.reward import TERMS, reward_weights
 from apf_physics.envs.task import NavigationTask, TrapOption
+from apf_physics.errors import UserError
 from apf_physics.observation import ObserverConfig
 from apf_physics.render.drawing import Snapshot, draw_frame, field_image
 
@@ -52,6 +57,7 @@ class NavigateVectorEnv(VectorEnv):
             None: no trap rule); ``info["trapped"]`` then says which.
         action, kinematics, observation, lidar, limits: The robot's actions, kind and sensor
             (see ``NavigateEnv``).
+        autoreset_mode: ``"next_step"`` (default) or ``"same_step"`` (see the module docstring).
 
     Also reachable as ``gymnasium.make_vec("apf_physics/Navigate-v0", num_envs=N,
     vectorization_mode="vector_entry_point", world=...)``.
@@ -64,7 +70,13 @@ class NavigateVectorEnv(VectorEnv):
                  resolution: int = 4, render_mode: str | None = None, memory: bool = False, previous: bool = False,
                  obs_scale: str = "raw", observer: ObserverConfig | dict | None = None, trap: TrapOption = None,
                  action: str = "discrete", kinematics: str | None = None, observation: str = "window",
-                 lidar: Any = None, limits: Any = None):
+                 lidar: Any = None, limits: Any = None, autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP):
+        modes = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
+        chosen = [m for name, m in modes.items() if autoreset_mode in (m, name)]
+        if not chosen:
+            raise UserError(f"autoreset_mode must be one of {', '.join(modes)}, got {autoreset_mode!r}")
+        self.autoreset_mode = chosen[0]
+        self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
         self.worlds = resolve_worlds(world)
         self.robot = robot_options(self.worlds, action, kinematics, observation, lidar, limits)
         self.num_envs = int(num_envs)
@@ -140,7 +152,24 @@ class NavigateVectorEnv(VectorEnv):
         info["collision"], info["_collision"] = result.collided & stepped, stepped
         if self._task.stepper.trap is not None:
             info["trapped"], info["_trapped"] = result.trapped & stepped, stepped
+        if self.autoreset_mode == AutoresetMode.SAME_STEP and self._needs_reset.any():
+            info = self._reset_ended(info)
         return self._task.observation(), result.reward.astype(np.float32), result.terminated, result.truncated, info
+
+    def _reset_ended(self, info: dict) -> dict:
+        """``SAME_STEP``: restart the copies whose episode just ended; their last observation and
+        the step's info go to ``final_obs`` and ``final_info``, ``info`` is the step's with the
+        new episodes' ``position``, ``world`` and ``distance``."""
+        ended = self._needs_reset.copy()
+        final = self._task.observation()
+        final_obs = np.empty(self.num_envs, dtype=object)
+        for i in np.flatnonzero(ended).tolist():
+            final_obs[i] = {k: v[i] for k, v in final.items()} if isinstance(final, dict) else final[i]
+        self._start(np.flatnonzero(ended))
+        after = {**info, **self._info()}
+        after["final_obs"], after["_final_obs"] = final_obs, ended
+        after["final_info"], after["_final_info"] = info, ended
+        return after
 
     def _info(self) -> dict:
         names = np.array([w.name for w in self.worlds], dtype=object)
