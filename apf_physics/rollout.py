@@ -28,13 +28,11 @@ from apf_physics.actions import SAFETY
 from apf_physics.engine import Outcome, Stepper, TrapDetector
 from apf_physics.errors import UserError
 from apf_physics.formation import FormationCrowd, FormationTeam, formation_spec, formation_success, links_in_range
-from apf_physics.kinematics import UnicycleLimits, arc_points
+from apf_physics.kinematics import KINEMATICS, UnicycleLimits, arc_points
 from apf_physics.planners.base import Planner
 from apf_physics.tracking import CHECK_SAMPLES, UnicycleFollowers, detour_arcs, give_way, track_safely
 from apf_physics.world import World
 
-KINEMATICS = ("holonomic", "unicycle")
-"""The robot kinds a run can be forced to (``--kinematics``)."""
 UNICYCLE_TRAP_FACTOR = 2
 """A unicycle's trap window is this many times the planner's: each change of direction can cost it
 up to two steps of turning on the spot, so following a boundary takes it longer around one spot

@@ -448,25 +448,6 @@ class UnicycleFollowers:
         waypoints[ok] = anchors[ok]
         return waypoints
 
-    def commands(self, states: np.ndarray, leader_v: float, leader_omega: float) -> tuple[np.ndarray, np.ndarray]:
-        """``(v, ω)`` (F,), (F,) of the followers this step, given the leader's command.
-
-        The rule decides each follower's move knowing the moves of those ahead of it; a unicycle
-        may not make its move (it turns first, or drives an arc). So, in chain order, each
-        follower's arc (sampled at :data:`CHECK_SAMPLES` points) is checked against the arcs
-        of the robots ahead (final) and the start positions of those behind, and against the
-        obstacles; a follower whose arc comes closer than the rule's contact distance (or than its
-        radius to an obstacle) only turns this step (v = 0: it stays where the others were told it is).
-        """
-        states = np.asarray(states, float).reshape(-1, 5)
-        v, omega = pursue(states[1:], self.waypoints(states, leader_v, leader_omega), self.limits,
-                          self.turn_in_place)
-        v_all = np.concatenate([[float(leader_v)], v])
-        arcs = arc_points(states, v_all, np.concatenate([[float(leader_omega)], omega]), CHECK_SAMPLES)
-        standing = np.repeat(states[:, None, :2], CHECK_SAMPLES + 1, axis=1)
-        self._keep_apart(v_all, arcs, standing, 1)
-        return v_all[1:], omega
-
     def _keep_apart(self, v_all: np.ndarray, arcs: np.ndarray, standing: np.ndarray, first: int) -> bool:
         """In chain order from robot ``first``, stop (v = 0, in place in ``v_all`` and ``arcs``) each
         robot whose arc comes within contact of the arcs of the robots before it or of the robots
@@ -501,7 +482,12 @@ class UnicycleFollowers:
         """``(v, ω)`` (m,), (m,) of every robot this step, the leader's command given (it may be
         stopped here): what a rollout of unicycle formations drives.
 
-        As :meth:`commands`, and besides: in a line, a follower whose robot ahead does not make its
+        The rule decides each follower's move knowing the moves of those ahead of it; a unicycle
+        may not make its move (it turns first, or drives an arc). So, in chain order, each
+        follower's arc (sampled at :data:`CHECK_SAMPLES` points) is checked against the arcs of
+        the robots ahead (final) and the start positions of those behind, and against the
+        obstacles; a follower whose arc comes closer than the rule's contact distance (or than its
+        radius to an obstacle) only turns this step. Besides, in a line, a follower whose robot ahead does not make its
         move (it turns on the spot first) does not close in on it below :data:`CLOSING` ·
         ``spacing`` (the rule placed it assuming that move; the robots behind would bunch up and
         block one another); and the leader, which its planner steers without regard to its

@@ -136,8 +136,7 @@ def test_a_formation_of_unicycles_keeps_its_links():
     r = world.robot_radius
     for _ in range(90):
         lv, lw = leader.commands(state[:1], followers.leader_cap(state))
-        fv, fw = followers.commands(state, lv[0], lw[0])
-        v, omega = np.concatenate([lv, fv]), np.concatenate([lw, fw])
+        v, omega = followers.drive(state, lv[0], lw[0])
         swept = arc_points(state, v, omega, SUBSTEPS)                        # (3, S + 1, 2)
         gaps = np.hypot(*(swept[:, None] - swept[None, :]).transpose(3, 0, 1, 2))
         assert gaps[~np.eye(len(robots), dtype=bool)].min() >= 2 * r

@@ -40,7 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from apf_physics.evaluate import evaluate, figures  # noqa: E402
 from apf_physics.worldsets import label_starts  # noqa: E402
 from apf_physics.planners import LEARNED, make_planner  # noqa: E402
-from apf_physics.rollout import KINEMATICS  # noqa: E402
+from apf_physics.kinematics import KINEMATICS  # noqa: E402
 from apf_physics.safefile import write_text  # noqa: E402
 from apf_physics.worldfile import load_world  # noqa: E402
 

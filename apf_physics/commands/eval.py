@@ -20,7 +20,8 @@ from apf_physics.evaluate import Episode, evaluate, format_table, write_json, wr
 from apf_physics.planners import make_planner
 from apf_physics.safefile import check_writable
 from apf_physics.render.page import PAGE, write_results
-from apf_physics.rollout import KINEMATICS, kinematics_option
+from apf_physics.kinematics import KINEMATICS
+from apf_physics.rollout import kinematics_option
 from apf_physics.worldfile import MAX_STARTS, load_worlds
 
 

@@ -10,7 +10,8 @@ from apf_physics.planners import make_planner
 from apf_physics.render.episodes import write_episode_video
 from apf_physics.safefile import check_writable
 from apf_physics.render.video import VIDEO_EXTENSIONS, choose_codec
-from apf_physics.rollout import KINEMATICS, kinematics_option, rollout, rollout_formations
+from apf_physics.kinematics import KINEMATICS
+from apf_physics.rollout import kinematics_option, rollout, rollout_formations
 from apf_physics.worldfile import load_world
 
 
