@@ -2,8 +2,7 @@
 
 Every static body the physics builds (an obstacle, a wall slab, a moving obstacle) is
 labelled with what it is (:class:`BodyLabels`), and every robot's proxy is known by its body
-id. Pymunk's begin/separate callbacks count the pairs of shapes touching now
-(:func:`count_touching`); after a substep in which some touch, the arbiters' body-id pairs are
+id. After a substep in which shapes may touch (:class:`Touching`), the arbiters' body-id pairs are
 read (:func:`touching_pairs`), and at the end of the step they become the rows
 ``(robot, kind, other)`` of a :class:`ContactLog` (:func:`contact_rows`, or
 :func:`contact_rows_few` for a few pairs; :func:`contact_log`).
@@ -114,20 +113,44 @@ class BodyLabels:
         self.of_id.update((b.id, (k, i)) for b, k, i in bodies)
 
 
-def count_touching(space: pymunk.Space) -> list[int]:
-    """A one-element list that ``space``'s collision callbacks keep at the number of pairs of
-    shapes touching now (begin and separate are called once per contact, not per substep): a
-    substep after which it is 0 has no arbiters to read."""
-    touching = [0]
+class Touching:
+    """Whether any shapes of ``space`` may touch now: a substep after which none do has no
+    arbiters to read.
 
-    def begin(arbiter, space, data):
-        touching[0] += 1
+    Two ways to know, each cheaper in its case: pymunk's begin/separate callbacks keep a count of
+    the pairs touching (a Python call each time a contact begins or ends: cheap for a few robots,
+    which touch rarely), or nothing is counted and the arbiters are read after every substep
+    (one call per substep, whatever touches: cheaper when many robots are in contact).
+    :meth:`count` switches between them; a count that starts is set to the arbiters present.
+    """
 
-    def separate(arbiter, space, data):
-        touching[0] -= 1
+    def __init__(self, space: pymunk.Space, buffer: pymunk.batch.Buffer):
+        self.space, self._buffer = space, buffer
+        self.pairs = 0          # pairs touching now, while counting
+        self.counting = False
+        self.count(True)
 
-    space.on_collision(begin=begin, separate=separate)
-    return touching
+    def count(self, counting: bool) -> None:
+        """Count (True) or read after every substep (False)."""
+        if counting == self.counting:
+            return
+        if counting:
+            self.pairs = len(touching_pairs(self.space, self._buffer))
+            self.space.on_collision(begin=self._begin, separate=self._separate)
+        else:
+            self.space.on_collision(begin=pymunk.empty_callback, separate=pymunk.empty_callback)
+        self.counting = counting
+
+    @property
+    def maybe(self) -> bool:
+        """Some shapes may touch now (always, when not counting)."""
+        return not self.counting or self.pairs > 0
+
+    def _begin(self, arbiter, space, data) -> None:
+        self.pairs += 1
+
+    def _separate(self, arbiter, space, data) -> None:
+        self.pairs -= 1
 
 
 def touching_pairs(space: pymunk.Space, buffer: pymunk.batch.Buffer) -> np.ndarray:

@@ -44,11 +44,12 @@ import pymunk
 import pymunk.batch
 
 from apf_physics.contacts import (FEW_PAIRS, MOVING, BodyLabels, CollisionType, ContactLog, contact_log, contact_rows,
-                                  contact_rows_few, count_touching, touching_depths,
+                                  contact_rows_few, Touching, touching_depths,
                                   touching_pairs)
 from apf_physics.contacts import KINDS, Contact  # noqa: F401 (public here too)
 from apf_physics.errors import UserError
 from apf_physics.field import Atlas
+from apf_physics.sweep import Sweeps
 from apf_physics.tiles import Tiles, obstacle_shapes
 from apf_physics.tiles import CHUNK, TILE_GAP, WALL_THICKNESS  # noqa: F401 (public here too)
 from apf_physics.world import World
@@ -58,6 +59,7 @@ CONTACT_MARGIN = 0.01  # a move that keeps this much more than touching distance
 CLEARANCE_RESOLUTION = 8  # nodes per unit of the clearance rasters that decide who needs physics
 CLEARANCE_CAP = 4.0  # clearance beyond this is not measured (it exceeds any move plus a radius)
 _FEW = 4  # up to this many proxies, per-body attribute access beats pymunk.batch's fixed cost
+_COUNT_AT_MOST = 8  # up to this many robots in pymunk, count touching pairs by callbacks; more: read every substep
 _PROXY_GROUP = 1  # collision group of proxies of single-robot slots: they never touch each other
 _SOLO_FILTER = pymunk.ShapeFilter(group=_PROXY_GROUP)   # queries about them: they are not there
 SETTLE_OBSTACLE = 0.005  # a robot ending a step farther than this inside an obstacle or the edge is pushed out [units]
@@ -160,6 +162,9 @@ class Physics:
         # twice the least clearance that needs no physics
         self._sample_atlas = np.zeros(3 * self.num_robots, np.intp)
         self._free_twice = np.zeros(self.num_robots)
+        # ... and, for the robots that the raster doubts, their world's static geometry (exact)
+        self._sweeps = Sweeps()
+        self._sweep_world = np.zeros(self.num_robots, np.intp)
         for s, world in enumerate(worlds):
             self._assign(s, world)
 
@@ -178,7 +183,7 @@ class Physics:
         self._proxy_held = False                     # some robot holds a proxy
         self._buffer = pymunk.batch.Buffer()
         self._arbiters = pymunk.batch.Buffer()
-        self._touching = count_touching(self.space)   # pairs of shapes touching now
+        self._touching = Touching(self.space, self._arbiters)
         self._rows_dirty = True
         self._touch_free = ContactLog.nothing(self.num_robots)   # the log of a step without contacts
         self._movers_needed: list = []
@@ -211,6 +216,7 @@ class Physics:
         self._sample_atlas[3 * m * slot:3 * m * (slot + 1)] = self._atlas_ids[id(raster)]
         # the raster is within 0.71 / resolution of the clearance (see World.clearance_raster)
         self._free_twice[m * slot:m * (slot + 1)] = 2 * (world.robot_radius + CONTACT_MARGIN + 0.71 / CLEARANCE_RESOLUTION)
+        self._sweep_world[m * slot:m * (slot + 1)] = self._sweeps.add(world)
 
     def _ensure_obstacles(self, robots: np.ndarray, moves: np.ndarray) -> None:
         """Build the static obstacles near the moves of ``robots`` that are not built yet
@@ -436,6 +442,13 @@ class Physics:
             bound = bound - 2 * bend
         needs = bound < self._free_twice
         m = self.robots_per_slot
+        doubted = np.flatnonzero(needs)
+        if len(doubted):   # the raster's bound is loose near walls: the exact distance along the move decides
+            distance = self._slot_radius[doubted // m] + CONTACT_MARGIN
+            if bend is not None:
+                distance = distance + bend[doubted]
+            needs[doubted] = self._sweeps.near(self._sweep_world[doubted], self._positions[doubted], moves[doubted],
+                                               distance)
         if m > 1:   # robots of one slot: closed under "may touch a robot that goes to pymunk"
             p = self._positions.reshape(-1, m, 2)
             dp = moves.reshape(-1, m, 2)
@@ -657,39 +670,28 @@ class Physics:
             static_depth = np.concatenate([static_depth, more_depth])
 
     def _settle_alone(self, alone: dict[int, list], simulated: np.ndarray, before: np.ndarray) -> None:
-        """:meth:`_settle` for robots alone in their slots, one by one in plain floats (a robot
-        alone meets no robot, and there are a few a step; the rule is :func:`_project_out`'s).
+        """:meth:`_settle` for robots alone in their slots (a robot alone meets no robot, and there
+        are a few a step), by the rule of :meth:`~apf_physics.sweep.Sweeps.settle`, compiled: each
+        is pushed out of the shape it overlaps most until none by more than
+        :data:`SETTLE_OBSTACLE`, then the static shape nearest its centre is looked up (in the
+        world's exact geometry, the shapes pymunk has); one overlapped is added, and so on; after
+        :data:`SETTLE_ROUNDS` a robot still overlapping goes back to where it started the step.
 
         ``alone``: each robot's overlaps with static shapes at the last substep, ``(way out x,
-        y, depth)``. A robot is pushed out of the shape it overlaps most until none by more than
-        :data:`SETTLE_OBSTACLE`, then pymunk is asked for the shape nearest its centre (a point
-        query); one overlapped there is added, and so on; after :data:`SETTLE_ROUNDS` a robot
-        still overlapping goes back to where it started the step.
+        y, depth)``.
         """
-        for robot, found in alone.items():
-            k = int(self._robot_proxy[robot])
-            r = float(self._proxy_radius[k])
-            ox, oy = self._tiles.offset[self._slot_tile[robot]].tolist()
-            x, y = self._positions[robot].tolist()
-            planes = [(nx, ny, depth, x, y) for nx, ny, depth in found]   # way out, depth, where measured
-            for round_ in range(2 * SETTLE_ROUNDS):
-                if round_ == SETTLE_ROUNDS:   # still overlapping: back to the step's start, and what is there
-                    x, y = before[np.searchsorted(simulated, robot)].tolist()
-                    planes = []
-                for _ in range(20):
-                    if not planes:
-                        break
-                    depth, nx, ny = max((d - nx * (x - ax) - ny * (y - ay), nx, ny) for nx, ny, d, ax, ay in planes)
-                    if depth <= SETTLE_OBSTACLE:
-                        break
-                    x, y = x + (depth + 1e-3) * nx, y + (depth + 1e-3) * ny
-                info = self.space.point_query_nearest((x + ox, y + oy), r - SETTLE_OBSTACLE, _SOLO_FILTER)
-                if info is None:
-                    break
-                planes.append((info.gradient.x, info.gradient.y, r - info.distance, x, y))
-            self._positions[robot] = (x, y)
-            self._proxy_target[k] = (x + ox, y + oy)
-            self._proxy_moved[k] = True
+        robots = np.fromiter(alone, np.intp, len(alone))
+        found = [alone[r] for r in robots.tolist()]
+        first = np.concatenate([[0], np.cumsum([len(f) for f in found])])
+        planes = np.array([plane for f in found for plane in f], float)
+        slots = robots // self.robots_per_slot
+        p = self._sweeps.settle(self._sweep_world[robots], self._positions[robots],
+                                before[np.searchsorted(simulated, robots)], self._slot_radius[slots], first, planes,
+                                SETTLE_OBSTACLE, SETTLE_ROUNDS)
+        self._positions[robots] = p
+        proxies = self._robot_proxy[robots]
+        self._proxy_target[proxies] = p + self._tiles.offset[self._slot_tile[slots]]
+        self._proxy_moved[proxies] = True
 
     def _with_mates(self, robots: np.ndarray) -> np.ndarray:
         """``robots`` and every robot that pymunk moved this step and that meets one of them (its
@@ -823,12 +825,13 @@ class Physics:
         self._proxy_moved[:] = False
         touched = []
         touching = self._touching
+        touching.count(len(robots) <= _COUNT_AT_MOST)   # robots in pymunk mostly touch something
         self._depths = None
         for k in range(self.substeps):
             if per_substep and k:   # steer: the command's change, on top of what contacts did to the velocity
                 self._add_velocities(proxies, (v[robots, k] - v[robots, k - 1]) / self.control_dt)
             self.space.step(self.dt)
-            if not touching[0]:
+            if not touching.maybe:
                 continue   # no shapes touch: no arbiters to read
             if k < self.substeps - 1:
                 ids = touching_pairs(self.space, self._arbiters)
