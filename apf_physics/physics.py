@@ -7,9 +7,9 @@ knows nothing of planners, observations or rewards.
 
 **Where pymunk does the work.** A robot whose move this step provably cannot touch anything
 moves exactly as pymunk would move a free disc (``p + v·dt``), without pymunk: the test is
-conservative, from a raster of capped clearance (1-Lipschitz, so three samples along the
-move bound it everywhere; the raster's interpolation error is subtracted) and, for robots
-sharing a slot, the exact closest approach of two linearly moving points. Every other robot
+the exact least distance between the segment its centre sweeps and its world's static shapes
+and edge (:mod:`apf_physics.sweep`, compiled), and, for robots sharing a slot, the exact
+closest approach of two linearly moving points. Every other robot
 is simulated by pymunk through a *proxy*: a dynamic disc that is put in the robot's world,
 moved by pymunk with the robot's velocity over fixed substeps, and read back. Proxies stay
 with their robot while it keeps needing physics and are parked far away when it does not.
@@ -48,7 +48,6 @@ from apf_physics.contacts import (FEW_PAIRS, MOVING, BodyLabels, CollisionType, 
                                   touching_pairs)
 from apf_physics.contacts import KINDS, Contact  # noqa: F401 (public here too)
 from apf_physics.errors import UserError
-from apf_physics.field import Atlas
 from apf_physics.sweep import Sweeps
 from apf_physics.tiles import Tiles, obstacle_shapes
 from apf_physics.tiles import CHUNK, TILE_GAP, WALL_THICKNESS  # noqa: F401 (public here too)
@@ -56,8 +55,10 @@ from apf_physics.world import World
 
 MAX_SPEED = math.sqrt(2.0)  # a diagonal unit move (±1, ±1) per control step [units per control step]
 CONTACT_MARGIN = 0.01  # a move that keeps this much more than touching distance needs no physics [units]
-CLEARANCE_RESOLUTION = 8  # nodes per unit of the clearance rasters that decide who needs physics
-CLEARANCE_CAP = 4.0  # clearance beyond this is not measured (it exceeds any move plus a radius)
+# The clearance raster of the imitation teacher's rule (rl.imitation.teacher_room), which the
+# physics used to decide who needs pymunk; the teacher keeps it, so that its labels stay as trained.
+CLEARANCE_RESOLUTION = 8  # nodes per unit
+CLEARANCE_CAP = 4.0  # clearance beyond this is not measured
 _FEW = 4  # up to this many proxies, per-body attribute access beats pymunk.batch's fixed cost
 _COUNT_AT_MOST = 8  # up to this many robots in pymunk, count touching pairs by callbacks; more: read every substep
 _PROXY_GROUP = 1  # collision group of proxies of single-robot slots: they never touch each other
@@ -65,7 +66,6 @@ _SOLO_FILTER = pymunk.ShapeFilter(group=_PROXY_GROUP)   # queries about them: th
 SETTLE_OBSTACLE = 0.005  # a robot ending a step farther than this inside an obstacle or the edge is pushed out [units]
 SETTLE_ROUNDS = 6  # rounds of pushes and queries before a robot still overlapping is put back (Physics._settle)
 SETTLE_ROBOT = 0.01  # two robots ending a step overlapping more than this are pushed apart [units]
-_THIRDS = np.array([0.0, 0.5, 1.0])[None, :, None]  # where a move's clearance is sampled
 
 
 def substeps_for(radius: float, max_speed: float = MAX_SPEED) -> int:
@@ -148,9 +148,6 @@ class Physics:
         self._mover_key: list[tuple[int, int]] = []
         self._mover_target = np.zeros((0, 4))           # position and velocity before pymunk next steps
         self._slot_time = np.zeros(self.num_slots)
-        # Clearance rasters, one per distinct world, sampled together.
-        self._atlas = Atlas(CLEARANCE_RESOLUTION)
-        self._atlas_ids: dict[int, int] = {}
         self._positions = np.zeros((self.num_robots, 2))
 
         self.worlds: list[World] = [None] * self.num_slots  # type: ignore[list-item]
@@ -158,20 +155,18 @@ class Physics:
         self._slot_radius = np.zeros(self.num_slots)
         self._slot_moving = np.zeros(self.num_slots, bool)
         self._any_moving = False
-        # per robot, for needs_physics(): its world's clearance raster (three samples each) and
-        # twice the least clearance that needs no physics
-        self._sample_atlas = np.zeros(3 * self.num_robots, np.intp)
-        self._free_twice = np.zeros(self.num_robots)
-        # ... and, for the robots that the raster doubts, their world's static geometry (exact)
+        # per robot, for needs_physics(): its world's static geometry (exact swept distances) and
+        # the distance its move must keep from it to need no physics
         self._sweeps = Sweeps()
         self._sweep_world = np.zeros(self.num_robots, np.intp)
+        self._keep_off = np.zeros(self.num_robots)
         for s, world in enumerate(worlds):
             self._assign(s, world)
 
         # Proxies: dynamic discs lent to the robots that need physics this step.
         self._proxy_body: list[pymunk.Body] = []
         self._proxy_robot = np.zeros(0, np.intp)     # robot each proxy simulates, -1: parked
-        self._proxy_dirty = np.zeros(0, bool)        # parked this step; may carry solver state
+        self._proxy_dirty = np.zeros(0, bool)        # parked since pymunk last stepped; may carry solver state
         self._proxy_radius = np.zeros(0)
         self._proxy_solo = np.zeros(0, bool)          # in the collision group of proxies that never meet
         self._proxy_ids = np.zeros(0, np.uintp)      # their body ids
@@ -203,9 +198,6 @@ class Physics:
             reach = world.robot_radius + CONTACT_MARGIN + 0.5
             self._tiles.build(key, world, 2 * reach + self.max_speed * self.control_dt)
             self._rows_dirty = True
-        raster = world.clearance_raster(CLEARANCE_RESOLUTION, CLEARANCE_CAP)   # shared by worlds of one map
-        if id(raster) not in self._atlas_ids:
-            self._atlas_ids[id(raster)] = self._atlas.add(raster)
         self.worlds[slot] = world
         self._any_moving = self._any_moving or bool(world.moving)   # stays set: moving obstacles were met
         self._moving_slots = None
@@ -213,10 +205,8 @@ class Physics:
         self._slot_tile[slot] = self._tiles.index[key]
         self._slot_radius[slot] = world.robot_radius
         m = self.robots_per_slot
-        self._sample_atlas[3 * m * slot:3 * m * (slot + 1)] = self._atlas_ids[id(raster)]
-        # the raster is within 0.71 / resolution of the clearance (see World.clearance_raster)
-        self._free_twice[m * slot:m * (slot + 1)] = 2 * (world.robot_radius + CONTACT_MARGIN + 0.71 / CLEARANCE_RESOLUTION)
-        self._sweep_world[m * slot:m * (slot + 1)] = self._sweeps.add(world)
+        self._sweep_world[m * slot:m * (slot + 1)] = self._sweeps.add(world)   # shared by worlds of one map
+        self._keep_off[m * slot:m * (slot + 1)] = world.robot_radius + CONTACT_MARGIN
 
     def _ensure_obstacles(self, robots: np.ndarray, moves: np.ndarray) -> None:
         """Build the static obstacles near the moves of ``robots`` that are not built yet
@@ -352,11 +342,11 @@ class Physics:
         self._release(robots)
         self._positions[robots] = np.asarray(positions, dtype=float).reshape(-1, 2)
         m = self.robots_per_slot
-        # One raster lookup for all: a robot clear of the static obstacles by more than its
-        # radius (and the raster's error) in a world without moving ones needs no more checks.
-        clearance = self._atlas.sample(self._positions[robots], self._sample_atlas[3 * robots])
+        # One exact look-up for all: a robot clear of the static obstacles and the map's edge by
+        # more than its radius in a world without moving ones needs no more checks.
         slots = robots // m
-        doubtful = (clearance - 0.71 / CLEARANCE_RESOLUTION < self._slot_radius[slots] + 1e-6)
+        doubtful = self._sweeps.near(self._sweep_world[robots], self._positions[robots], np.zeros((len(robots), 2)),
+                                     self._slot_radius[slots] + 1e-6)
         doubtful |= self._slot_moving[slots]
         crowds = set(self.crowd[slots[doubtful]].tolist())
         if m > 1 or self._crowd_robots:
@@ -432,23 +422,10 @@ class Physics:
         others move straight and uniformly as commanded. Moving obstacles are taken where the
         slots' steps (:meth:`set_time`) put them.
         """
-        # Clearance at the start, the middle and the end of each move: a 1-Lipschitz function
-        # sampled at both ends of a piece of length L/2 is at least (c_a + c_b − L/2) / 2 on it,
-        # so on the whole move at least (c_mid + min(c_start, c_end) − L/2) / 2.
-        samples = self._positions[:, None, :] + _THIRDS * moves[:, None, :]
-        c = self._atlas.sample(samples, self._sample_atlas).reshape(-1, 3)
-        bound = c[:, 1] + np.minimum(c[:, 0], c[:, 2]) - 0.5 * np.hypot(moves[:, 0], moves[:, 1])
-        if bend is not None:
-            bound = bound - 2 * bend
-        needs = bound < self._free_twice
+        # the exact least distance between each move and its world's static shapes and edge
+        keep_off = self._keep_off if bend is None else self._keep_off + bend
+        needs = self._sweeps.near(self._sweep_world, self._positions, moves, keep_off)
         m = self.robots_per_slot
-        doubted = np.flatnonzero(needs)
-        if len(doubted):   # the raster's bound is loose near walls: the exact distance along the move decides
-            distance = self._slot_radius[doubted // m] + CONTACT_MARGIN
-            if bend is not None:
-                distance = distance + bend[doubted]
-            needs[doubted] = self._sweeps.near(self._sweep_world[doubted], self._positions[doubted], moves[doubted],
-                                               distance)
         if m > 1:   # robots of one slot: closed under "may touch a robot that goes to pymunk"
             p = self._positions.reshape(-1, m, 2)
             dp = moves.reshape(-1, m, 2)
@@ -557,7 +534,8 @@ class Physics:
             self._ensure_obstacles(robots, moves)
         self._lend_movers(active)
         before = self._positions[robots].copy()
-        pairs = self._simulate(robots, v) if len(robots) or self._proxy_dirty.any() else None
+        # (proxies parked this step stay dirty, not lent, until pymunk next steps with robots in it)
+        pairs = self._simulate(robots, v) if len(robots) else None
         free = ~simulate
         self._positions[free] += moves[free]
         self._proxy_held = bool(len(robots))
