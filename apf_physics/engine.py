@@ -38,6 +38,7 @@ exact arc (the same substeps keep it from tunnelling). The episode rules are the
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Literal, Sequence
@@ -190,6 +191,10 @@ class Stepper:
         for i, w in enumerate(self.worlds):
             self._targets[i, :len(w.targets)] = w.targets
         self._tolerance = np.array([w.goal_tolerance for w in self.worlds])
+        # the same per world in Python floats, for the scalar path
+        self._target_points = [[(float(x), float(y)) for x, y in np.asarray(w.targets, float).reshape(-1, 2).tolist()]
+                               for w in self.worlds]
+        self._tolerance_of = self._tolerance.tolist()
         self._slot_targets = self._targets[self.world_of]       # (S, T, 2): each slot's world's targets
         self._slot_tolerance = self._tolerance[self.world_of]
         self.trap = trap
@@ -219,8 +224,17 @@ class Stepper:
 
     def distance(self) -> np.ndarray:
         """(S,) each leader's distance to the nearest target of its world."""
-        d = self.positions[:, 0, None, :] - self._slot_targets                  # (S, T, 2)
-        return np.hypot(d[..., 0], d[..., 1]).min(axis=1)
+        return _nearest(self.positions[:, 0], self._slot_targets)
+
+    def _distance_one(self, x: float, y: float) -> float:
+        """:meth:`distance` of slot 0's leader at ``(x, y)``, in Python floats: the same subtractions
+        and the same ``np.hypot`` (``math.hypot`` rounds differently), so the same bits."""
+        nearest = math.inf
+        for tx, ty in self._target_points[self.world_of[0]]:
+            d = float(np.hypot(x - tx, y - ty))
+            if d < nearest:
+                nearest = d
+        return nearest
 
     def poses(self) -> np.ndarray:
         """(S, m, 3) every robot's ``(x, y, θ)``."""
@@ -256,18 +270,18 @@ class Stepper:
         faces the target nearest its leader. Unicycles start at rest.
         """
         slots = np.asarray(slots, np.intp).reshape(-1)
-        positions = np.asarray(positions, float).reshape(len(slots), self.robots_per_slot, 2)
         m = self.robots_per_slot
-        exists = np.ones((len(slots), m), bool) if present is None else np.asarray(present, bool).reshape(len(slots), m)
-        self.physics.present[(slots[:, None] * m + np.arange(m)).ravel()] = exists.ravel()
+        positions = np.asarray(positions, float).reshape(len(slots), m, 2)
+        robots = (slots[:, None] * m + np.arange(m)).ravel() if m > 1 else slots
+        self.physics.present[robots] = True if present is None else np.asarray(present, bool).reshape(-1)
         if world_ids is not None:
-            self.world_of[slots] = world_ids
-            for s in slots.tolist():
-                self.physics.set_world(s, self.worlds[self.world_of[s]])
-            self._slot_targets[slots] = self._targets[self.world_of[slots]]
-            self._slot_tolerance[slots] = self._tolerance[self.world_of[slots]]
-        m = self.robots_per_slot
-        robots = (slots[:, None] * m + np.arange(m)[None]).ravel()
+            changed = slots[self.world_of[slots] != world_ids]   # slots changing worlds
+            if len(changed):
+                self.world_of[slots] = world_ids
+                for s in changed.tolist():
+                    self.physics.set_world(s, self.worlds[self.world_of[s]])
+                self._slot_targets[changed] = self._targets[self.world_of[changed]]
+                self._slot_tolerance[changed] = self._tolerance[self.world_of[changed]]
         self.steps[slots] = 0
         if self._moving:   # placed among the moving obstacles where they are at step 0
             self.physics.set_time(self.steps)
@@ -277,10 +291,11 @@ class Stepper:
         self.outcome[slots] = RUNNING
         if self.unicycle is not None:
             self._face(slots, positions, headings)
-        self.last_distance = self.distance()
+        self.last_distance = self.last_distance.copy()
+        self.last_distance[slots] = distance = _nearest(positions[:, 0], self._slot_targets[slots])
         if self._watch is not None:
             self._watch.reset(slots, positions[:, 0], self._leader_potential(slots))
-        arrived = self.last_distance[slots] <= self._slot_tolerance[slots]
+        arrived = distance <= self._slot_tolerance[slots]
         self.outcome[slots[arrived]] = REACHED
         self._unreported[slots] = arrived
 
@@ -379,10 +394,11 @@ class Stepper:
             self.physics.set_time(self.steps)
         contacts = self.physics.step(np.asarray(commands, float).reshape(1, 2))
         self.positions = self.physics.positions.reshape(1, 1, 2)
-        self.steps += 1
-        distance = self.distance()
-        collided = bool(contacts.touched and contacts.any[0])
-        reached = not collided and distance[0] <= self._slot_tolerance[0]
+        self.steps[0] += 1
+        (x, y), = self.positions[0].tolist()
+        distance = self._distance_one(x, y)
+        collided = contacts.touched and bool(contacts.any[0])
+        reached = not collided and distance <= self._tolerance_of[self.world_of[0]]
         outcome = COLLISION if collided else REACHED if reached else RUNNING
         if outcome == RUNNING and self._watch is not None:
             slot = np.zeros(1, np.intp)
@@ -391,10 +407,16 @@ class Stepper:
         if outcome == RUNNING and self.max_steps is not None and self.steps[0] >= self.max_steps:
             outcome = TIMEOUT
         self.outcome[0] = outcome
-        self.last_distance = distance
+        self.last_distance = np.array([distance])
         yes, no = self._yes, self._no
         return StepReport(self.positions, contacts, yes, yes if collided else no, yes if reached else no,
-                          no if outcome == RUNNING else yes, distance)
+                          no if outcome == RUNNING else yes, self.last_distance)
+
+
+def _nearest(leaders: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """(k,) the distance of each of ``leaders`` (k, 2) to the nearest of its ``targets`` (k, T, 2)."""
+    d = leaders[:, None, :] - targets
+    return np.hypot(d[..., 0], d[..., 1]).min(axis=1)
 
 
 def _constant(value: bool) -> np.ndarray:

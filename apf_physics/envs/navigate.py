@@ -16,6 +16,9 @@ from apf_physics.render.drawing import Snapshot, draw_frame, field_image
 
 __all__ = ["ACTIONS", "ACTION_NAMES", "NavigateEnv"]
 
+_SLOT = np.zeros(1, np.intp)   # the task's one slot
+_SLOT.flags.writeable = False
+
 
 class NavigateEnv(gym.Env):
     """A disc robot in an artificial potential field, moved through pymunk physics, that must reach a target.
@@ -144,6 +147,7 @@ class NavigateEnv(gym.Env):
         self.observation_space = self._task.observation_space()
         self._trail: list[np.ndarray] = []
         self._steps = 0
+        self._world_name = self.worlds[0].name   # the current episode's world's (set at reset)
 
     @property
     def world(self):
@@ -159,7 +163,8 @@ class NavigateEnv(gym.Env):
         if seed is not None:
             self._task.seed([seed])
         w, start = self.chooser.choose(self.np_random, options)
-        self._task.start(np.array([0]), np.array([w]), start[None])
+        self._task.start(_SLOT, np.array([w]), start[None])
+        self._world_name = self.worlds[w].name
         self._trail = [start.copy()]
         self._steps = 0
         return self._task.observation(0), self._get_info()
@@ -179,7 +184,8 @@ class NavigateEnv(gym.Env):
                 info)
 
     def _get_info(self) -> dict:
-        info = {"position": self.position, "world": self.world.name, "distance": float(self._task.distance()[0])}
+        info = {"position": self._task.positions[0, 0].copy(), "world": self._world_name,
+                "distance": float(self._task.distance()[0])}
         if self.robot.unicycle is not None:
             info["heading"] = float(self._task.stepper.headings[0, 0])
         return info

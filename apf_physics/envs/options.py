@@ -194,7 +194,8 @@ class StartChooser:
             self.kind, self.points = "array", arr
         # per world: the list starts are drawn from, or None for the free cells away from the targets
         self._lists = [self.points if self.kind == "array" else
-                       world.starts if self.kind == "world" and len(world.starts) else None for world in self.worlds]
+                       np.asarray(world.starts, float) if self.kind == "world" and len(world.starts) else None
+                       for world in self.worlds]
         self._cells = [world.start_cells() if listed is None else None
                        for world, listed in zip(self.worlds, self._lists)]
 
@@ -206,19 +207,23 @@ class StartChooser:
         """
         uniforms = np.asarray(uniforms, float).reshape(-1, 4)
         worlds = (uniforms[:, 0] * len(self.worlds)).astype(np.intp)
+        if len(self.worlds) == 1:
+            return worlds, self._starts_in(0, uniforms)
         starts = np.empty((len(uniforms), 2))
         for w in np.unique(worlds).tolist():
             mine = worlds == w
-            u = uniforms[mine]
-            listed = self._lists[w]
-            if listed is not None:
-                starts[mine] = listed[(u[:, 1] * len(listed)).astype(np.intp)]
-                continue
-            cells = self._cells[w]
-            if not len(cells):
-                raise UserError(f"{self.worlds[w].label}: no free start away from the targets")
-            starts[mine] = cells[(u[:, 1] * len(cells)).astype(np.intp)] + (u[:, 2:] - 0.5) * 0.25
+            starts[mine] = self._starts_in(w, uniforms[mine])
         return worlds, starts
+
+    def _starts_in(self, w: int, uniforms: np.ndarray) -> np.ndarray:
+        """(k, 2) starts in world ``w`` from ``(k, 4)`` uniforms (see :meth:`draw`), a new array."""
+        listed = self._lists[w]
+        if listed is not None:
+            return listed[(uniforms[:, 1] * len(listed)).astype(np.intp)]
+        cells = self._cells[w]
+        if not len(cells):
+            raise UserError(f"{self.worlds[w].label}: no free start away from the targets")
+        return cells[(uniforms[:, 1] * len(cells)).astype(np.intp)] + (uniforms[:, 2:] - 0.5) * 0.25
 
     def choose(self, rng: np.random.Generator, options: dict | None = None) -> tuple[int, np.ndarray]:
         """``(world index, start)`` of a new episode, drawn from ``rng`` (four uniforms, one call)."""

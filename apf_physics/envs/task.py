@@ -30,6 +30,13 @@ from apf_physics.tracking import UnicycleFollowers
 from apf_physics.world import FormationSpec, World
 
 
+_ONE_MOVE = ACTIONS.reshape(-1, 1, 1, 2).copy()   # the stepper's commands of a batch of one robot, per action
+_ONE_MOVE.flags.writeable = False
+_FLAGS = {value: np.full(1, value) for value in (False, True)}   # (1,) read-only flags of a batch of one
+for _flag in _FLAGS.values():
+    _flag.flags.writeable = False
+
+
 @dataclass(frozen=True)
 class TaskStep:
     """One step of the batch (arrays over slots)."""
@@ -120,9 +127,10 @@ class NavigationTask:
         self._centre = observer.size // 2
         self._obs = np.zeros((self.num, *observer.shape), np.float32) if robot.window else None
         self._scan = np.zeros((self.num, self.ranges.size), np.float32) if self.ranges is not None else None
+        self._handed_out = False   # whether observation() gave out _obs and _scan (then they are copied before a change)
         self._u = np.zeros(self.num)     # the potential at each leader (its window's centre)
         self._moved = np.zeros((self.num, 2))   # each leader's last displacement (a holonomic robot's velocity)
-        self._scalar = self.stepper.scalar and self.team is None and robot.thesis
+        self._thesis_one = self.team is None and robot.thesis   # with the stepper's scalar path: stepped by _step_one
 
     @property
     def positions(self) -> np.ndarray:
@@ -199,13 +207,16 @@ class NavigationTask:
                 self._obs = obs
             if scan is not None:
                 self._scan = scan
-        else:  # copy on write: an array handed out by step() is never changed afterwards
+            self._handed_out = False
+        else:  # copy on write: an array handed out is never changed afterwards
             self._u[slots] = u
+            if self._handed_out:
+                self._obs = None if self._obs is None else self._obs.copy()
+                self._scan = None if self._scan is None else self._scan.copy()
+                self._handed_out = False
             if obs is not None:
-                self._obs = self._obs.copy()
                 self._obs[slots] = obs
             if scan is not None:
-                self._scan = self._scan.copy()
                 self._scan[slots] = scan
 
     def _scan_of(self, slots: np.ndarray | None, steps: np.ndarray) -> np.ndarray:
@@ -220,6 +231,7 @@ class NavigationTask:
         """The current observations (or those of ``slots``; an int: that slot's alone): (N, C, k, k)
         windows, (N, K + 5) ranges, or ``{"window": ..., "lidar": ...}``; never changed afterwards."""
         rows = slice(None) if slots is None else slots
+        self._handed_out = True
         if self._scan is None:
             return self._obs[rows]
         if self._obs is None:
@@ -229,7 +241,7 @@ class NavigationTask:
     def step(self, actions: np.ndarray | int) -> TaskStep:
         """Advance every running slot by its action (slots not running do not move; a batch of
         one may be given its action as an int)."""
-        if self._scalar and self.stepper.outcome[0] == RUNNING:
+        if self._thesis_one and self.stepper.scalar and self.stepper.outcome[0] == RUNNING:
             return self._step_one(int(actions) if isinstance(actions, (int, np.integer))
                                   else int(np.asarray(actions).reshape(-1)[0]))
         commands = self.robot.commands(actions, self.num)
@@ -287,17 +299,16 @@ class NavigationTask:
         """:meth:`step` of a batch of one running robot alone (``Navigate-v0``): the same
         numbers, with the reward and the episode's end decided in Python scalars
         (``tests/test_single_path.py`` checks them against the batch path to the last bit)."""
-        (x0, y0), = self.stepper.positions[:, 0].tolist()
-        report = self.stepper.step(ACTIONS[action].reshape(1, 1, 2))
-        leaders = report.positions[:, 0]
+        (x0, y0), = self.stepper.positions[0].tolist()
+        report = self.stepper.step(_ONE_MOVE[action])
         revisits = None
         if self.observer.memory is not None:
-            revisits = float(self.observer.visit(leaders)[0])
+            revisits = float(self.observer.visit(report.positions[:, 0])[0])
         u_before = float(self._u[0])
         self._observe(None)
         walked = None
         if self.weights.length:
-            (x1, y1), = leaders.tolist()
+            (x1, y1), = report.positions[0].tolist()
             walked = math.sqrt((x1 - x0) ** 2 + (y1 - y0) ** 2)
         collided, reached, ended = bool(report.collided[0]), bool(report.reached[0]), bool(report.ended[0])
         terms = reward_terms_one(self.weights, collided, reached, u_before, float(self._u[0]),
@@ -306,10 +317,11 @@ class NavigationTask:
         trapped = ended and outcome == TRAPPED
         truncated = trapped or (ended and outcome == TIMEOUT)
         robot_contact = bool(report.contacts.touched and report.contacts.robot[0])
-        # fresh arrays: the vector env hands them out, and a caller may change its own
-        return TaskStep(self._obs, np.array([sum(terms)]), np.array([ended and not truncated]), np.array([truncated]),
-                        np.array(terms)[:, None], np.array([reached]), np.array([collided]), np.array([True]),
-                        np.array([robot_contact]), np.array([trapped]))
+        # fresh arrays where the vector env hands them out (a caller may change its own), the
+        # stepper's read-only flags elsewhere
+        return TaskStep(self.observation(), np.array([sum(terms)]), np.array([ended and not truncated]), np.array([truncated]),
+                        np.array(terms)[:, None], report.reached, report.collided, report.moved,
+                        _FLAGS[robot_contact], _FLAGS[trapped])
 
     def distance(self) -> np.ndarray:
         """(N,) each leader's distance to the nearest target of its world, after the last start or step."""
