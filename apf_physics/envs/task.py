@@ -127,7 +127,6 @@ class NavigationTask:
         self._centre = observer.size // 2
         self._obs = np.zeros((self.num, *observer.shape), np.float32) if robot.window else None
         self._scan = np.zeros((self.num, self.ranges.size), np.float32) if self.ranges is not None else None
-        self._handed_out = False   # whether observation() gave out _obs and _scan (then they are copied before a change)
         self._u = np.zeros(self.num)     # the potential at each leader (its window's centre)
         self._moved = np.zeros((self.num, 2))   # each leader's last displacement (a holonomic robot's velocity)
         self._thesis_one = self.team is None and robot.thesis   # with the stepper's scalar path: stepped by _step_one
@@ -207,16 +206,13 @@ class NavigationTask:
                 self._obs = obs
             if scan is not None:
                 self._scan = scan
-            self._handed_out = False
-        else:  # copy on write: an array handed out is never changed afterwards
+        else:  # copy on write: an array handed out by step() is never changed afterwards
             self._u[slots] = u
-            if self._handed_out:
-                self._obs = None if self._obs is None else self._obs.copy()
-                self._scan = None if self._scan is None else self._scan.copy()
-                self._handed_out = False
             if obs is not None:
+                self._obs = self._obs.copy()
                 self._obs[slots] = obs
             if scan is not None:
+                self._scan = self._scan.copy()
                 self._scan[slots] = scan
 
     def _scan_of(self, slots: np.ndarray | None, steps: np.ndarray) -> np.ndarray:
@@ -231,7 +227,6 @@ class NavigationTask:
         """The current observations (or those of ``slots``; an int: that slot's alone): (N, C, k, k)
         windows, (N, K + 5) ranges, or ``{"window": ..., "lidar": ...}``; never changed afterwards."""
         rows = slice(None) if slots is None else slots
-        self._handed_out = True
         if self._scan is None:
             return self._obs[rows]
         if self._obs is None:
@@ -299,7 +294,8 @@ class NavigationTask:
         """:meth:`step` of a batch of one running robot alone (``Navigate-v0``): the same
         numbers, with the reward and the episode's end decided in Python scalars
         (``tests/test_single_path.py`` checks them against the batch path to the last bit)."""
-        (x0, y0), = self.stepper.positions[0].tolist()
+        if self.weights.length:
+            (x0, y0), = self.stepper.positions[0].tolist()
         report = self.stepper.step(_ONE_MOVE[action])
         revisits = None
         if self.observer.memory is not None:
@@ -319,7 +315,7 @@ class NavigationTask:
         robot_contact = bool(report.contacts.touched and report.contacts.robot[0])
         # fresh arrays where the vector env hands them out (a caller may change its own), the
         # stepper's read-only flags elsewhere
-        return TaskStep(self.observation(), np.array([sum(terms)]), np.array([ended and not truncated]), np.array([truncated]),
+        return TaskStep(self._obs, np.array([sum(terms)]), np.array([ended and not truncated]), np.array([truncated]),
                         np.array(terms)[:, None], report.reached, report.collided, report.moved,
                         _FLAGS[robot_contact], _FLAGS[trapped])
 
