@@ -80,6 +80,10 @@ def swept_distance(p: np.ndarray, dp: np.ndarray, q: np.ndarray, dq: np.ndarray)
     return np.sqrt(np.sum(closest * closest, axis=-1))
 
 
+ROUNDING = 1e-9
+"""A safety margin short by less than this is rounding, and safe (:meth:`FollowerController.act`)."""
+
+
 class FollowerController:
     """Moves of the followers of one formation.
 
@@ -200,7 +204,9 @@ class FollowerController:
                 other_move = moves[j] if j < i else np.zeros(2)
                 dist = swept_distance(positions[i], ACTIONS, positions[j], other_move)
                 margin = np.minimum(margin, dist - self.contact)
-            safe = margin >= 0
+            # a margin within rounding of zero is safe: robots placed exactly the safe distance apart
+            # and moving alike keep it, whatever rounding the physics leaves in their positions
+            safe = margin >= -ROUNDING
             order = np.argsort(u, kind="stable")
             safe_order = order[safe[order]]
             if len(safe_order):

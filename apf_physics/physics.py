@@ -47,6 +47,7 @@ from apf_physics.contacts import (FEW_PAIRS, MOVING, BodyLabels, CollisionType, 
                                   contact_rows_few, Touching, touching_depths,
                                   touching_pairs)
 from apf_physics.contacts import KINDS, Contact  # noqa: F401 (public here too)
+from apf_physics.compiled import kernel
 from apf_physics.errors import UserError
 from apf_physics.sweep import Sweeps
 from apf_physics.tiles import Tiles, obstacle_shapes
@@ -524,7 +525,7 @@ class Physics:
             simulate &= active
             moves = moves * active[:, None]
         if not self._proxy_held and not simulate.any():
-            self._positions += moves
+            self._move_free(np.flatnonzero(self.present if active is None else self.present & active), v)
             return self._touch_free
         held = self._robot_proxy >= 0
         self._release(np.flatnonzero(held & ~simulate))
@@ -536,8 +537,8 @@ class Physics:
         before = self._positions[robots].copy()
         # (proxies parked this step stay dirty, not lent, until pymunk next steps with robots in it)
         pairs = self._simulate(robots, v) if len(robots) else None
-        free = ~simulate
-        self._positions[free] += moves[free]
+        free = ~simulate & self.present
+        self._move_free(np.flatnonzero(free if active is None else free & active), v)
         self._proxy_held = bool(len(robots))
         if pairs is None or not len(pairs):
             return self._touch_free
@@ -829,6 +830,24 @@ class Physics:
         self._positions[robots] = after - offsets
         return np.vstack(touched) if touched else np.zeros((0, 2), np.uintp)
 
+    def _move_free(self, robots: np.ndarray, v: np.ndarray) -> None:
+        """Move ``robots`` as pymunk moves a free disc, to the bit: put where the robot's proxy
+        would be (its position plus its tile's offset), advanced by its velocity times the
+        substep's duration at each substep (chipmunk's ``p ← p + v·dt``, a velocity per
+        substep changing as :meth:`_add_velocities` changes it), read back less the offset. A
+        robot's path therefore does not depend on whether it went to pymunk this step."""
+        if not len(robots):
+            return
+        offset = self._tiles.offset[self._slot_tile[robots // self.robots_per_slot]]
+        if v.ndim == 3:   # a velocity per substep: the first, then each change added (_simulate)
+            velocity = np.empty((len(robots), self.substeps, 2))
+            velocity[:, 0] = v[robots, 0] / self.control_dt
+            for k in range(1, self.substeps):
+                velocity[:, k] = velocity[:, k - 1] + (v[robots, k] - v[robots, k - 1]) / self.control_dt
+        else:
+            velocity = np.broadcast_to((v[robots] / self.control_dt)[:, None, :], (len(robots), self.substeps, 2))
+        _free_moves(self._positions, robots, offset, np.ascontiguousarray(velocity), self.dt)
+
     def _add_velocities(self, proxies: np.ndarray, change: np.ndarray) -> None:
         """Add ``change`` to the velocities of the bodies of ``proxies`` (between substeps), leaving
         everything else as it is. A free body then moves at its new command; one that a contact
@@ -861,6 +880,19 @@ class Physics:
     def _contact_rows(self, pairs: np.ndarray) -> np.ndarray:
         """(K, 3) sorted distinct rows ``(robot, kind, other)`` of the touching body-id pairs."""
         return contact_rows(pairs, self._labels, self._proxy_ids, self._proxy_order, self._proxy_robot)
+
+
+@kernel
+def _free_moves(positions, robots, offset, velocity, dt):
+    """:meth:`Physics._move_free`'s arithmetic: in place, robot ``robots[k]`` from its position
+    plus ``offset[k]``, ``p ← p + velocity[k, s]·dt`` for each substep ``s``, less the offset."""
+    for k in range(robots.shape[0]):
+        r = robots[k]
+        x, y = positions[r, 0] + offset[k, 0], positions[r, 1] + offset[k, 1]
+        for s in range(velocity.shape[1]):
+            x = x + velocity[k, s, 0] * dt
+            y = y + velocity[k, s, 1] * dt
+        positions[r, 0], positions[r, 1] = x - offset[k, 0], y - offset[k, 1]
 
 
 def _closest_approach(p: np.ndarray, dp: np.ndarray) -> np.ndarray:
