@@ -32,6 +32,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from apf_physics import field as apf
+from apf_physics.compiled import kernel
 from apf_physics.field import Atlas, Grid, Raster
 from apf_physics.kinematics import UnicycleLimits, distance_bearing
 from apf_physics.lidar import Lidar, LidarConfig
@@ -242,25 +243,31 @@ class Observer:
         crowd = discs is not None and len(discs) > 0
         if not self._moving and not crowd:
             return values
-        worlds = self.world_of[robots]
         when = np.asarray(t, float)
         if when.ndim == 0:
             when = np.full(len(robots), float(when))
-        groups = [(0, np.arange(len(robots)))] if len(self.worlds) == 1 else \
-            [(w, np.flatnonzero(worlds == w)) for w in np.unique(worlds).tolist()]
-        for w, mine in groups:
+        # the robots of each world: their rows in values, positions and steps
+        if len(self.worlds) == 1:
+            groups = [(0, np.arange(len(robots)), positions, when)]
+        else:
+            worlds = self.world_of[robots]
+            groups = []
+            for w in np.unique(worlds).tolist():
+                mine = np.flatnonzero(worlds == w)
+                groups.append((w, mine, positions[mine], when[mine]))
+        for w, mine, where, at in groups:
             world = self.worlds[w]
             if world.moving:
-                shift = world.moving_offsets(when[mine])                                # (m, M, 2)
-                lo, hi = self._moving_boxes(world)
-                centre, radius = self._moving_discs(world)
-                shapes = [world.obstacles[i] for i in world.moving]
-                self._add_near(values, mine, positions[mine][:, None, :] - shift, lo, hi, centre, radius, shapes,
-                               world, len(offsets) > 1)
+                shift = world.moving_offsets(at)                                        # (m, M, 2)
+                shapes, lo, hi, centre, radius = self._moving_shapes(world)
+                # where[:, None, :] - shift, by arrays of one shape (broadcasting over an axis of
+                # 2 costs numpy a call of its inner loop per pair)
+                local = np.repeat(where, len(shapes), axis=0).reshape(shift.shape) - shift
+                self._add_near(values, mine, local, lo, hi, centre, radius, shapes, world, len(offsets) > 1)
             if crowd:   # other robots: discs of the robot radius where they are (in the world's frame)
                 centre = np.asarray(discs, float).reshape(-1, 2)
                 r = np.full(len(centre), world.robot_radius)
-                local = np.broadcast_to(positions[mine][:, None, :], (len(mine), len(centre), 2))
+                local = np.broadcast_to(where[:, None, :], (len(mine), len(centre), 2))
                 self._add_near(values, mine, local, centre - world.robot_radius, centre + world.robot_radius,
                                centre, r, [None] * len(centre), world, len(offsets) > 1)
         return values
@@ -271,64 +278,35 @@ class Observer:
 
         ``local`` (m, M, 2): each robot in each shape's frame; ``lo``, ``hi`` (M, 2): the shapes'
         boxes in their frames; discs by ``centre`` and ``radius`` (NaN radius: a polygon,
-        measured by ``shapes[i].signed_distance``).
+        measured by ``shapes[i].signed_distance``). One compiled loop (:func:`_add_terms`), where
+        numpy's fixed cost per call was most of the cost; the polygons' distances alone are
+        numpy's, at the points :func:`_polygon_points` lists.
         """
-        k, h = self.config.size, self.config.size // 2
         field = world.field
-        if lattice:   # window columns dx / rows dy within p0 of each shape's box, clipped to the window
-            first = np.clip(np.ceil(lo - field.p0 - local), -h, h + 1).astype(np.intp)
-            last = np.clip(np.floor(hi + field.p0 - local), -h - 1, h).astype(np.intp)
-        else:
-            first = np.zeros(local.shape, np.intp)
-            inside_box = np.all((local >= lo - field.p0) & (local <= hi + field.p0), axis=-1)
-            last = np.where(inside_box[..., None], first, -1)
-        robot, shape = np.nonzero((first[..., 0] <= last[..., 0]) & (first[..., 1] <= last[..., 1]))
-        if not len(robot):
-            return
-        first, last, base = first[robot, shape], last[robot, shape], local[robot, shape]
-        span = (last - first).max(axis=0) + 1
-        a, b = np.indices((int(span[0]), int(span[1]))).reshape(2, -1)
-        # the window points of each (robot, shape) pair within its box: pair, and place in the box
-        pair, at = np.nonzero((first[:, None, 0] + a <= last[:, None, 0]) & (first[:, None, 1] + b <= last[:, None, 1]))
-        dx, dy = first[pair, 0] + a[at], first[pair, 1] + b[at]
-        px, py = base[pair, 0] + dx, base[pair, 1] + dy                                 # in the shape's frame
-        shape = shape[pair]
-        # discs all at once; polygons one by one
-        d = np.hypot(px - centre[shape, 0], py - centre[shape, 1]) - radius[shape]
-        polygon = np.isnan(radius[shape])
-        for index in (np.unique(shape[polygon]).tolist() if polygon.any() else ()):
-            mine_ = shape == index
-            d[mine_], _ = shapes[index].signed_distance(np.stack([px[mine_], py[mine_]], -1))
-        term = apf.repulsive_term(d, field.krep, field.p0, field.u_max)
-        n, q = values.shape
-        cell = mine[robot[pair]] * q + ((h - dy) * k + (dx + h) if lattice else 0)    # window point [h - dy, h + dx]
-        # each point's terms summed in the order above (bincount adds in input order), then added to
-        # U there; u_wall stays the highest reading: points inside read it, none above it
-        added = np.bincount(cell, weights=term, minlength=n * q)
-        hit = np.zeros(n * q, bool)
-        hit[cell] = True
-        assert values.flags.c_contiguous   # so that flat is a view of it
-        flat = values.reshape(-1)
-        flat[hit] = np.minimum(flat[hit] + added[hit], world.u_wall)
-        inside = d <= 0
-        if inside.any():
-            flat[cell[inside]] = world.u_wall
+        half = self.config.size // 2 if lattice else 0   # one point (potential_at): a 1×1 window
+        polygon_d = _NO_POINTS
+        polygon = np.isnan(radius)
+        if np.count_nonzero(polygon):
+            shape, px, py = _polygon_points(local, lo, hi, field.p0, half, polygon)
+            polygon_d = np.empty(len(shape))
+            for index in np.unique(shape).tolist():
+                chosen = shape == index
+                polygon_d[chosen], _ = shapes[index].signed_distance(np.stack([px[chosen], py[chosen]], -1))
+        _add_terms(values, mine, local, lo, hi, centre, radius, polygon_d, field.krep, field.p0, field.u_max,
+                   world.u_wall, half)
 
-    def _moving_discs(self, world: World) -> tuple[np.ndarray, np.ndarray]:
-        """Centres ``(M, 2)`` and radii ``(M,)`` of the moving discs where they are written (NaN for polygons)."""
+    def _moving_shapes(self, world: World) -> tuple[list, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The world's moving obstacles where they are written: the shapes, their bounding boxes
+        ``lo``, ``hi`` ``(M, 2)``, and the discs' centres ``(M, 2)`` and radii ``(M,)`` (NaN for polygons)."""
         def build():
             shapes = [world.obstacles[i] for i in world.moving]
+            boxes = [s.bounds for s in shapes]
+            lo = np.array([lo for lo, _ in boxes], float).reshape(-1, 2)
+            hi = np.array([hi for _, hi in boxes], float).reshape(-1, 2)
             centre = np.array([getattr(s, "center", (np.nan, np.nan)) for s in shapes], float).reshape(-1, 2)
             radius = np.array([getattr(s, "radius", np.nan) for s in shapes], float)
-            return centre, radius
-        return world.cached("moving_discs", build)
-
-    def _moving_boxes(self, world: World) -> tuple[np.ndarray, np.ndarray]:
-        """Bounding boxes of the world's moving obstacles where they are written, ``(M, 2)`` twice."""
-        def build():
-            boxes = [world.obstacles[i].bounds for i in world.moving]
-            return np.array([lo for lo, _ in boxes]), np.array([hi for _, hi in boxes])
-        return world.cached("moving_boxes", build)
+            return shapes, lo, hi, centre, radius
+        return world.cached("moving_shapes", build)
 
     def observe(self, positions: np.ndarray, robots: np.ndarray | None = None,
                 t: np.ndarray | float = 0.0, discs: np.ndarray | None = None) -> np.ndarray:
@@ -348,6 +326,101 @@ class Observer:
         if self.config.memory:
             out[:, channels.index("memory")] = self.memory.window(positions, robots)
         return out
+
+
+_NO_POINTS = np.zeros(0)   # the polygons' distances where there are none
+
+
+@kernel
+def _window_span(x, lo, hi, p0, half):
+    """The whole offsets ``dx`` in ``[-half, half]`` that put ``x + dx`` within ``p0`` of
+    ``[lo, hi]``: ``(first, last)``, none when ``first > last`` (one axis of a window)."""
+    first = int(min(max(np.ceil(lo - p0 - x), -half), half + 1))
+    last = int(min(max(np.floor(hi + p0 - x), -half - 1), half))
+    return first, last
+
+
+@kernel
+def _repulsive_term(d, krep, p0, u_max):
+    """One shape's term at signed distance ``d``, as :func:`~apf_physics.field.repulsive_term`
+    gives it: ``min(krep/2 · (1/d − 1/p0)², u_max)`` within ``p0``, 0 beyond, ``u_max`` inside."""
+    if d <= 0.0:
+        return u_max
+    if d <= p0:
+        return min(0.5 * krep * (1.0 / d - 1.0 / p0) ** 2, u_max)
+    return 0.0
+
+
+@kernel
+def _polygon_points(local, lo, hi, p0, half, polygon):
+    """The window points near the shapes ``s`` with ``polygon[s]``, in the order :func:`_add_terms`
+    meets them: ``(shape, x, y)``, each point's shape and where it is in that shape's frame."""
+    count = 0
+    for r in range(local.shape[0]):
+        for s in range(local.shape[1]):
+            if polygon[s]:
+                x0, x1 = _window_span(local[r, s, 0], lo[s, 0], hi[s, 0], p0, half)
+                y0, y1 = _window_span(local[r, s, 1], lo[s, 1], hi[s, 1], p0, half)
+                count += max(x1 - x0 + 1, 0) * max(y1 - y0 + 1, 0)
+    shape = np.empty(count, np.intp)
+    x = np.empty(count)
+    y = np.empty(count)
+    i = 0
+    for r in range(local.shape[0]):
+        for s in range(local.shape[1]):
+            if polygon[s]:
+                x0, x1 = _window_span(local[r, s, 0], lo[s, 0], hi[s, 0], p0, half)
+                y0, y1 = _window_span(local[r, s, 1], lo[s, 1], hi[s, 1], p0, half)
+                for dx in range(x0, x1 + 1):
+                    for dy in range(y0, y1 + 1):
+                        shape[i], x[i], y[i] = s, local[r, s, 0] + dx, local[r, s, 1] + dy
+                        i += 1
+    return shape, x, y
+
+
+@kernel
+def _add_terms(values, rows, local, lo, hi, centre, radius, polygon_d, krep, p0, u_max, u_wall, half):
+    """Add to each robot's window the repulsive terms of the shapes near it.
+
+    Robot ``r``'s window is ``values[rows[r]]`` (``k²`` points, ``k = 2·half + 1``); it is at
+    ``local[r, s]`` in shape ``s``'s frame, so its window point ``[half − dy, half + dx]`` is at
+    ``local[r, s] + (dx, dy)``. The points within ``p0`` of the shape's box ``[lo[s], hi[s]]``
+    are measured: their signed distance ``d`` to the disc ``centre[s]``, ``radius[s]``, or, for
+    a polygon (NaN radius), the next of ``polygon_d`` (its points in the order met here: robots,
+    shapes, ``dx``, ``dy``, as :func:`_polygon_points` lists them). A window point's terms
+    (:func:`_repulsive_term`) are summed in shape order, from 0, then added to its value, which
+    stays at most ``u_wall``; a point inside a shape reads ``u_wall``.
+    """
+    k = 2 * half + 1
+    added = np.zeros(k * k)             # one robot's sums, by window point
+    hit = np.zeros(k * k, np.bool_)
+    inside = np.zeros(k * k, np.bool_)
+    touched = np.empty(k * k, np.intp)  # the points hit, in the order first hit
+    j = 0                               # the next polygon point
+    for r in range(local.shape[0]):
+        count = 0
+        for s in range(local.shape[1]):
+            x, y = local[r, s, 0], local[r, s, 1]
+            x0, x1 = _window_span(x, lo[s, 0], hi[s, 0], p0, half)
+            y0, y1 = _window_span(y, lo[s, 1], hi[s, 1], p0, half)
+            for dx in range(x0, x1 + 1):
+                for dy in range(y0, y1 + 1):
+                    if np.isnan(radius[s]):
+                        d = polygon_d[j]
+                        j += 1
+                    else:
+                        d = np.hypot(x + dx - centre[s, 0], y + dy - centre[s, 1]) - radius[s]
+                    c = (half - dy) * k + (half + dx)
+                    added[c] += _repulsive_term(d, krep, p0, u_max)
+                    inside[c] = inside[c] or d <= 0.0
+                    if not hit[c]:
+                        hit[c] = True
+                        touched[count] = c
+                        count += 1
+        row = rows[r]
+        for c in touched[:count]:
+            values[row, c] = u_wall if inside[c] else min(values[row, c] + added[c], u_wall)
+            added[c], hit[c], inside[c] = 0.0, False, False
 
 
 class VisitMemory:

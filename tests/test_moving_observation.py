@@ -3,7 +3,9 @@
 ``Observer._add_near`` was rewritten for speed (the window points of each robot and shape
 found with one ``nonzero``, the sums by one ``bincount`` without sorting). The implementation
 it replaced is kept here as the reference: from random robots, steps, discs, polygons and
-other robots' discs, both give the same observations to the last bit.
+other robots' discs, both give the same observations to the last bit. That numpy version was
+replaced in turn by compiled loops; it is kept here too (``numpy_add_near``, what
+``tools/bench_moving.py`` times as "before"; ``tests/test_observation_kernel.py`` compares all three).
 """
 
 from __future__ import annotations
@@ -69,6 +71,56 @@ def reference_add_near(self, values: np.ndarray, mine: np.ndarray, local: np.nda
         row, col = np.divmod(cell[inside], q)
         values[row, col] = world.u_wall
 
+
+def numpy_add_near(self, values: np.ndarray, mine: np.ndarray, local: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                   centre: np.ndarray, radius: np.ndarray, shapes: list, world: World, lattice: bool) -> None:
+    """Add, in place, the repulsive terms of M shapes to the windows of robots ``mine`` (numpy: the
+    implementation of 2026-11-25 that the compiled loops replaced, timed by ``tools/bench_moving.py``).
+
+    ``local`` (m, M, 2): each robot in each shape's frame; ``lo``, ``hi`` (M, 2): the shapes'
+    boxes in their frames; discs by ``centre`` and ``radius`` (NaN radius: a polygon,
+    measured by ``shapes[i].signed_distance``).
+    """
+    k, h = self.config.size, self.config.size // 2
+    field = world.field
+    if lattice:   # window columns dx / rows dy within p0 of each shape's box, clipped to the window
+        first = np.clip(np.ceil(lo - field.p0 - local), -h, h + 1).astype(np.intp)
+        last = np.clip(np.floor(hi + field.p0 - local), -h - 1, h).astype(np.intp)
+    else:
+        first = np.zeros(local.shape, np.intp)
+        inside_box = np.all((local >= lo - field.p0) & (local <= hi + field.p0), axis=-1)
+        last = np.where(inside_box[..., None], first, -1)
+    robot, shape = np.nonzero((first[..., 0] <= last[..., 0]) & (first[..., 1] <= last[..., 1]))
+    if not len(robot):
+        return
+    first, last, base = first[robot, shape], last[robot, shape], local[robot, shape]
+    span = (last - first).max(axis=0) + 1
+    a, b = np.indices((int(span[0]), int(span[1]))).reshape(2, -1)
+    # the window points of each (robot, shape) pair within its box: pair, and place in the box
+    pair, at = np.nonzero((first[:, None, 0] + a <= last[:, None, 0]) & (first[:, None, 1] + b <= last[:, None, 1]))
+    dx, dy = first[pair, 0] + a[at], first[pair, 1] + b[at]
+    px, py = base[pair, 0] + dx, base[pair, 1] + dy                                 # in the shape's frame
+    shape = shape[pair]
+    # discs all at once; polygons one by one
+    d = np.hypot(px - centre[shape, 0], py - centre[shape, 1]) - radius[shape]
+    polygon = np.isnan(radius[shape])
+    for index in (np.unique(shape[polygon]).tolist() if polygon.any() else ()):
+        mine_ = shape == index
+        d[mine_], _ = shapes[index].signed_distance(np.stack([px[mine_], py[mine_]], -1))
+    term = apf.repulsive_term(d, field.krep, field.p0, field.u_max)
+    n, q = values.shape
+    cell = mine[robot[pair]] * q + ((h - dy) * k + (dx + h) if lattice else 0)    # window point [h - dy, h + dx]
+    # each point's terms summed in the order above (bincount adds in input order), then added to
+    # U there; u_wall stays the highest reading: points inside read it, none above it
+    added = np.bincount(cell, weights=term, minlength=n * q)
+    hit = np.zeros(n * q, bool)
+    hit[cell] = True
+    assert values.flags.c_contiguous   # so that flat is a view of it
+    flat = values.reshape(-1)
+    flat[hit] = np.minimum(flat[hit] + added[hit], world.u_wall)
+    inside = d <= 0
+    if inside.any():
+        flat[cell[inside]] = world.u_wall
 
 
 def crowded_world():

@@ -1,0 +1,121 @@
+"""The compiled loops of ``Observer._add_near`` against the numpy implementations they replaced.
+
+``tests/test_moving_observation.py`` compares whole observations in real worlds; here the
+terms are added to random windows by random shapes, many times over, so that every branch
+meets the cases that could differ by a bit: points exactly ``p0`` from a disc or on its rim,
+several shapes' terms summed at one point, values at ``u_wall`` (and its float32 rounding,
+which may lie above it), windows of one point (the float64 values of ``potential_at``),
+polygons among discs, robots listed out of order. ``==`` throughout.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from apf_physics import observation
+from apf_physics.field import FieldParams
+from apf_physics.obstacles import PolygonObstacle
+from apf_physics.observation import Observer, ObserverConfig
+from test_moving_observation import numpy_add_near, reference_add_near
+
+FIELDS = [FieldParams(katt=2.0, krep=20.0, kstr=8.0, p0=0.5, ps=8.0, u_max=100.0),
+          FieldParams(katt=1.0, krep=3.7, kstr=8.0, p0=1.3, ps=8.0, u_max=25.0)]
+
+
+def random_case(rng: np.random.Generator, size: int, lattice: bool, polygons: bool):
+    """Robots and shapes of one random call of ``_add_near``: ``(values, mine, local, lo, hi, centre,
+    radius, shapes, world)``."""
+    field = FIELDS[int(rng.integers(len(FIELDS)))]
+    u_wall = float(rng.choice([field.u_max * 3 + 0.1, 311.3, 1e3 / 3]))
+    world = SimpleNamespace(field=field, u_wall=u_wall)
+    robots, count = int(rng.integers(1, 40)), int(rng.integers(1, 9))
+    n = robots + int(rng.integers(0, 5))
+    mine = rng.permutation(n)[:robots]
+    # discs of varied radii, some centred on whole or half coordinates (points exactly on the rim
+    # or exactly p0 from it), all near the robots, which stand in one place to crowd their windows
+    radius = rng.choice([0.25, 0.5, 0.75, rng.uniform(0.1, 1.5)], count)
+    centre = rng.uniform(-3, 3, (count, 2))
+    snapped = rng.random(count) < 0.5
+    centre[snapped] = np.round(centre[snapped] * 2) / 2
+    shapes: list = [None] * count
+    if polygons:
+        for s in rng.choice(count, max(1, count // 3), replace=False).tolist():
+            corner = centre[s] - rng.uniform(0, 1, 2)
+            quad = corner + np.array([[0.0, 0.0], [rng.uniform(0.5, 2), 0.0],
+                                      [rng.uniform(0.5, 2), rng.uniform(0.5, 2)], [0.0, rng.uniform(0.5, 2)]])
+            shapes[s] = PolygonObstacle(quad)
+            radius[s], centre[s] = np.nan, np.nan
+    lo = np.array([s.bounds[0] if s is not None else c - r for s, c, r in zip(shapes, centre, radius)])
+    hi = np.array([s.bounds[1] if s is not None else c + r for s, c, r in zip(shapes, centre, radius)])
+    local = rng.uniform(-4, 4, (robots, count, 2))
+    whole = rng.random((robots, count)) < 0.3
+    local[whole] = np.round(local[whole])
+    if not lattice:   # a single point: put half of them near a shape
+        near = rng.random((robots, count)) < 0.5
+        local[near] = (lo + rng.uniform(-0.6, 0.6, (count, 2)) * (hi - lo + 2 * field.p0)
+                       + (hi - lo) / 2)[np.nonzero(near)[1]]
+    q = size * size if lattice else 1
+    if lattice:
+        values = rng.uniform(-50, u_wall, (n, q)).astype(np.float32)
+        values[rng.random((n, q)) < 0.1] = np.float32(u_wall)      # may round above u_wall
+    else:
+        values = rng.uniform(-50, u_wall, (n, q))
+        values[rng.random((n, q)) < 0.1] = u_wall
+    return values, mine, local, lo, hi, centre, radius, shapes, world
+
+
+@pytest.mark.parametrize("polygons", [False, True])
+@pytest.mark.parametrize("lattice", [True, False])
+@pytest.mark.parametrize("size", [3, 11])
+def test_terms_match_the_replaced_implementations(size, lattice, polygons):
+    observer = Observer(ObserverConfig(size=size), 1)
+    rng = np.random.default_rng([size, lattice, polygons])
+    for trial in range(150):
+        values, *args = random_case(rng, size, lattice, polygons)
+        new, old, before = values.copy(), values.copy(), values.copy()
+        observer._add_near(new, *args, lattice)
+        reference_add_near(observer, old, *args, lattice)
+        numpy_add_near(observer, before, *args, lattice)
+        np.testing.assert_array_equal(new, old, err_msg=f"trial {trial}")
+        np.testing.assert_array_equal(new, before, err_msg=f"trial {trial}")
+        assert new.dtype == values.dtype
+
+
+def test_many_points_at_once():
+    """Thousands of robots among hundreds of discs: hypot and the term over ~10⁵ points, as numpy gives them."""
+    observer = Observer(ObserverConfig(size=11), 1)
+    rng = np.random.default_rng(7)
+    world = SimpleNamespace(field=FIELDS[1], u_wall=250.0)
+    robots, count = 3000, 40
+    centre = rng.uniform(0, 30, (count, 2))
+    radius = rng.uniform(0.1, 1.0, count)
+    positions = rng.uniform(0, 30, (robots, 2))
+    local = np.broadcast_to(positions[:, None, :], (robots, count, 2))    # as other robots' discs are given
+    values = rng.uniform(-20, 200, (robots, 121)).astype(np.float32)
+    new, old = values.copy(), values.copy()
+    args = (np.arange(robots), local, centre - radius[:, None], centre + radius[:, None], centre, radius,
+            [None] * count, world, True)
+    observer._add_near(new, *args)
+    reference_add_near(observer, old, *args)
+    assert (new != values).sum() > 10_000
+    np.testing.assert_array_equal(new, old)
+
+
+def test_python_source_is_the_compiled_rule(monkeypatch):
+    """The kernels' Python originals (what a reader reads) give what the compiled ones give."""
+    observer = Observer(ObserverConfig(size=5), 1)
+    rng = np.random.default_rng(3)
+    for lattice in (True, False):
+        values, *args = random_case(rng, 5, lattice, polygons=True)
+        compiled = values.copy()
+        observer._add_near(compiled, *args, lattice)
+        with monkeypatch.context() as patch:
+            for name in ("_window_span", "_repulsive_term", "_polygon_points", "_add_terms"):
+                patch.setattr(observation, name, getattr(observation, name).py_func)
+            python = values.copy()
+            observer._add_near(python, *args, lattice)
+        np.testing.assert_array_equal(compiled, python)
+
