@@ -316,9 +316,12 @@ class Observer:
         robot radius that repel like obstacles (the same for every robot observed).
         """
         robots = self._everyone if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
-        out = np.empty((len(robots), *self.config.shape), np.float32)
-        out[:, 0] = self.potential_windows(positions, robots, t, discs=discs)
+        windows = self.potential_windows(positions, robots, t, discs=discs)
         channels = self.config.channels
+        if len(channels) == 1:   # the window alone (a new array): no copy
+            return windows[:, None]
+        out = np.empty((len(robots), *self.config.shape), np.float32)
+        out[:, 0] = windows
         if "previous" in channels:
             centre = self.potential_at(positions, robots, t, discs) if self.config.scale == "log" else None
             out[:, channels.index("previous")] = self.potential_windows(positions, robots, np.asarray(t) - 1.0, centre,
@@ -445,10 +448,6 @@ class VisitMemory:
         self._everyone = np.arange(self.num)
         self.dims = np.ones((self.num, 2), dtype=np.intp)          # cells per robot's map: (columns, rows)
         self.counts = np.zeros((self.num, 1, 1), dtype=np.int32)   # (N, columns, rows), grown as needed
-        half = self.size // 2
-        steps = np.arange(self.size) - half
-        self._dc = np.broadcast_to(steps[None, :], (self.size, self.size))   # column offset of [i, j]: j − k//2
-        self._dr = np.broadcast_to(-steps[:, None], (self.size, self.size))  # row offset of [i, j]: k//2 − i
 
     @staticmethod
     def cells_of(world: World) -> tuple[int, int]:
@@ -490,15 +489,26 @@ class VisitMemory:
         """(N, k, k) float32 memory windows around ``positions`` (robots ``robots``, default all)."""
         robots = self._everyone if robots is None else np.asarray(robots, dtype=np.intp).reshape(-1)
         c0, r0 = self._cell(positions, robots)
-        dims = self.dims[robots]
-        c = c0[:, None, None] + self._dc[None]
-        r = r0[:, None, None] + self._dr[None]
-        cols, rows = dims[:, 0, None, None], dims[:, 1, None, None]
-        outside = (c < 0) | (c >= cols) | (r < 0) | (r >= rows)
-        counts = self.counts[robots[:, None, None], np.clip(c, 0, cols - 1), np.clip(r, 0, rows - 1)]
-        values = np.minimum(counts, self.cap).astype(np.float32) / np.float32(self.cap)
-        values[outside] = 1.0
-        return values
+        return _memory_windows(self.counts, robots, c0, r0, self.dims, self.size // 2, self.cap)
+
+
+@kernel
+def _memory_windows(counts, robots, c0, r0, dims, half, cap):
+    """(n, k, k) float32 windows of visit counts, ``k = 2·half + 1``: point ``[i, j]`` of robot
+    ``robots[n]`` (in cell ``(c0[n], r0[n])``) reads its cell ``(c0[n] + j − half, r0[n] + half − i)``
+    as ``min(count, cap) / cap``, or 1 outside its map (``dims[robot]`` cells: columns, rows)."""
+    k = 2 * half + 1
+    out = np.empty((len(robots), k, k), np.float32)
+    for n in range(len(robots)):
+        robot = robots[n]
+        for i in range(k):
+            for j in range(k):
+                c, r = c0[n] + j - half, r0[n] + half - i
+                if 0 <= c < dims[robot, 0] and 0 <= r < dims[robot, 1]:
+                    out[n, i, j] = np.float32(min(counts[robot, c, r], cap)) / np.float32(cap)
+                else:
+                    out[n, i, j] = 1.0
+    return out
 
 
 @dataclass(frozen=True)

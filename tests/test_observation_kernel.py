@@ -5,7 +5,8 @@ terms are added to random windows by random shapes, many times over, so that eve
 meets the cases that could differ by a bit: points exactly ``p0`` from a disc or on its rim,
 several shapes' terms summed at one point, values at ``u_wall`` (and its float32 rounding,
 which may lie above it), windows of one point (the float64 values of ``potential_at``),
-polygons among discs, robots listed out of order. ``==`` throughout.
+polygons among discs, robots listed out of order. ``==`` throughout. And the memory channel's
+windows (``VisitMemory.window``, a compiled loop too) against its numpy version.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import pytest
 from apf_physics import observation
 from apf_physics.field import FieldParams
 from apf_physics.obstacles import PolygonObstacle
-from apf_physics.observation import Observer, ObserverConfig
+from apf_physics.observation import Observer, ObserverConfig, VisitMemory
 from test_moving_observation import numpy_add_near, reference_add_near
 
 FIELDS = [FieldParams(katt=2.0, krep=20.0, kstr=8.0, p0=0.5, ps=8.0, u_max=100.0),
@@ -118,4 +119,43 @@ def test_python_source_is_the_compiled_rule(monkeypatch):
             python = values.copy()
             observer._add_near(python, *args, lattice)
         np.testing.assert_array_equal(compiled, python)
+    memory = VisitMemory(3, 5, 2)
+    memory.reset(np.arange(3), np.array([[0.5, 0.5], [3.2, 1.5], [6.0, 6.9]]), [SimpleNamespace(size=(7, 7))] * 3)
+    positions = np.array([[1.5, 0.5], [3.2, 2.5], [6.5, 6.9]])
+    memory.visit(positions)
+    compiled = memory.window(positions)
+    with monkeypatch.context() as patch:
+        patch.setattr(observation, "_memory_windows", observation._memory_windows.py_func)
+        np.testing.assert_array_equal(memory.window(positions), compiled)
 
+
+def numpy_memory_window(memory, positions: np.ndarray, robots: np.ndarray) -> np.ndarray:
+    """``VisitMemory.window`` before its compiled loop (2026-11-25)."""
+    c0, r0 = memory._cell(positions, robots)
+    steps = np.arange(memory.size) - memory.size // 2
+    dc = np.broadcast_to(steps[None, :], (memory.size, memory.size))
+    dr = np.broadcast_to(-steps[:, None], (memory.size, memory.size))
+    dims = memory.dims[robots]
+    c = c0[:, None, None] + dc[None]
+    r = r0[:, None, None] + dr[None]
+    cols, rows = dims[:, 0, None, None], dims[:, 1, None, None]
+    outside = (c < 0) | (c >= cols) | (r < 0) | (r >= rows)
+    counts = memory.counts[robots[:, None, None], np.clip(c, 0, cols - 1), np.clip(r, 0, rows - 1)]
+    values = np.minimum(counts, memory.cap).astype(np.float32) / np.float32(memory.cap)
+    values[outside] = 1.0
+    return values
+
+
+@pytest.mark.parametrize("size,cap", [(11, 4), (5, 3), (1, 7)])
+def test_memory_windows_match_the_numpy_version(size, cap):
+    rng = np.random.default_rng([size, cap])
+    memory = VisitMemory(60, size, cap)
+    worlds = [SimpleNamespace(size=(float(rng.uniform(1, 30)), float(rng.uniform(1, 30)))) for _ in range(60)]
+    memory.reset(np.arange(60), rng.uniform(0, 1, (60, 2)), worlds)
+    memory.counts[:] = rng.integers(0, 2 * cap, memory.counts.shape)
+    for _ in range(20):
+        robots = rng.choice(60, int(rng.integers(1, 60)))
+        positions = rng.uniform(-3, 33, (len(robots), 2))      # off the map too: clipped to its edge
+        window = memory.window(positions, robots)
+        assert window.dtype == np.float32 and window.shape == (len(robots), size, size)
+        np.testing.assert_array_equal(window, numpy_memory_window(memory, positions, robots))
