@@ -12,8 +12,9 @@ Navigate-v0's batch of one by the stepper's array path instead of its scalar pat
 
 Then where a Navigate step goes: the same steps again with the physics call
 (``Physics.step``, its free-move test apart, and steps with and without pymunk apart), the
-observation (``Observer.observe``) and the resets timed apart (per call, with
-``time.perf_counter``). ``--profile`` adds a cProfile of the Navigate steps (top 25 by own time).
+observation of the steps (``Observer.observe``) and the resets (``env.reset`` through the
+wrappers, their observation included; ``NavigationTask.start`` apart) timed apart (per call,
+with ``time.perf_counter``). ``--profile`` adds a cProfile of the Navigate steps (top 25 by own time).
 """
 
 from __future__ import annotations
@@ -97,7 +98,7 @@ def breakdown(steps: int) -> None:
     physics, observer = task.stepper.physics, task.observer
     actions = np.random.default_rng(1).integers(0, 9, steps)
     run(env, actions[:500])
-    free, simulated, test, obs, starts = [], [], [], [], []
+    free, simulated, test, obs, starts, resets, reset_obs = [], [], [], [], [], [], []
     step = physics.step
 
     def sorting(*args, **kwargs):   # physics steps with and without pymunk, apart
@@ -105,24 +106,35 @@ def breakdown(steps: int) -> None:
         out = step(*args, **kwargs)
         (simulated if physics._proxy_held else free).append(time.perf_counter() - t)
         return out
-    physics.step = sorting
+    reset = env.reset
+
+    def resetting(*args, **kwargs):   # whole resets, and the observations made in them apart
+        seen = len(obs)
+        t = time.perf_counter()
+        out = reset(*args, **kwargs)
+        resets.append(time.perf_counter() - t)
+        reset_obs.extend(obs[seen:])
+        return out
+    physics.step, env.reset = sorting, resetting
     try:
-        with timed(physics, "needs_physics", test), timed(observer, "observe", obs), \
-                timed(task, "start", starts):
+        with timed(physics, "needs_physics", test), timed(observer, "observe", obs), timed(task, "start", starts):
             total = run(env, actions)
     finally:
-        del physics.step
+        del physics.step, env.reset
     phys = sum(free) + sum(simulated)
     parts = {"Physics.step, all": phys,
              "  of which the free-move test": sum(test),
-             "Observer.observe": sum(obs),
-             "resets (NavigationTask.start)": sum(starts)}
+             "Observer.observe (in steps)": sum(obs) - sum(reset_obs),
+             "resets (env.reset, wrappers included)": sum(resets),
+             "  of which NavigationTask.start": sum(starts)}
     print(f"where a Navigate step goes ({steps} steps, per-call timers add a little to each part):")
     print(f"  {'whole step (resets included)':40s} {total / steps * 1e6:7.1f} us")
     for name, seconds in parts.items():
         print(f"  {name:40s} {seconds / steps * 1e6:7.1f} us  {seconds / total:5.1%}")
-    rest = total - phys - sum(obs) - sum(starts)
+    rest = total - phys - (sum(obs) - sum(reset_obs)) - sum(resets)
     print(f"  {'the rest (env, task, stepper, wrappers)':40s} {rest / steps * 1e6:7.1f} us  {rest / total:5.1%}")
+    print(f"  episodes: {len(resets)}, {steps / max(len(resets), 1):.1f} steps each; a reset "
+          f"{np.median(resets) * 1e6:.1f} us (median)")
     print(f"  physics steps without pymunk: {len(free) / steps:.1%} of steps, median {np.median(free) * 1e6:.1f} us")
     print(f"  physics steps through pymunk: {len(simulated) / steps:.1%} of steps, median "
           f"{np.median(simulated) * 1e6:.1f} us")

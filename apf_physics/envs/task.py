@@ -37,9 +37,10 @@ for _flag in _FLAGS.values():
     _flag.flags.writeable = False
 
 
-@dataclass(frozen=True)
+@dataclass
 class TaskStep:
-    """One step of the batch (arrays over slots)."""
+    """One step of the batch (arrays over slots). (Not a frozen dataclass: one is made every step,
+    and a frozen one's ``__init__`` costs several times a plain one's.)"""
 
     observation: np.ndarray | dict  # (N, C, k, k) float32 windows, (N, K + 5) ranges, or a dict of both
     reward: np.ndarray         # (N,) float64, 0 where nothing moved
