@@ -296,7 +296,7 @@ class Physics:
         slots = robots // self.robots_per_slot
         radius = self._slot_radius[slots]
         solo = ~self._shared[slots] & ~self._slot_moving[slots] & (self.robots_per_slot == 1)
-        for r, alone in {(float(a), bool(b)) for a, b in zip(radius, solo)}:
+        for r, alone in sorted(set(zip(radius.tolist(), solo.tolist()))):
             mine = robots[(radius == r) & (solo == alone)]
             free = np.flatnonzero((self._proxy_robot < 0) & ~self._proxy_dirty & (self._proxy_radius == r)
                                   & (self._proxy_solo == alone))
@@ -580,19 +580,19 @@ class Physics:
             return
         # a few pairs: read by dicts (as contact_rows_few); a robot and a static shape: the robot's way
         # out is against the normal if it is a, along it if b
-        robot_of = self._proxy_robot
+        robot_of, solo = self._proxy_robot.tolist(), self._proxy_solo.tolist()   # plain lists: read per pair
         skip = set(undone.tolist())
         static_robot, static_normal, static_depth, pairs = [], [], [], []
         alone: dict[int, list] = {}   # robots alone in their slots: settled one by one (_settle_alone)
         for (a, b), (nx, ny), d in zip(ids[deep].tolist(), normal[deep].tolist(), distance[deep].tolist()):
             ka, kb = self._proxy_of_id.get(a), self._proxy_of_id.get(b)
-            ra = -1 if ka is None else int(robot_of[ka])
-            rb = -1 if kb is None else int(robot_of[kb])
+            ra = -1 if ka is None else robot_of[ka]
+            rb = -1 if kb is None else robot_of[kb]
             if ra >= 0 and rb >= 0:
                 pairs.append((ra, rb))
             elif ra >= 0 or rb >= 0:
                 r, sign, k = (ra, -1.0, ka) if ra >= 0 else (rb, 1.0, kb)
-                if self._proxy_solo[k]:
+                if solo[k]:
                     alone.setdefault(r, []).append((sign * nx, sign * ny, -d))
                 elif r not in skip:
                     static_robot.append(r)
