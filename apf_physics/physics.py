@@ -844,9 +844,9 @@ class Physics:
             velocity[:, 0] = v[robots, 0] / self.control_dt
             for k in range(1, self.substeps):
                 velocity[:, k] = velocity[:, k - 1] + (v[robots, k] - v[robots, k - 1]) / self.control_dt
-        else:
-            velocity = np.broadcast_to((v[robots] / self.control_dt)[:, None, :], (len(robots), self.substeps, 2))
-        _free_moves(self._positions, robots, offset, np.ascontiguousarray(velocity), self.dt)
+        else:   # one for every substep
+            velocity = (v[robots] / self.control_dt)[:, None, :]
+        _free_moves(self._positions, robots, offset, velocity, self.dt, self.substeps)
 
     def _add_velocities(self, proxies: np.ndarray, change: np.ndarray) -> None:
         """Add ``change`` to the velocities of the bodies of ``proxies`` (between substeps), leaving
@@ -883,15 +883,17 @@ class Physics:
 
 
 @kernel
-def _free_moves(positions, robots, offset, velocity, dt):
+def _free_moves(positions, robots, offset, velocity, dt, substeps):
     """:meth:`Physics._move_free`'s arithmetic: in place, robot ``robots[k]`` from its position
-    plus ``offset[k]``, ``p ← p + velocity[k, s]·dt`` for each substep ``s``, less the offset."""
+    plus ``offset[k]``, ``p ← p + velocity[k, s]·dt`` for each of the substeps ``s`` (``velocity``
+    (K, substeps, 2), or (K, 1, 2): the same at every substep), less the offset."""
+    last = velocity.shape[1] - 1
     for k in range(robots.shape[0]):
         r = robots[k]
         x, y = positions[r, 0] + offset[k, 0], positions[r, 1] + offset[k, 1]
-        for s in range(velocity.shape[1]):
-            x = x + velocity[k, s, 0] * dt
-            y = y + velocity[k, s, 1] * dt
+        for s in range(substeps):
+            x = x + velocity[k, min(s, last), 0] * dt
+            y = y + velocity[k, min(s, last), 1] * dt
         positions[r, 0], positions[r, 1] = x - offset[k, 0], y - offset[k, 1]
 
 
