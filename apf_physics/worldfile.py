@@ -57,8 +57,10 @@ RASTER_BYTES_PER_UNIT2 = 4_000
 """Peak bytes per square unit of rasters (map plus margin) an evaluation builds, computed in
 chunks: measured 2,400–2,600 beyond the process's own (a 300 × 300 world of boxes with the
 window and map networks and A*; a 512 × 512 MovingAI map with the map network and A*), rounded
-up. The physics' clearance raster at 8 nodes per unit dominates; then the A* grid and the
-potential and observation rasters at 4."""
+up, when the physics still had a clearance raster at 8 nodes per unit. The physics now keeps an
+index of the static shapes instead (:mod:`apf_physics.sweep`), and the A* grid and the potential
+and observation rasters at 4 nodes per unit dominate: 1,100–1,600 bytes per square unit on
+150 × 150 maps (``tests/test_world.py``), so the figure is generous."""
 RASTER_BYTES_PER_TARGET = 1_500
 """Further peak bytes per square unit per target: U is computed from a column per target
 (measured 370 at the default 4 nodes per unit; 1,500 covers a model's observer at 8)."""
@@ -88,8 +90,8 @@ def memory_budget() -> int:
 def raster_memory(size: Sequence[float], targets: int) -> float:
     """Estimated peak memory [bytes] of the rasters an evaluation of a world builds.
 
-    The physics' clearance raster (8 nodes per unit, float64), the potential and observation
-    rasters and the A* grid (4 nodes per unit) over the map and :data:`RASTER_MARGIN` beyond
+    The potential and observation rasters and the A* grid (4 nodes per unit) over the map and
+    :data:`RASTER_MARGIN` beyond
     it: :data:`RASTER_BYTES_PER_UNIT2` plus :data:`RASTER_BYTES_PER_TARGET` per target, per
     square unit (measured peaks, rounded up).
     """
@@ -103,7 +105,7 @@ def raster_memory_problem(size: Sequence[float], targets: int) -> str | None:
     if need <= budget:
         return None
     return (f"a {size[0]:g} x {size[1]:g} map with {targets} target(s) needs about {_gib(need)} of rasters "
-            f"(the physics' clearance at 8 nodes per unit, the planners' at 4), over the budget of {_gib(budget)}; "
+            f"(the planners' at 4 nodes per unit), over the budget of {_gib(budget)}; "
             f"use a smaller map, or set {MEMORY_BUDGET_VARIABLE} (e.g. {math.ceil(need / 2**30)}G) on a machine "
             f"with that much memory")
 

@@ -246,8 +246,8 @@ import sys
 import numpy as np
 from apf_physics.mapfiles import write_pgm
 from apf_physics.observation import MapView, observation_raster
-from apf_physics.physics import CLEARANCE_CAP, CLEARANCE_RESOLUTION
 from apf_physics.search import SearchGrid
+from apf_physics.sweep import Sweeps
 from apf_physics.worldfile import raster_memory, world_from_dict
 if sys.argv[1] == "grid":   # a random occupancy grid of 150 x 150 cells, one unit each
     occupied = np.random.default_rng(0).random((150, 150)) < 0.2
@@ -264,7 +264,7 @@ try:   # reset the peak, so that what imports used does not count
 except OSError:
     pass
 before = status("VmRSS")
-world.clearance_raster(CLEARANCE_RESOLUTION, CLEARANCE_CAP)   # the physics'
+Sweeps().add(world)                                            # the physics' index of static shapes
 observation_raster(world, 7, 4)                                # the DQN planner's (and u_wall's potential raster)
 world.start_cells()                                            # --random-starts
 SearchGrid.of(world).cost_to_go                                # the A* planner's
