@@ -171,7 +171,7 @@ class NavigationTask:
         slots = np.asarray(slots, np.intp).reshape(-1)
         world_ids = np.asarray(world_ids, np.intp).reshape(-1)
         leaders = np.asarray(leaders, float).reshape(-1, 2)
-        worlds = [self.worlds[w] for w in world_ids.tolist()]
+        worlds = list(map(self.worlds.__getitem__, world_ids.tolist()))
         if self.team is None:
             positions = leaders[:, None, :]
         else:

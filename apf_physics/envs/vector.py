@@ -97,6 +97,7 @@ class NavigateVectorEnv(VectorEnv):
         self._needs_reset = np.zeros(self.num_envs, bool)
         self._trail: list[np.ndarray] = []
         self._all = np.ones(self.num_envs, bool)
+        self._names = np.array([w.name for w in self.worlds], dtype=object)
 
     def _uniforms_for(self, slots: np.ndarray) -> np.ndarray:
         """Four uniforms per slot from each copy's own generator: the same numbers, in the same
@@ -119,7 +120,7 @@ class NavigateVectorEnv(VectorEnv):
             worlds, starts = self.chooser.draw(self._uniforms_for(slots))
         self._task.start(slots, worlds, starts)
         self._needs_reset[slots] = False
-        if 0 in slots:
+        if slots[0] == 0:   # (slots ascending)
             self._trail = [starts[0].copy()]
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
@@ -172,9 +173,8 @@ class NavigateVectorEnv(VectorEnv):
         return after
 
     def _info(self) -> dict:
-        names = np.array([w.name for w in self.worlds], dtype=object)
         info = {"position": self._task.positions[:, 0].copy(), "_position": self._all,
-                "world": names[self._task.world_of], "_world": self._all,
+                "world": self._names[self._task.world_of], "_world": self._all,
                 "distance": self._task.distance(), "_distance": self._all}
         if self.robot.unicycle is not None:
             info["heading"], info["_heading"] = self._task.stepper.headings[:, 0].copy(), self._all
