@@ -207,7 +207,7 @@ def test_a_file_over_the_size_limit_is_refused_before_it_is_read(tmp_path):
     ({"field": {"preset": "thesis-fixed", "kstr": 1e300}}, "field", "|U| would reach about 3.2e+301"),
     ({"field": {"preset": "thesis-fixed", "p0": 5e-324}}, "field", "the slope of U would reach infinity"),
     ({"size": [1e5, 1e5]}, "size[0]", "between 1 and 10,000 units, got 100000"),
-    ({"size": [2000, 2000]}, "size", "GiB of rasters (the physics' clearance at 8 nodes per unit, the planners' at 4), "
+    ({"size": [2000, 2000]}, "size", "GiB of rasters (the planners' at 4 nodes per unit), "
                                      "over the budget of 2.0 GiB"),
     ({"starts": [[15.2, 15.2]]}, "starts[0]", "already within goal_tolerance 0.5 of a target"),
     ({"name": "x" * 300}, "name", "at most 200 characters"),
