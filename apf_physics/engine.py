@@ -358,7 +358,7 @@ class Stepper:
             self.steps += 1
         else:
             self.positions = np.where(moved[:, None, None], after, self.positions)
-            self.steps[moved] += 1
+            self.steps += moved
         distance = self.distance()
         reached = distance <= self._slot_tolerance
         if not everyone:
