@@ -38,9 +38,13 @@ class SegmentIndex:
         interior: Given ``(origin, side, shape)`` of the buckets, rows ``(col, row, owner)`` of
             buckets wholly inside an owner, farther than ``reach`` from its boundary: points
             there read ``−reach`` for it.
+        side: The buckets' side (default: set by ``reach``, as above). With ``reach`` 0, each
+            bucket lists the primitives that pass through it (for queries that scan every bucket
+            a region covers, :mod:`apf_physics.sweep`).
     """
 
-    def __init__(self, reach: float, primitives: tuple, interior: Callable | None = None, nearest: bool = False):
+    def __init__(self, reach: float, primitives: tuple, interior: Callable | None = None, nearest: bool = False,
+                 side: float | None = None):
         a, b, radius, owner, kind, normal, pn_a, pn_b = primitives
         lo = np.minimum(a, b) - radius[:, None]
         hi = np.maximum(a, b) + radius[:, None]
@@ -48,7 +52,8 @@ class SegmentIndex:
         self.origin = lo.min(axis=0) - reach
         extent = hi.max(axis=0) + reach - self.origin
         # small buckets (fewer candidates per point), but at most reach/√2 (so that ``interior`` can mark them)
-        side = min(reach / math.sqrt(2.0), max(0.5, reach / 6.0))
+        if side is None:
+            side = min(reach / math.sqrt(2.0), max(0.5, reach / 6.0))
         if np.prod(np.ceil(extent / side) + 1) > MAX_BUCKETS:
             side = min(reach / math.sqrt(2.0), float(np.sqrt(np.prod(extent) / MAX_BUCKETS)) * 1.01)
         self.side = side

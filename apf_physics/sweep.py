@@ -1,21 +1,25 @@
-"""Which straight moves come near a world's static obstacles: exact swept distances, compiled.
+"""The physics' exact questions about a world's static obstacles, compiled.
 
-The physics sends to pymunk only the robots whose move this step may touch something
-(:meth:`~apf_physics.physics.Physics.needs_physics`). Its first test, three samples of a
-clearance raster along the move, is cheap but loose near walls: a robot sliding along a wall
-that it never touches is sent to pymunk all the same. :class:`Sweeps` answers the question
-exactly for the robots that test doubts: the least distance between the segment a robot's
-centre sweeps (from where it is to where its command takes it) and every static edge, disc,
-grid boundary and the map's edge.
+Which robots does the physics send to pymunk this step
+(:meth:`~apf_physics.physics.Physics.needs_physics`)? Those whose move comes within their
+radius (and a margin) of something: :meth:`Sweeps.near` measures, for every robot, the least
+distance between the segment its centre sweeps (from where it is to where its command takes
+it) and every static edge, disc, grid boundary and the map's edge. A robot sliding along a wall
+that it never touches stays out of pymunk.
+
+Where does a robot alone in its slot end when pymunk left it overlapping a shape at its last
+substep? :meth:`Sweeps.settle` pushes it out, asking for the nearest static shape after each push.
 
 Each world's static geometry (:func:`~apf_physics.lidar.static_geometry`) goes into a bucket
-index (:class:`~apf_physics.buckets.SegmentIndex`: square buckets, each listing the primitives
-within :data:`REACH` of it); a move is measured against the primitives listed in the buckets
-its box covers, by one compiled loop over all robots (:func:`_near_static`). The worlds in use
-are stacked, so one call serves robots of many worlds.
+index (:class:`~apf_physics.buckets.SegmentIndex` of reach 0: square buckets, each listing the
+primitives that pass through it); a query scans the buckets its box covers, in one compiled
+loop over all robots (:func:`_near_static`, :func:`_settle`). The worlds in use are stacked, so
+one call serves robots of many worlds.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -24,10 +28,12 @@ from apf_physics.compiled import kernel
 from apf_physics.lidar import static_geometry
 from apf_physics.world import World
 
-BUCKET_REACH = 1.0
-"""The bucket index's reach (:class:`~apf_physics.buckets.SegmentIndex`), which sets its buckets'
-side (half a unit). Queries scan every bucket their box covers, and a primitive is listed in
-every bucket it passes through, so a query of any distance is exact."""
+BUCKET_SIDE = 0.5
+"""The side of the bucket index's squares (:class:`~apf_physics.buckets.SegmentIndex` of reach 0:
+each lists the primitives that pass through it), or larger on a map of more than
+:data:`MOST_BUCKETS` of them. A query scans every bucket its box covers, so a query of any
+distance is exact."""
+MOST_BUCKETS = 1_000_000
 
 
 def _index(world: World) -> SegmentIndex | None:
@@ -42,8 +48,9 @@ def _index(world: World) -> SegmentIndex | None:
         radius = np.concatenate([np.zeros(len(geometry.a)), geometry.radius])
         kind = np.concatenate([np.full(len(geometry.a), EDGE), np.full(len(geometry.centre), DISC)]).astype(np.int8)
         zeros = np.zeros((len(a), 2))
-        return SegmentIndex(BUCKET_REACH, (a, b, radius, np.zeros(len(a), np.intp), kind, zeros, zeros, zeros))
-    return world.cached(("sweep_index", BUCKET_REACH), build, static=True)
+        side = max(BUCKET_SIDE, math.sqrt(world.size[0] * world.size[1] / MOST_BUCKETS))
+        return SegmentIndex(0.0, (a, b, radius, np.zeros(len(a), np.intp), kind, zeros, zeros, zeros), side=side)
+    return world.cached(("sweep_index", BUCKET_SIDE), build, static=True)
 
 
 class Sweeps:
