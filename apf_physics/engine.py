@@ -192,8 +192,7 @@ class Stepper:
             self._targets[i, :len(w.targets)] = w.targets
         self._tolerance = np.array([w.goal_tolerance for w in self.worlds])
         # the same per world in Python floats, for the scalar path
-        self._target_points = [[(float(x), float(y)) for x, y in np.asarray(w.targets, float).reshape(-1, 2).tolist()]
-                               for w in self.worlds]
+        self._target_points = [[tuple(t) for t in np.asarray(w.targets, float).reshape(-1, 2).tolist()] for w in self.worlds]
         self._tolerance_of = self._tolerance.tolist()
         self._slot_targets = self._targets[self.world_of]       # (S, T, 2): each slot's world's targets
         self._slot_tolerance = self._tolerance[self.world_of]

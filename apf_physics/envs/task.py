@@ -314,8 +314,8 @@ class NavigationTask:
         trapped = ended and outcome == TRAPPED
         truncated = trapped or (ended and outcome == TIMEOUT)
         robot_contact = bool(report.contacts.touched and report.contacts.robot[0])
-        # fresh arrays where the vector env hands them out (a caller may change its own), the
-        # stepper's read-only flags elsewhere
+        # fresh arrays for what the vector env hands out (a caller may change its own), read-only
+        # shared flags for the rest
         return TaskStep(self._obs, np.array([sum(terms)]), np.array([ended and not truncated]), np.array([truncated]),
                         np.array(terms)[:, None], report.reached, report.collided, report.moved,
                         _FLAGS[robot_contact], _FLAGS[trapped])

@@ -120,7 +120,7 @@ class NavigateVectorEnv(VectorEnv):
             worlds, starts = self.chooser.draw(self._uniforms_for(slots))
         self._task.start(slots, worlds, starts)
         self._needs_reset[slots] = False
-        if slots[0] == 0:   # (slots ascending)
+        if len(slots) and slots[0] == 0:   # (slots ascending)
             self._trail = [starts[0].copy()]
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
