@@ -122,11 +122,16 @@ class Touching:
     which touch rarely), or nothing is counted and the arbiters are read after every substep
     (one call per substep, whatever touches: cheaper when many robots are in contact).
     :meth:`count` switches between them; a count that starts is set to the arbiters present.
+
+    While counting, :attr:`begun` counts the contacts that began: every pair that touches during
+    a step is among the arbiters after the substep in which it began, or after the first substep
+    if it touched before; a reader needs no other substep (:meth:`new_pairs`).
     """
 
     def __init__(self, space: pymunk.Space, buffer: pymunk.batch.Buffer):
         self.space, self._buffer = space, buffer
         self.pairs = 0          # pairs touching now, while counting
+        self.begun = 0          # contacts begun, while counting
         self.counting = False
         self.count(True)
 
@@ -146,8 +151,16 @@ class Touching:
         """Some shapes may touch now (always, when not counting)."""
         return not self.counting or self.pairs > 0
 
+    def new_pairs(self, first: bool, begun_before: int) -> bool:
+        """After a substep (``first``: the step's first; ``begun_before``: :attr:`begun` before it):
+        may the arbiters now hold a pair not read after an earlier substep of this step?"""
+        if not self.counting:
+            return True
+        return self.begun != begun_before or (first and self.pairs > 0)
+
     def _begin(self, arbiter, space, data) -> None:
         self.pairs += 1
+        self.begun += 1
 
     def _separate(self, arbiter, space, data) -> None:
         self.pairs -= 1

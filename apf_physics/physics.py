@@ -809,13 +809,16 @@ class Physics:
         for k in range(self.substeps):
             if per_substep and k:   # steer: the command's change, on top of what contacts did to the velocity
                 self._add_velocities(proxies, (v[robots, k] - v[robots, k - 1]) / self.control_dt)
+            begun = touching.begun
             self.space.step(self.dt)
             if not touching.maybe:
                 continue   # no shapes touch: no arbiters to read
-            if k < self.substeps - 1:
-                ids = touching_pairs(self.space, self._arbiters)
-            else:   # the last substep: how deep they touch too, for _settle
+            if k == self.substeps - 1:   # the last substep: how deep they touch too, for _settle
                 ids, normal, distance = self._depths = touching_depths(self.space, self._arbiters)
+            elif touching.new_pairs(k == 0, begun):
+                ids = touching_pairs(self.space, self._arbiters)
+            else:
+                continue   # the pairs touching now were all read after an earlier substep
             if len(ids):
                 touched.append(ids)
         self._proxy_dirty[:] = False
