@@ -6,9 +6,11 @@ All through ``gymnasium.make`` (wrappers included), random actions, an episode r
 ends (resets included in the time). They are timed in alternating blocks of ``steps /
 blocks`` steps, so that a change of the machine's load hits all alike; the figure of each is
 the median over its blocks, and the ratio is theirs (aim ≤ 5); the fastest block of each is
-printed too (on a loaded machine it is the one the scheduler took least from). A third line steps
-Navigate-v0's batch of one by the stepper's array path instead of its scalar path
-(``Stepper.scalar = False``): before and after in one run.
+printed too (on a loaded machine it is the one the scheduler took least from). Each figure is
+given by the wall clock and by the thread's CPU time. A third line steps Navigate-v0's batch of
+one by the stepper's array path instead of its scalar path (``Stepper.scalar = False``): before
+and after in one run. A fourth steps it with ``Physics.step`` and ``Observer.observe`` stubbed
+(nobody moves, nothing touches): the step's own part, the env, task, stepper and wrappers.
 
 Then where a Navigate step goes: the same steps again with the physics call
 (``Physics.step``, its free-move test apart, and steps with and without pymunk apart), the
@@ -31,6 +33,7 @@ import gymnasium as gym
 import numpy as np
 
 import apf_physics  # noqa: F401  (registers the ids)
+from apf_physics.contacts import ContactLog
 
 
 def make(env_id: str):
@@ -40,35 +43,52 @@ def make(env_id: str):
     return env
 
 
-def run(env, actions: np.ndarray) -> float:
-    """Seconds for ``len(actions)`` steps (resetting when an episode ends)."""
-    t = time.perf_counter()
+def run(env, actions: np.ndarray) -> tuple[float, float]:
+    """Seconds for ``len(actions)`` steps (resetting when an episode ends): by the wall clock, and
+    by this thread's CPU time (what a loaded machine's scheduler takes away is not in it)."""
+    t, c = time.perf_counter(), time.thread_time()
     for a in actions.tolist():
         _, _, terminated, truncated, _ = env.step(a)
         if terminated or truncated:
             env.reset()
-    return time.perf_counter() - t
+    return time.perf_counter() - t, time.thread_time() - c
 
 
-def side_by_side(steps: int, blocks: int) -> tuple[float, float, float]:
-    """Median µs per step of CartPole-v1, of Navigate-v0, and of Navigate-v0 with its batch of one
-    stepped by the array path (``Stepper.scalar = False``: the step before the scalar path),
-    timed in alternating blocks."""
-    cart, nav, array = make("CartPole-v1"), make("apf_physics/Navigate-v0"), make("apf_physics/Navigate-v0")
-    array.unwrapped._task.stepper.scalar = False
+def stubbed(env):
+    """``env`` with ``Physics.step`` and ``Observer.observe`` replaced by stubs (nothing touched,
+    nobody moves; the window of the start): what is left of a step is the env's, the task's, the
+    stepper's and the wrappers' own part (episodes run to the step limit, 100 steps)."""
+    task = env.unwrapped._task
+    nothing = ContactLog.nothing(task.stepper.physics.num_robots)
+    window = task.observer.observe(task.stepper.positions[:, 0], None, task.stepper.steps)
+    task.stepper.physics.step = lambda velocities, active=None: nothing
+    task.observer.observe = lambda positions, robots=None, t=0.0, discs=None: window.copy()
+    return env
+
+
+def side_by_side(steps: int, blocks: int) -> dict[str, tuple[float, float]]:
+    """Median µs per step (wall clock, CPU time) of CartPole-v1, of Navigate-v0, and of Navigate-v0
+    with its batch of one stepped by the array path (``Stepper.scalar = False``: the step before
+    the scalar path), timed in alternating blocks; the two Navigate-v0 take the same actions."""
+    envs = {"CartPole-v1": make("CartPole-v1"), "Navigate-v0": make("apf_physics/Navigate-v0"),
+            "array path": make("apf_physics/Navigate-v0"), "own part": stubbed(make("apf_physics/Navigate-v0"))}
+    envs["array path"].unwrapped._task.stepper.scalar = False
     rng = np.random.default_rng(0)
     per = max(1, steps // blocks)
-    run(cart, rng.integers(0, 2, 500))   # warm up
-    run(nav, rng.integers(0, 9, 500))
-    run(array, rng.integers(0, 9, 500))
-    c, n, a = [], [], []
-    for _ in range(blocks):
-        c.append(run(cart, rng.integers(0, 2, per)) / per * 1e6)
-        n.append(run(nav, rng.integers(0, 9, per)) / per * 1e6)
-        a.append(run(array, rng.integers(0, 9, per)) / per * 1e6)
-    for name, values in (("CartPole-v1", c), ("Navigate-v0", n), ("array path", a)):
-        print(f"  blocks of {name}: median {statistics.median(values):.1f}, fastest {min(values):.1f} us/step")
-    return statistics.median(c), statistics.median(n), statistics.median(a)
+    times: dict[str, list[tuple[float, float]]] = {name: [] for name in envs}
+    for block in range(blocks + 1):   # block 0 warms up
+        moves = rng.integers(0, 9, per)
+        for name, env in envs.items():
+            wall, cpu = run(env, rng.integers(0, 2, per) if name == "CartPole-v1" else moves)
+            if block:
+                times[name].append((wall / per * 1e6, cpu / per * 1e6))
+    out = {}
+    for name, values in times.items():
+        wall, cpu = [w for w, _ in values], [c for _, c in values]
+        out[name] = statistics.median(wall), statistics.median(cpu)
+        print(f"  blocks of {name}: median {out[name][0]:.1f} (CPU {out[name][1]:.1f}), fastest {min(wall):.1f} "
+              f"(CPU {min(cpu):.1f}) us/step")
+    return out
 
 
 @contextmanager
@@ -97,7 +117,7 @@ def breakdown(steps: int) -> None:
     task = env.unwrapped._task
     physics, observer = task.stepper.physics, task.observer
     actions = np.random.default_rng(1).integers(0, 9, steps)
-    run(env, actions[:500])
+    run(env, actions[:500])   # warm up
     free, simulated, test, obs, starts, resets, reset_obs = [], [], [], [], [], [], []
     step = physics.step
 
@@ -118,7 +138,7 @@ def breakdown(steps: int) -> None:
     physics.step, env.reset = sorting, resetting
     try:
         with timed(physics, "needs_physics", test), timed(observer, "observe", obs), timed(task, "start", starts):
-            total = run(env, actions)
+            total, _ = run(env, actions)
     finally:
         del physics.step, env.reset
     phys = sum(free) + sum(simulated)
@@ -147,11 +167,17 @@ def main() -> None:
     parser.add_argument("--profile", action="store_true", help="also cProfile the Navigate steps")
     args = parser.parse_args()
     print(f"load average at start: {os.getloadavg()[0]:.2f}")
-    cart, nav, array = side_by_side(args.steps, args.blocks)
-    print(f"single environment, random actions, through gymnasium.make (median of {args.blocks} alternating blocks)")
-    print(f"  CartPole-v1                             {cart:7.1f} us/step")
-    print(f"  apf_physics/Navigate-v0                 {nav:7.1f} us/step   {nav / cart:5.1f} x CartPole (aim <= 5)")
-    print(f"  the same, stepped by the array path     {array:7.1f} us/step   {array / cart:5.1f} x CartPole")
+    times = side_by_side(args.steps, args.blocks)
+    (cart, cart_cpu), (nav, nav_cpu), (array, array_cpu), (own, own_cpu) = times.values()
+    print(f"single environment, random actions, through gymnasium.make (median of {args.blocks} alternating blocks; "
+          f"wall clock, and CPU time)")
+    print(f"  CartPole-v1                             {cart:7.1f} us/step (CPU {cart_cpu:6.1f})")
+    print(f"  apf_physics/Navigate-v0                 {nav:7.1f} us/step (CPU {nav_cpu:6.1f})   {nav / cart:5.1f} x "
+          f"CartPole (CPU {nav_cpu / cart_cpu:4.1f} x; aim <= 5)")
+    print(f"  the same, stepped by the array path     {array:7.1f} us/step (CPU {array_cpu:6.1f})   {array / cart:5.1f} x "
+          f"CartPole (CPU {array_cpu / cart_cpu:4.1f} x)")
+    print(f"  own part: physics, observation stubbed  {own:7.1f} us/step (CPU {own_cpu:6.1f})   {own / cart:5.1f} x "
+          f"CartPole (CPU {own_cpu / cart_cpu:4.1f} x)")
     breakdown(args.steps)
     if args.profile:
         env = make("apf_physics/Navigate-v0")
