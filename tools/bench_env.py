@@ -5,7 +5,8 @@
 Prints, from one process:
 
 - µs per step of ``apf_physics/Navigate-v0`` and Gymnasium's ``CartPole-v1``, both through
-  ``gymnasium.make`` (wrappers included) with random actions, and their ratio (aim ≤ 5);
+  ``gymnasium.make`` (wrappers included) with random actions, timed in alternating blocks, and
+  their ratio (aim ≤ 5);
 - robot-steps per second of ``NavigateVectorEnv`` on fixed20 (random starts and actions) at
   each N, and with ``--vmas`` VMAS's ``navigation`` scenario (CPU, one agent per env,
   continuous random actions, one torch thread) at the same N, stepped in alternating blocks,
@@ -41,20 +42,27 @@ from apf_physics.obstacles import CircleObstacle, Motion
 from apf_physics.observation import Observer, ObserverConfig
 
 
-def single_rate(env_id: str, steps: int, **kwargs) -> float:
-    """Steps per second of one environment through ``gymnasium.make``, random actions, after 500
-    steps of warm-up (the compiled kernels are compiled on their first use)."""
-    env = gym.make(env_id, **kwargs)
-    env.reset(seed=0)
-    actions = np.random.default_rng(0).integers(0, env.action_space.n, steps + 500)
-    t = 0.0
-    for k, a in enumerate(actions.tolist()):
-        if k == 500:
+def single_rates(steps: int, blocks: int = 10) -> tuple[float, float]:
+    """Steps per second of ``CartPole-v1`` and of ``apf_physics/Navigate-v0`` (fixed20), each
+    through ``gymnasium.make``, random actions, timed in alternating blocks (after a block of
+    warm-up: the compiled kernels are compiled on their first use); the median block of each."""
+    envs = [gym.make("CartPole-v1"), gym.make("apf_physics/Navigate-v0", world="fixed20")]
+    rng = np.random.default_rng(0)
+    per = max(1, steps // blocks)
+    rates: list[list[float]] = [[], []]
+    for env in envs:
+        env.reset(seed=0)
+    for block in range(blocks + 1):
+        for env, out in zip(envs, rates):
+            actions = rng.integers(0, env.action_space.n, per).tolist()
             t = time.perf_counter()
-        _, _, terminated, truncated, _ = env.step(a)
-        if terminated or truncated:
-            env.reset()
-    return steps / (time.perf_counter() - t)
+            for a in actions:
+                _, _, terminated, truncated, _ = env.step(a)
+                if terminated or truncated:
+                    env.reset()
+            if block:
+                out.append(per / (time.perf_counter() - t))
+    return float(np.median(rates[0])), float(np.median(rates[1]))
 
 
 LIDAR_ROBOT = {"action": "continuous", "kinematics": "unicycle", "observation": "lidar", "lidar": {"beams": 64}}
@@ -282,9 +290,9 @@ def main() -> None:
                   f"obstacle {c['obstacle']} (worst {c['worst obstacle']:.3f}), robot {c['robot']} "
                   f"(worst {c['worst robot']:.3f}), through {c['through']}; "
                   f"physics {c['physics us/robot-step']:.1f} us (CPU) per robot-step")
-    cart = single_rate("CartPole-v1", args.steps)
-    ours = single_rate("apf_physics/Navigate-v0", args.steps, world="fixed20")
-    print("single environment, random actions, through gymnasium.make (wrappers included)")
+    cart, ours = single_rates(args.steps)
+    print("single environment, random actions, through gymnasium.make (wrappers included; median of 10 "
+          "alternating blocks, tools/bench_single.py for where the time goes)")
     print(f"  CartPole-v1                {cart:10.0f} steps/s   {1e6 / cart:7.1f} us/step")
     print(f"  apf_physics/Navigate-v0    {ours:10.0f} steps/s   {1e6 / ours:7.1f} us/step")
     print(f"  a Navigate step costs      {cart / ours:10.1f} x a CartPole step (aim <= 5)")
