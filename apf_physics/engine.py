@@ -273,7 +273,7 @@ class Stepper:
         positions = np.asarray(positions, float).reshape(len(slots), m, 2)
         robots = (slots[:, None] * m + np.arange(m)).ravel() if m > 1 else slots
         self.physics.present[robots] = True if present is None else np.asarray(present, bool).reshape(-1)
-        if world_ids is not None:
+        if world_ids is not None and len(self.worlds) > 1:
             changed = slots[self.world_of[slots] != world_ids]   # slots changing worlds
             if len(changed):
                 self.world_of[slots] = world_ids
@@ -290,8 +290,11 @@ class Stepper:
         self.outcome[slots] = RUNNING
         if self.unicycle is not None:
             self._face(slots, positions, headings)
-        self.last_distance = self.last_distance.copy()
-        self.last_distance[slots] = distance = _nearest(positions[:, 0], self._slot_targets[slots])
+        if self.scalar:   # (as in _step_one)
+            self.last_distance = distance = np.array([self._distance_one(*positions[0, 0].tolist())])
+        else:
+            self.last_distance = self.last_distance.copy()
+            self.last_distance[slots] = distance = _nearest(positions[:, 0], self._slot_targets[slots])
         if self._watch is not None:
             self._watch.reset(slots, positions[:, 0], self._leader_potential(slots))
         arrived = distance <= self._slot_tolerance[slots]

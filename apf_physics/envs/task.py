@@ -189,7 +189,7 @@ class NavigationTask:
                 self.unicycle_followers[slot] = followers
         self.observer.reset(slots, leaders, worlds)
         self._moved[slots] = 0.0
-        self._observe(slots)
+        self._observe(None if self.num == 1 else slots)   # (a batch of one: its one slot)
 
     def _observe(self, slots: np.ndarray | None) -> None:
         """Refresh the observations (and the potential at the leader) of ``slots`` (None: all)."""
