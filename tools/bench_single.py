@@ -5,9 +5,10 @@
 All through ``gymnasium.make`` (wrappers included), random actions, an episode reset when one
 ends (resets included in the time). They are timed in alternating blocks of ``steps /
 blocks`` steps, so that a change of the machine's load hits all alike; the figure of each is
-the median over its blocks, and the ratio is theirs (aim ≤ 5); the fastest block of each is
-printed too (on a loaded machine it is the one the scheduler took least from). Each figure is
-given by the wall clock and by the thread's CPU time. A third line steps Navigate-v0's batch of
+the median over its blocks, and the ratio the median of each block's ratio to the CartPole
+block beside it (aim ≤ 5); the fastest block of each is printed too (on a loaded machine it is
+the one the scheduler took least from). Each figure is given by the wall clock and by the
+thread's CPU time. A third line steps Navigate-v0's batch of
 one by the stepper's array path instead of its scalar path (``Stepper.scalar = False``): before
 and after in one run. A fourth steps it with ``Physics.step`` and ``Observer.observe`` stubbed
 (nobody moves, nothing touches): the step's own part, the env, task, stepper and wrappers.
@@ -83,11 +84,17 @@ def side_by_side(steps: int, blocks: int) -> dict[str, tuple[float, float]]:
             if block:
                 times[name].append((wall / per * 1e6, cpu / per * 1e6))
     out = {}
+    cart = times["CartPole-v1"]
     for name, values in times.items():
         wall, cpu = [w for w, _ in values], [c for _, c in values]
-        out[name] = statistics.median(wall), statistics.median(cpu)
+        ratio = [w / c for (w, _), (c, _) in zip(values, cart)]   # per block: what the load did to both
+        ratio_cpu = [w / c for (_, w), (_, c) in zip(values, cart)]
+        out[name] = (statistics.median(wall), statistics.median(cpu),
+                     statistics.median(ratio), statistics.median(ratio_cpu))
         print(f"  blocks of {name}: median {out[name][0]:.1f} (CPU {out[name][1]:.1f}), fastest {min(wall):.1f} "
-              f"(CPU {min(cpu):.1f}) us/step")
+              f"(CPU {min(cpu):.1f}) us/step" + ("" if name == "CartPole-v1" else
+                                                  f"; x CartPole's block: median {out[name][2]:.1f}, "
+                                                  f"{min(ratio):.1f} to {max(ratio):.1f}"))
     return out
 
 
@@ -168,16 +175,15 @@ def main() -> None:
     args = parser.parse_args()
     print(f"load average at start: {os.getloadavg()[0]:.2f}")
     times = side_by_side(args.steps, args.blocks)
-    (cart, cart_cpu), (nav, nav_cpu), (array, array_cpu), (own, own_cpu) = times.values()
+    (cart, cart_cpu, _, _), nav, array, own = times.values()
     print(f"single environment, random actions, through gymnasium.make (median of {args.blocks} alternating blocks; "
-          f"wall clock, and CPU time)")
+          f"wall clock, and CPU time; x CartPole: the median of the blocks' ratios to the CartPole block beside them)")
     print(f"  CartPole-v1                             {cart:7.1f} us/step (CPU {cart_cpu:6.1f})")
-    print(f"  apf_physics/Navigate-v0                 {nav:7.1f} us/step (CPU {nav_cpu:6.1f})   {nav / cart:5.1f} x "
-          f"CartPole (CPU {nav_cpu / cart_cpu:4.1f} x; aim <= 5)")
-    print(f"  the same, stepped by the array path     {array:7.1f} us/step (CPU {array_cpu:6.1f})   {array / cart:5.1f} x "
-          f"CartPole (CPU {array_cpu / cart_cpu:4.1f} x)")
-    print(f"  own part: physics, observation stubbed  {own:7.1f} us/step (CPU {own_cpu:6.1f})   {own / cart:5.1f} x "
-          f"CartPole (CPU {own_cpu / cart_cpu:4.1f} x)")
+    for label, (wall, cpu, ratio, ratio_cpu) in (("apf_physics/Navigate-v0", nav),
+                                                 ("the same, stepped by the array path", array),
+                                                 ("own part: physics, observation stubbed", own)):
+        aim = "; aim <= 5" if label.startswith("apf") else ""
+        print(f"  {label:39s} {wall:7.1f} us/step (CPU {cpu:6.1f})   {ratio:5.1f} x CartPole (CPU {ratio_cpu:4.1f} x{aim})")
     breakdown(args.steps)
     if args.profile:
         env = make("apf_physics/Navigate-v0")
