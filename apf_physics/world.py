@@ -25,6 +25,7 @@ import numpy as np
 
 from apf_physics import field as apf
 from apf_physics import geometry
+from apf_physics.compiled import kernel
 from apf_physics.errors import WorldError
 from apf_physics.field import FieldParams
 from apf_physics.kinematics import LIMIT_KEYS, UnicycleLimits
@@ -245,17 +246,16 @@ class World:
         t = np.asarray(t, float)
         if not self.moving:
             return np.zeros(t.shape + (0, 2))
-        whole = np.round(t)
-        if np.any(whole != t) or t.size == 0 or whole.min() < -1:
+        rows, last = _table_rows(t.ravel())                     # the table starts at step -1
+        if not t.size or last < 0:
             return np.stack([self.obstacles[i].motion.offset(t) for i in self.moving], axis=-2)
-        steps = whole.astype(np.intp) + 1                       # the table starts at step -1
         table = self._cache.get("motion_table")
-        if table is None or steps.max() >= table.shape[0]:
-            length = max(256, 2 * int(steps.max()) + 1)
+        if table is None or last >= table.shape[0]:
+            length = max(256, 2 * last + 1)
             at = np.arange(length) - 1.0
             table = np.stack([self.obstacles[i].motion.offset(at) for i in self.moving], axis=1)   # (T, M, 2)
             self._cache["motion_table"] = table
-        return table[steps]
+        return table.reshape(len(table), -1).take(rows, axis=0).reshape(t.shape + table.shape[1:])
 
     def at(self, t: float = 0.0) -> Moment:
         """The world at control step ``t`` (fractional steps allowed): see :class:`Moment`.
@@ -646,6 +646,20 @@ class Moment:
             clearance = np.minimum(_with_moving(world, points, world.near_shapes.distance(points), offsets),
                                    world.edge_distance(points))
         return _least_per_segment(len(a), owner, clearance)
+
+
+@kernel
+def _table_rows(t):
+    """``(rows, last)``: each step of ``t`` (1-D) as a row of the motion table (the step + 1) and
+    the last row needed, or ``last`` −1 if a step is not whole or not from step −1 to 2⁵²."""
+    rows = np.empty(t.shape[0], np.intp)
+    last = 0
+    for i in range(t.shape[0]):
+        if not (-1.0 <= t[i] < 2.0 ** 52 and t[i] == np.floor(t[i])):
+            return rows, -1
+        rows[i] = int(t[i]) + 1
+        last = max(last, rows[i])
+    return rows, last
 
 
 def _with_moving(world: World, points: np.ndarray, best: np.ndarray, offsets) -> np.ndarray:
