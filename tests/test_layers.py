@@ -40,8 +40,9 @@ PACKAGE = PROJECT / "apf_physics"
 PYPROJECT = PROJECT / "pyproject.toml"
 ROOT = "apf_physics"
 
-LAZY_ALLOWED = {"torch", "cv2", "av", "ray"}
-"""Third-party imports that may be deferred into a function (heavy, and not needed by every user)."""
+LAZY_ALLOWED = {"torch", "cv2", "av", "ray", "numba"}
+"""Third-party imports that may be deferred into a function (heavy, and not needed by every user;
+numba's import takes half a second, paid where a compiled loop first runs: apf_physics.compiled)."""
 
 DYNAMIC_ALLOWED = {
     ("apf_physics.cli", 'module = importlib.import_module(f"apf_physics.commands.{name}")'): "apf_physics.commands",
