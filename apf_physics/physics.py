@@ -499,6 +499,9 @@ class Physics:
             The contacts seen during the step (read-only).
         """
         v = np.asarray(velocities, dtype=float)
+        if self.num_robots == 1 and not self._any_moving and not self._proxy_held and active is None \
+                and v.size == 2 and self._step_alone(v):
+            return self._touch_free
         per_substep = v.ndim == 3
         if per_substep:
             v = v.reshape(self.num_robots, self.substeps, 2)
@@ -832,6 +835,31 @@ class Physics:
             after = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 2)[self._row_of_proxy[proxies]]
         self._positions[robots] = after - offsets
         return np.vstack(touched) if touched else np.zeros((0, 2), np.uintp)
+
+    def _step_alone(self, v: np.ndarray) -> bool:
+        """:meth:`step` for one robot, moving straight among static obstacles and holding no proxy,
+        when its move comes near nothing: the array path's operations, in the same order, on
+        Python floats (``tests/test_physics.py`` checks both paths give the same steps to the bit).
+
+        Returns:
+            Whether it moved; False (nothing done) when it needs pymunk, is absent, or its command
+            exceeds the top speed: the array path takes it.
+        """
+        vx, vy = v.reshape(2).tolist()
+        if not self.present[0] or np.hypot(vx, vy) > self.max_speed:
+            return False
+        x, y = self._positions[0].tolist()
+        dt, control = self.dt, self.control_dt
+        if self._sweeps.near_one(int(self._sweep_world[0]), x, y, x + vx * control, y + vy * control,
+                                 float(self._keep_off[0])):
+            return False
+        ox, oy = self._tiles.offset[self._slot_tile[0]].tolist()
+        vx, vy = vx / control, vy / control
+        x, y = x + ox, y + oy
+        for _ in range(self.substeps):   # as _free_moves
+            x, y = x + vx * dt, y + vy * dt
+        self._positions[0] = (x - ox, y - oy)
+        return True
 
     def _move_free(self, robots: np.ndarray, v: np.ndarray) -> None:
         """Move ``robots`` as pymunk moves a free disc, to the bit: put where the robot's proxy

@@ -107,6 +107,12 @@ class Sweeps:
         return _near_static(np.ascontiguousarray(world, np.intp), p, q, np.ascontiguousarray(distance, float),
                             grid, shape, start, member, prim)
 
+    def near_one(self, world: int, px: float, py: float, qx: float, qy: float, distance: float) -> bool:
+        """:meth:`near` for one move ``(px, py) → (qx, qy)``, in plain floats."""
+        if self._tables is None:
+            self._tables = self._stack()
+        return _move_near(world, px, py, qx, qy, distance, *self._tables)
+
     def settle(self, world: np.ndarray, p: np.ndarray, before: np.ndarray, radius: np.ndarray, first: np.ndarray,
                planes: np.ndarray, tolerance: float, rounds: int) -> np.ndarray:
         """Robots that meet no other robot, at ``p`` (K, 2), overlapping static shapes, pushed out.
@@ -133,43 +139,40 @@ class Sweeps:
 
 @kernel
 def _near_static(world, p, q, distance, grid, shape, start, member, prim):
-    """For each move ``p[i] → q[i]`` in world ``world[i]``: does it come within ``distance[i]`` of
-    the map's edge or of a primitive (a segment ``a + t·e``, ``t ∈ [0, 1]``, with a radius)
-    listed in a bucket that the move's box, widened by ``distance[i]``, covers?"""
+    """For each move ``p[i] → q[i]`` in world ``world[i]``: :func:`_move_near`."""
     n = p.shape[0]
     out = np.zeros(n, np.bool_)
     for i in range(n):
-        w = world[i]
-        need = distance[i]
-        px, py, qx, qy = p[i, 0], p[i, 1], q[i, 0], q[i, 1]
-        # the map's edge: a straight move is nearest to it at one of its ends
-        width, height = grid[w, 3], grid[w, 4]
-        if (min(px, qx) < need or min(py, qy) < need or width - max(px, qx) < need
-                or height - max(py, qy) < need):
-            out[i] = True
-            continue
-        cols, rows, first = shape[w, 0], shape[w, 1], shape[w, 2]
-        if cols == 0:
-            continue
-        ox, oy, side = grid[w, 0], grid[w, 1], grid[w, 2]
-        c0 = max(int(np.floor((min(px, qx) - need - ox) / side)), 0)
-        c1 = min(int(np.floor((max(px, qx) + need - ox) / side)), cols - 1)
-        r0 = max(int(np.floor((min(py, qy) - need - oy) / side)), 0)
-        r1 = min(int(np.floor((max(py, qy) + need - oy) / side)), rows - 1)
-        dx, dy = qx - px, qy - py
-        for row in range(r0, r1 + 1):
-            for col in range(c0, c1 + 1):
-                bucket = first + row * cols + col
-                for k in range(start[bucket], start[bucket + 1]):
-                    j = member[k]
-                    if _segment_distance(px, py, dx, dy, prim[j, 0], prim[j, 1], prim[j, 2], prim[j, 3]) < need + prim[j, 4]:
-                        out[i] = True
-                        break
-                if out[i]:
-                    break
-            if out[i]:
-                break
+        out[i] = _move_near(world[i], p[i, 0], p[i, 1], q[i, 0], q[i, 1], distance[i], grid, shape, start, member, prim)
     return out
+
+
+@kernel
+def _move_near(w, px, py, qx, qy, need, grid, shape, start, member, prim):
+    """Does the move ``(px, py) → (qx, qy)`` in world ``w`` come within ``need`` of the map's edge
+    or of a primitive (a segment ``a + t·e``, ``t ∈ [0, 1]``, with a radius) listed in a bucket
+    that the move's box, widened by ``need``, covers?"""
+    # the map's edge: a straight move is nearest to it at one of its ends
+    width, height = grid[w, 3], grid[w, 4]
+    if min(px, qx) < need or min(py, qy) < need or width - max(px, qx) < need or height - max(py, qy) < need:
+        return True
+    cols, rows, first = shape[w, 0], shape[w, 1], shape[w, 2]
+    if cols == 0:
+        return False
+    ox, oy, side = grid[w, 0], grid[w, 1], grid[w, 2]
+    c0 = max(int(np.floor((min(px, qx) - need - ox) / side)), 0)
+    c1 = min(int(np.floor((max(px, qx) + need - ox) / side)), cols - 1)
+    r0 = max(int(np.floor((min(py, qy) - need - oy) / side)), 0)
+    r1 = min(int(np.floor((max(py, qy) + need - oy) / side)), rows - 1)
+    dx, dy = qx - px, qy - py
+    for row in range(r0, r1 + 1):
+        for col in range(c0, c1 + 1):
+            bucket = first + row * cols + col
+            for k in range(start[bucket], start[bucket + 1]):
+                j = member[k]
+                if _segment_distance(px, py, dx, dy, prim[j, 0], prim[j, 1], prim[j, 2], prim[j, 3]) < need + prim[j, 4]:
+                    return True
+    return False
 
 
 @kernel
