@@ -17,10 +17,13 @@ import numpy as np
 import pymunk
 import pymunk.batch
 
+from apf_physics.compiled import kernel
+
 KINDS = ("obstacle", "wall", "robot", "moving_obstacle")
 """What a robot can touch; :attr:`ContactLog.pairs` holds indices into this."""
 OBSTACLE, WALL, ROBOT, MOVING = range(4)
 """Indices into :data:`KINDS`."""
+_KIND_COUNT = len(KINDS)
 FEW_PAIRS = 64
 """Up to this many touching pairs, contacts are read with dicts (:func:`contact_rows_few`) rather than arrays."""
 
@@ -234,21 +237,46 @@ def contact_rows(pairs: np.ndarray, labels: BodyLabels, proxy_ids: np.ndarray, p
         proxy_order: ``argsort(proxy_ids)``.
         proxy_robot: The robot each proxy simulates (-1: parked).
     """
-    proxy_index = proxy_order[np.clip(np.searchsorted(proxy_ids[proxy_order], pairs), 0, len(proxy_ids) - 1)]
-    is_proxy = proxy_ids[proxy_index] == pairs
-    robot_of = np.where(is_proxy, proxy_robot[proxy_index], -1)
-    static = np.clip(np.searchsorted(labels.ids, pairs), 0, max(len(labels.ids) - 1, 0))
-    robots, kinds, others = [], [], []
-    for a, b in ((0, 1), (1, 0)):   # an arbiter's bodies come in either order
-        robot = robot_of[:, a]
-        with_static = (robot >= 0) & ~is_proxy[:, b]
-        label = labels.label[static[with_static, b]]
-        with_robot = (robot >= 0) & (robot_of[:, b] >= 0)
-        robots += [robot[with_static], robot[with_robot]]
-        kinds += [label[:, 0], np.full(int(with_robot.sum()), ROBOT)]
-        others += [label[:, 1], robot_of[with_robot, b]]
-    robot, kind, other = (np.concatenate(c).astype(np.int64) for c in (robots, kinds, others))
-    # rows (robot, kind, other) as one sortable key: one 1-D unique instead of a row-wise one
-    span = int(other.max(initial=0)) + 1
-    key = np.unique((robot * len(KINDS) + kind) * span + other)
-    return np.column_stack([key // (len(KINDS) * span), key // span % len(KINDS), key % span]).astype(np.intp)
+    return _contact_rows(np.ascontiguousarray(pairs, np.uint64), proxy_ids[proxy_order].astype(np.uint64), proxy_order,
+                         proxy_robot, labels.ids.astype(np.uint64), labels.label)
+
+
+@kernel
+def _contact_rows(pairs, proxy_ids, proxy_order, proxy_robot, label_ids, label):
+    """:func:`contact_rows` over ``proxy_ids`` sorted (``proxy_order``: their proxies) and
+    ``label_ids`` sorted with their ``label`` rows: each body of a pair that is a lent proxy gives
+    one row, ``(its robot, kind, index)`` for a static body or ``(its robot, ROBOT, the other's
+    robot)`` for another lent proxy; rows sorted, each once."""
+    n = pairs.shape[0]
+    robot = np.full((n, 2), -1, np.int64)   # the robot each body simulates (-1: not a lent proxy)
+    proxy = np.zeros((n, 2), np.bool_)
+    for i in range(n):
+        for side in range(2):
+            k = np.searchsorted(proxy_ids, pairs[i, side])
+            if k < len(proxy_ids) and proxy_ids[k] == pairs[i, side]:
+                proxy[i, side] = True
+                robot[i, side] = proxy_robot[proxy_order[k]]
+    rows = np.empty((2 * n, 3), np.int64)
+    count = 0
+    for i in range(n):
+        for a in range(2):
+            b = 1 - a
+            if robot[i, a] < 0:
+                continue
+            if not proxy[i, b]:
+                s = min(np.searchsorted(label_ids, pairs[i, b]), max(len(label_ids) - 1, 0))
+                rows[count, 0], rows[count, 1], rows[count, 2] = robot[i, a], label[s, 0], label[s, 1]
+                count += 1
+            elif robot[i, b] >= 0:
+                rows[count, 0], rows[count, 1], rows[count, 2] = robot[i, a], ROBOT, robot[i, b]
+                count += 1
+    rows = rows[:count]
+    # rows as one sortable key: one 1-D unique
+    span = 1
+    for i in range(count):
+        span = max(span, rows[i, 2] + 1)
+    key = np.unique((rows[:, 0] * _KIND_COUNT + rows[:, 1]) * span + rows[:, 2])
+    out = np.empty((len(key), 3), np.intp)
+    for i in range(len(key)):
+        out[i, 0], out[i, 1], out[i, 2] = key[i] // (_KIND_COUNT * span), key[i] // span % _KIND_COUNT, key[i] % span
+    return out
