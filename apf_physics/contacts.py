@@ -241,6 +241,30 @@ def contact_rows(pairs: np.ndarray, labels: BodyLabels, proxy_ids: np.ndarray, p
                          proxy_robot, labels.ids.astype(np.uint64), labels.label)
 
 
+def body_robots(pairs: np.ndarray, proxy_ids: np.ndarray, proxy_order: np.ndarray,
+                proxy_robot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each body of the (K, 2) body-id ``pairs``: ``(robot, proxy)``, both (K, 2), the robot it
+    simulates (-1: not a lent proxy) and which proxy it is (-1: not a proxy); arguments as
+    :func:`contact_rows`."""
+    return _body_robots(np.ascontiguousarray(pairs, np.uint64), proxy_ids[proxy_order].astype(np.uint64), proxy_order,
+                        proxy_robot)
+
+
+@kernel
+def _body_robots(pairs, proxy_ids, proxy_order, proxy_robot):
+    """:func:`body_robots` over ``proxy_ids`` sorted (``proxy_order``: their proxies)."""
+    n = pairs.shape[0]
+    robot = np.full((n, 2), -1, np.int64)
+    proxy = np.full((n, 2), -1, np.int64)
+    for i in range(n):
+        for side in range(2):
+            k = np.searchsorted(proxy_ids, pairs[i, side])
+            if k < len(proxy_ids) and proxy_ids[k] == pairs[i, side]:
+                proxy[i, side] = proxy_order[k]
+                robot[i, side] = proxy_robot[proxy_order[k]]
+    return robot, proxy
+
+
 @kernel
 def _contact_rows(pairs, proxy_ids, proxy_order, proxy_robot, label_ids, label):
     """:func:`contact_rows` over ``proxy_ids`` sorted (``proxy_order``: their proxies) and
@@ -248,14 +272,7 @@ def _contact_rows(pairs, proxy_ids, proxy_order, proxy_robot, label_ids, label):
     one row, ``(its robot, kind, index)`` for a static body or ``(its robot, ROBOT, the other's
     robot)`` for another lent proxy; rows sorted, each once."""
     n = pairs.shape[0]
-    robot = np.full((n, 2), -1, np.int64)   # the robot each body simulates (-1: not a lent proxy)
-    proxy = np.zeros((n, 2), np.bool_)
-    for i in range(n):
-        for side in range(2):
-            k = np.searchsorted(proxy_ids, pairs[i, side])
-            if k < len(proxy_ids) and proxy_ids[k] == pairs[i, side]:
-                proxy[i, side] = True
-                robot[i, side] = proxy_robot[proxy_order[k]]
+    robot, proxy = _body_robots(pairs, proxy_ids, proxy_order, proxy_robot)
     rows = np.empty((2 * n, 3), np.int64)
     count = 0
     for i in range(n):
@@ -263,7 +280,7 @@ def _contact_rows(pairs, proxy_ids, proxy_order, proxy_robot, label_ids, label):
             b = 1 - a
             if robot[i, a] < 0:
                 continue
-            if not proxy[i, b]:
+            if proxy[i, b] < 0:
                 s = min(np.searchsorted(label_ids, pairs[i, b]), max(len(label_ids) - 1, 0))
                 rows[count, 0], rows[count, 1], rows[count, 2] = robot[i, a], label[s, 0], label[s, 1]
                 count += 1

@@ -43,9 +43,8 @@ import numpy as np
 import pymunk
 import pymunk.batch
 
-from apf_physics.contacts import (FEW_PAIRS, MOVING, BodyLabels, CollisionType, ContactLog, contact_log, contact_rows,
-                                  contact_rows_few, Touching, touching_depths,
-                                  touching_pairs)
+from apf_physics.contacts import (FEW_PAIRS, MOVING, BodyLabels, CollisionType, ContactLog, Touching, body_robots,
+                                  contact_log, contact_rows, contact_rows_few, touching_depths, touching_pairs)
 from apf_physics.contacts import KINDS, Contact  # noqa: F401 (public here too)
 from apf_physics.compiled import kernel
 from apf_physics.errors import UserError
@@ -171,6 +170,7 @@ class Physics:
         self._proxy_radius = np.zeros(0)
         self._proxy_solo = np.zeros(0, bool)          # in the collision group of proxies that never meet
         self._proxy_ids = np.zeros(0, np.uintp)      # their body ids
+        self._proxy_order = np.zeros(0, np.intp)     # argsort of the ids
         self._proxy_of_id: dict[int, int] = {}        # the same as a dict
         self._proxy_target = np.zeros((0, 2))         # where a proxy is to be put before pymunk next steps
         self._proxy_parking = np.zeros((0, 2))        # where each waits when parked (_parking)
@@ -265,6 +265,7 @@ class Physics:
         self._proxy_radius = np.append(self._proxy_radius, radius)
         self._proxy_solo = np.append(self._proxy_solo, solo)
         self._proxy_ids = np.append(self._proxy_ids, np.uintp(body.id))
+        self._proxy_order = np.argsort(self._proxy_ids)
         self._proxy_of_id[body.id] = k
         self._proxy_target = np.vstack([self._proxy_target, self._parking(k)])
         self._proxy_parking = np.vstack([self._proxy_parking, self._parking(k)])
@@ -324,7 +325,6 @@ class Physics:
         row_mover = np.array([movers.get(int(i), -1) for i in ids])
         self._row_of_mover = np.empty(len(self._mover_body), np.intp)
         self._row_of_mover[row_mover[row_mover >= 0]] = np.flatnonzero(row_mover >= 0)
-        self._proxy_order = np.argsort(self._proxy_ids)
         self._rows_dirty = False
 
     # -- control ---------------------------------------------------------------------------
@@ -581,34 +581,22 @@ class Physics:
         deep = np.flatnonzero(distance < -min(SETTLE_OBSTACLE, SETTLE_ROBOT))
         if not len(deep) and not len(undone):
             return
-        # a few pairs: read by dicts (as contact_rows_few); a robot and a static shape: the robot's way
-        # out is against the normal if it is a, along it if b
-        robot_of, solo = self._proxy_robot.tolist(), self._proxy_solo.tolist()   # plain lists: read per pair
-        skip = set(undone.tolist())
-        static_robot, static_normal, static_depth, pairs = [], [], [], []
-        alone: dict[int, list] = {}   # robots alone in their slots: settled one by one (_settle_alone)
-        for (a, b), (nx, ny), d in zip(ids[deep].tolist(), normal[deep].tolist(), distance[deep].tolist()):
-            ka, kb = self._proxy_of_id.get(a), self._proxy_of_id.get(b)
-            ra = -1 if ka is None else robot_of[ka]
-            rb = -1 if kb is None else robot_of[kb]
-            if ra >= 0 and rb >= 0:
-                pairs.append((ra, rb))
-            elif ra >= 0 or rb >= 0:
-                r, sign, k = (ra, -1.0, ka) if ra >= 0 else (rb, 1.0, kb)
-                if solo[k]:
-                    alone.setdefault(r, []).append((sign * nx, sign * ny, -d))
-                elif r not in skip:
-                    static_robot.append(r)
-                    static_normal.append((sign * nx, sign * ny))
-                    static_depth.append(-d)
-        if alone:
-            self._settle_alone(alone, simulated, before)
-        if not static_robot and not pairs and not len(undone):
+        # a robot and a static shape: the robot's way out is against the normal if it is a, along it if b
+        robot, proxy = body_robots(ids[deep], self._proxy_ids, self._proxy_order, self._proxy_robot)
+        normal, depth = normal[deep], -distance[deep]
+        both = (robot[:, 0] >= 0) & (robot[:, 1] >= 0)
+        pair_robots = robot[both].astype(np.intp)
+        first_side = robot[:, 0] >= 0
+        one = ~both & (first_side | (robot[:, 1] >= 0))
+        r = np.where(first_side, robot[:, 0], robot[:, 1])[one].astype(np.intp)
+        solo = self._proxy_solo[np.where(first_side, proxy[:, 0], proxy[:, 1])[one]]
+        out = normal[one] * np.where(first_side[one], -1.0, 1.0)[:, None]
+        if solo.any():   # robots alone in their slots (most of them): _settle_alone
+            self._settle_alone(r[solo], np.column_stack([out[solo], depth[one][solo]]), simulated, before)
+        rest = ~solo & ~np.isin(r, undone) if len(undone) else ~solo
+        static_robot, static_normal, static_depth = r[rest], out[rest], depth[one][rest]
+        if not len(static_robot) and not len(pair_robots) and not len(undone):
             return
-        static_robot = np.array(static_robot, np.intp)
-        static_normal = np.array(static_normal, float).reshape(-1, 2)
-        static_depth = np.array(static_depth, float)
-        pair_robots = np.array(pairs, np.intp).reshape(-1, 2)
         if len(undone):
             more_robot, more_normal, more_depth, more_pairs = self._overlaps_at(undone)
             static_robot = np.concatenate([static_robot, more_robot])
@@ -651,7 +639,7 @@ class Physics:
             static_normal = np.concatenate([static_normal, more_normal])
             static_depth = np.concatenate([static_depth, more_depth])
 
-    def _settle_alone(self, alone: dict[int, list], simulated: np.ndarray, before: np.ndarray) -> None:
+    def _settle_alone(self, robot: np.ndarray, planes: np.ndarray, simulated: np.ndarray, before: np.ndarray) -> None:
         """:meth:`_settle` for robots alone in their slots (a robot alone meets no robot, and there
         are a few a step), by the rule of :meth:`~apf_physics.sweep.Sweeps.settle`, compiled: each
         is pushed out of the shape it overlaps most until none by more than
@@ -659,17 +647,17 @@ class Physics:
         world's exact geometry, the shapes pymunk has); one overlapped is added, and so on; after
         :data:`SETTLE_ROUNDS` a robot still overlapping goes back to where it started the step.
 
-        ``alone``: each robot's overlaps with static shapes at the last substep, ``(way out x,
-        y, depth)``.
+        ``robot`` (K,), ``planes`` (K, 3): a robot's overlap with a static shape at the last
+        substep, ``(way out x, y, depth)``, in the arbiters' order (a robot may have several).
         """
-        robots = np.fromiter(alone, np.intp, len(alone))
-        found = [alone[r] for r in robots.tolist()]
-        first = np.concatenate([[0], np.cumsum([len(f) for f in found])])
-        planes = np.array([plane for f in found for plane in f], float)
+        order = np.argsort(robot, kind="stable")
+        robot = robot[order]
+        first = np.flatnonzero(np.concatenate([[True], robot[1:] != robot[:-1], [True]]))   # each robot's planes
+        robots = robot[first[:-1]]
         slots = robots // self.robots_per_slot
         p = self._sweeps.settle(self._sweep_world[robots], self._positions[robots],
-                                before[np.searchsorted(simulated, robots)], self._slot_radius[slots], first, planes,
-                                SETTLE_OBSTACLE, SETTLE_ROUNDS)
+                                before[np.searchsorted(simulated, robots)], self._slot_radius[slots], first,
+                                planes[order], SETTLE_OBSTACLE, SETTLE_ROUNDS)
         self._positions[robots] = p
         proxies = self._robot_proxy[robots]
         self._proxy_target[proxies] = p + self._tiles.offset[self._slot_tile[slots]]
