@@ -6,7 +6,8 @@ from pymunk's arbiters after every substep (:mod:`apf_physics.contacts`). The ph
 knows nothing of planners, observations or rewards.
 
 **Where pymunk does the work.** A robot whose move this step provably cannot touch anything
-moves exactly as pymunk would move a free disc (``p + v·dt``), without pymunk: the test is
+moves exactly as pymunk would move a free disc (``p ← p + v·dt`` at each substep, the same
+additions in the same order: :meth:`Physics._move_free`), without pymunk: the test is
 the exact least distance between the segment its centre sweeps and its world's static shapes
 and edge (:mod:`apf_physics.sweep`, compiled), and, for robots sharing a slot, the exact
 closest approach of two linearly moving points. Every other robot
