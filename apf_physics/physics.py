@@ -56,10 +56,6 @@ from apf_physics.world import World
 
 MAX_SPEED = math.sqrt(2.0)  # a diagonal unit move (±1, ±1) per control step [units per control step]
 CONTACT_MARGIN = 0.01  # a move that keeps this much more than touching distance needs no physics [units]
-# The clearance raster of the imitation teacher's rule (rl.imitation.teacher_room), which the
-# physics used to decide who needs pymunk; the teacher keeps it, so that its labels stay as trained.
-CLEARANCE_RESOLUTION = 8  # nodes per unit
-CLEARANCE_CAP = 4.0  # clearance beyond this is not measured
 _FEW = 4  # up to this many proxies, per-body attribute access beats pymunk.batch's fixed cost
 _COUNT_AT_MOST = 8  # up to this many robots in pymunk, count touching pairs by callbacks; more: read every substep
 _PROXY_GROUP = 1  # collision group of proxies of single-robot slots: they never touch each other

@@ -31,7 +31,6 @@ from apf_physics.actions import MOVE_SAMPLES, MOVE_SETS, SAFETY
 from apf_physics.models.mapnet import MapNetwork, sample_values
 from apf_physics.models.policy import MapPolicy, map_scores, move_inputs
 from apf_physics.observation import MapView
-from apf_physics.physics import CLEARANCE_CAP, CLEARANCE_RESOLUTION
 from apf_physics.planners.dqn import DQNPlanner
 from apf_physics.rl.config import ImitationConfig, TrainConfig
 from apf_physics.rl.learner import Counters, Learner
@@ -109,6 +108,13 @@ class Demonstrations:
         return self._teachers[id(world)]
 
 
+TEACHER_RESOLUTION = 8
+"""Nodes per unit of the static clearance raster the teacher's rule samples (:func:`teacher_room`;
+the raster the physics once used, kept so that the labels stay as the shipped models were taught)."""
+TEACHER_CAP = 4.0
+"""Clearance beyond this is not measured by that raster."""
+
+
 def teacher_room(world: World, positions: np.ndarray, moves: np.ndarray) -> np.ndarray:
     """Which moves the teacher demonstrates as safe (``>= 0``): a lower bound, within the room the
     network reads (up to 1), of the room :func:`~apf_physics.models.policy.move_inputs` gives, from
@@ -120,11 +126,11 @@ def teacher_room(world: World, positions: np.ndarray, moves: np.ndarray) -> np.n
     72 validation starts) and do worse on large maps (BENCHMARKS.md). This is the teacher's rule,
     not an input: the network reads ``move_inputs`` when it trains as when it acts.
     """
-    raster = world.clearance_raster(CLEARANCE_RESOLUTION, CLEARANCE_CAP)
+    raster = world.clearance_raster(TEACHER_RESOLUTION, TEACHER_CAP)
     steps = np.linspace(0.0, 1.0, MOVE_SAMPLES + 1)
     points = positions[:, None, None, :] + steps[None, None, :, None] * moves[None, :, None, :]
     clearance = raster.sample(points.reshape(-1, 2)).reshape(len(positions), len(moves), -1).min(axis=2)
-    bound = clearance - 0.5 * np.hypot(*moves.T)[None] / MOVE_SAMPLES - 0.71 / CLEARANCE_RESOLUTION
+    bound = clearance - 0.5 * np.hypot(*moves.T)[None] / MOVE_SAMPLES - 0.71 / TEACHER_RESOLUTION
     return bound - (world.robot_radius + SAFETY)
 
 
