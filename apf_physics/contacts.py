@@ -169,12 +169,23 @@ class Touching:
         self.pairs -= 1
 
 
+_PAIR_FIELDS = pymunk.batch.ArbiterFields.BODY_A_ID | pymunk.batch.ArbiterFields.BODY_B_ID
+_DEPTH_FIELDS = _PAIR_FIELDS | pymunk.batch.ArbiterFields.NORMAL | pymunk.batch.ArbiterFields.DISTANCE_1
+# (the fields as constants: or-ing pymunk's flags costs as much as reading a few arbiters)
+
+
 def touching_pairs(space: pymunk.Space, buffer: pymunk.batch.Buffer) -> np.ndarray:
     """(K, 2) body ids of the pairs of bodies whose shapes touch now (read through ``buffer``)."""
+    return np.frombuffer(touching_pair_bytes(space, buffer), dtype=np.uintp).reshape(-1, 2)
+
+
+def touching_pair_bytes(space: pymunk.Space, buffer: pymunk.batch.Buffer) -> bytes:
+    """:func:`touching_pairs` as the bytes of its array: a reader after every substep joins them
+    once at the end of the step (``np.frombuffer(b"".join(...), np.uintp)``), rather than paying
+    numpy's fixed costs at every substep."""
     buffer.clear()
-    pymunk.batch.get_space_arbiters(space, pymunk.batch.ArbiterFields.BODY_A_ID | pymunk.batch.ArbiterFields.BODY_B_ID,
-                                    buffer)
-    return np.frombuffer(buffer.int_buf(), dtype=np.uintp).reshape(-1, 2).copy()
+    pymunk.batch.get_space_arbiters(space, _PAIR_FIELDS, buffer)
+    return bytes(buffer.int_buf())
 
 
 def touching_depths(space: pymunk.Space, buffer: pymunk.batch.Buffer) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -186,9 +197,7 @@ def touching_depths(space: pymunk.Space, buffer: pymunk.batch.Buffer) -> tuple[n
         and ``b`` overlap by that much). A robot's disc meets a shape at one point.
     """
     buffer.clear()
-    fields = (pymunk.batch.ArbiterFields.BODY_A_ID | pymunk.batch.ArbiterFields.BODY_B_ID
-              | pymunk.batch.ArbiterFields.NORMAL | pymunk.batch.ArbiterFields.DISTANCE_1)
-    pymunk.batch.get_space_arbiters(space, fields, buffer)
+    pymunk.batch.get_space_arbiters(space, _DEPTH_FIELDS, buffer)
     ids = np.frombuffer(buffer.int_buf(), dtype=np.uintp).reshape(-1, 2).copy()
     values = np.frombuffer(buffer.float_buf(), dtype=np.float64).reshape(-1, 3)
     return ids, values[:, :2].copy(), values[:, 2].copy()
@@ -248,6 +257,61 @@ def body_robots(pairs: np.ndarray, proxy_ids: np.ndarray, proxy_order: np.ndarra
     :func:`contact_rows`."""
     return _body_robots(np.ascontiguousarray(pairs, np.uint64), proxy_ids[proxy_order].astype(np.uint64), proxy_order,
                         proxy_robot)
+
+
+def deep_planes(ids: np.ndarray, normal: np.ndarray, distance: np.ndarray, tolerance: float, proxy_ids: np.ndarray,
+                proxy_order: np.ndarray, proxy_robot: np.ndarray,
+                proxy_solo: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The last substep's pairs (:func:`touching_depths`) that overlap by more than ``tolerance``,
+    split by who must settle them.
+
+    Returns:
+        ``(robots (R,), first (R + 1,), planes (K, 3), rest (L,))``: the robots alone in their
+        slots (``proxy_solo``) that overlap static shapes, sorted, robot ``robots[i]``'s planes
+        being ``planes[first[i]:first[i + 1]]``, each ``(way out x, y, depth)`` in the arbiters'
+        order; and the indices of the other deep pairs (two robots, or a robot of a formation
+        or near moving obstacles) in ``ids``. Other arguments as :func:`contact_rows`.
+    """
+    return _deep_planes(np.ascontiguousarray(ids, np.uint64), normal, distance, float(tolerance),
+                        proxy_ids[proxy_order].astype(np.uint64), proxy_order, proxy_robot, proxy_solo)
+
+
+@kernel
+def _deep_planes(ids, normal, distance, tolerance, proxy_ids, proxy_order, proxy_robot, proxy_solo):
+    """:func:`deep_planes` over ``proxy_ids`` sorted (``proxy_order``: their proxies)."""
+    n = len(distance)
+    robot, proxy = _body_robots(ids, proxy_ids, proxy_order, proxy_robot)
+    solo_robot = np.empty(n, np.int64)
+    solo_plane = np.empty((n, 3))
+    rest = np.empty(n, np.int64)
+    count = 0
+    others = 0
+    for i in range(n):
+        if not distance[i] < -tolerance or (robot[i, 0] < 0 and robot[i, 1] < 0):
+            continue
+        side = 0 if robot[i, 0] >= 0 else 1
+        if robot[i, 1 - side] >= 0 or not proxy_solo[proxy[i, side]]:
+            rest[others] = i
+            others += 1
+            continue
+        sign = -1.0 if side == 0 else 1.0   # the way out: against the normal from a robot that is a, along it if b
+        solo_robot[count] = robot[i, side]
+        solo_plane[count, 0], solo_plane[count, 1] = sign * normal[i, 0], sign * normal[i, 1]
+        solo_plane[count, 2] = -distance[i]
+        count += 1
+    order = np.argsort(solo_robot[:count], kind="mergesort")   # stable: each robot's planes in the arbiters' order
+    sorted_robot = solo_robot[:count][order]
+    first = np.empty(count + 1, np.int64)
+    robots = 0
+    for j in range(count):
+        if j == 0 or sorted_robot[j] != sorted_robot[j - 1]:
+            first[robots] = j
+            robots += 1
+    first[robots] = count
+    unique = np.empty(robots, np.int64)
+    for j in range(robots):
+        unique[j] = sorted_robot[first[j]]
+    return unique, first[:robots + 1].copy(), solo_plane[:count][order], rest[:others].copy()
 
 
 @kernel

@@ -45,7 +45,8 @@ import pymunk
 import pymunk.batch
 
 from apf_physics.contacts import (FEW_PAIRS, MOVING, BodyLabels, CollisionType, ContactLog, Touching, body_robots,
-                                  contact_log, contact_rows, contact_rows_few, touching_depths, touching_pairs)
+                                  deep_planes,
+                                  contact_log, contact_rows, contact_rows_few, touching_depths, touching_pair_bytes)
 from apf_physics.contacts import KINDS, Contact  # noqa: F401 (public here too)
 from apf_physics.compiled import kernel
 from apf_physics.errors import UserError
@@ -63,6 +64,7 @@ _SOLO_FILTER = pymunk.ShapeFilter(group=_PROXY_GROUP)   # queries about them: th
 SETTLE_OBSTACLE = 0.005  # a robot ending a step farther than this inside an obstacle or the edge is pushed out [units]
 SETTLE_ROUNDS = 6  # rounds of pushes and queries before a robot still overlapping is put back (Physics._settle)
 SETTLE_ROBOT = 0.01  # two robots ending a step overlapping more than this are pushed apart [units]
+_BODY_FIELDS = pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.VELOCITY   # (or-ing pymunk's flags costs µs)
 
 
 def substeps_for(radius: float, max_speed: float = MAX_SPEED) -> int:
@@ -575,22 +577,23 @@ class Physics:
             return
         ids, normal, distance = self._depths if self._depths is not None else (np.zeros((0, 2)), np.zeros((0, 2)),
                                                                                np.zeros(0))
-        deep = np.flatnonzero(distance < -min(SETTLE_OBSTACLE, SETTLE_ROBOT))
+        alone, first, planes, deep = deep_planes(ids, normal, distance, min(SETTLE_OBSTACLE, SETTLE_ROBOT),
+                                                 self._proxy_ids, self._proxy_order, self._proxy_robot,
+                                                 self._proxy_solo)
+        if len(alone):   # robots alone in their slots (most of them): _settle_alone
+            self._settle_alone(alone, first, planes, simulated, before)
         if not len(deep) and not len(undone):
             return
         # a robot and a static shape: the robot's way out is against the normal if it is a, along it if b
-        robot, proxy = body_robots(ids[deep], self._proxy_ids, self._proxy_order, self._proxy_robot)
+        robot, _ = body_robots(ids[deep], self._proxy_ids, self._proxy_order, self._proxy_robot)
         normal, depth = normal[deep], -distance[deep]
         both = (robot[:, 0] >= 0) & (robot[:, 1] >= 0)
         pair_robots = robot[both].astype(np.intp)
         first_side = robot[:, 0] >= 0
-        one = ~both & (first_side | (robot[:, 1] >= 0))
+        one = ~both
         r = np.where(first_side, robot[:, 0], robot[:, 1])[one].astype(np.intp)
-        solo = self._proxy_solo[np.where(first_side, proxy[:, 0], proxy[:, 1])[one]]
         out = normal[one] * np.where(first_side[one], -1.0, 1.0)[:, None]
-        if solo.any():   # robots alone in their slots (most of them): _settle_alone
-            self._settle_alone(r[solo], np.column_stack([out[solo], depth[one][solo]]), simulated, before)
-        rest = ~solo & ~np.isin(r, undone) if len(undone) else ~solo
+        rest = ~np.isin(r, undone) if len(undone) else np.ones(len(r), bool)
         static_robot, static_normal, static_depth = r[rest], out[rest], depth[one][rest]
         if not len(static_robot) and not len(pair_robots) and not len(undone):
             return
@@ -636,7 +639,8 @@ class Physics:
             static_normal = np.concatenate([static_normal, more_normal])
             static_depth = np.concatenate([static_depth, more_depth])
 
-    def _settle_alone(self, robot: np.ndarray, planes: np.ndarray, simulated: np.ndarray, before: np.ndarray) -> None:
+    def _settle_alone(self, robots: np.ndarray, first: np.ndarray, planes: np.ndarray, simulated: np.ndarray,
+                      before: np.ndarray) -> None:
         """:meth:`_settle` for robots alone in their slots (a robot alone meets no robot, and there
         are a few a step), by the rule of :meth:`~apf_physics.sweep.Sweeps.settle`, compiled: each
         is pushed out of the shape it overlaps most until none by more than
@@ -644,17 +648,14 @@ class Physics:
         world's exact geometry, the shapes pymunk has); one overlapped is added, and so on; after
         :data:`SETTLE_ROUNDS` a robot still overlapping goes back to where it started the step.
 
-        ``robot`` (K,), ``planes`` (K, 3): a robot's overlap with a static shape at the last
-        substep, ``(way out x, y, depth)``, in the arbiters' order (a robot may have several).
+        ``robots`` (R,) sorted, ``first`` (R + 1,), ``planes`` (K, 3): robot ``robots[i]``'s
+        overlaps with static shapes at the last substep are ``planes[first[i]:first[i + 1]]``,
+        each ``(way out x, y, depth)`` (:func:`~apf_physics.contacts.deep_planes`).
         """
-        order = np.argsort(robot, kind="stable")
-        robot = robot[order]
-        first = np.flatnonzero(np.concatenate([[True], robot[1:] != robot[:-1], [True]]))   # each robot's planes
-        robots = robot[first[:-1]]
         slots = robots // self.robots_per_slot
         p = self._sweeps.settle(self._sweep_world[robots], self._positions[robots],
                                 before[np.searchsorted(simulated, robots)], self._slot_radius[slots], first,
-                                planes[order], SETTLE_OBSTACLE, SETTLE_ROUNDS)
+                                planes, SETTLE_OBSTACLE, SETTLE_ROUNDS)
         self._positions[robots] = p
         proxies = self._robot_proxy[robots]
         self._proxy_target[proxies] = p + self._tiles.offset[self._slot_tile[slots]]
@@ -778,7 +779,7 @@ class Physics:
         else:
             # every body's position and velocity in one read and one write (static bodies are
             # rows too: they are written back as they were read)
-            fields = pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.VELOCITY
+            fields = _BODY_FIELDS
             buf = self._buffer
             buf.clear()
             pymunk.batch.get_space_bodies(self.space, fields, buf)
@@ -802,13 +803,10 @@ class Physics:
             if not touching.maybe:
                 continue   # no shapes touch: no arbiters to read
             if k == self.substeps - 1:   # the last substep: how deep they touch too, for _settle
-                ids, normal, distance = self._depths = touching_depths(self.space, self._arbiters)
+                self._depths = touching_depths(self.space, self._arbiters)
+                touched.append(self._depths[0].tobytes())
             elif touching.new_pairs(k == 0, begun):
-                ids = touching_pairs(self.space, self._arbiters)
-            else:
-                continue   # the pairs touching now were all read after an earlier substep
-            if len(ids):
-                touched.append(ids)
+                touched.append(touching_pair_bytes(self.space, self._arbiters))
         self._proxy_dirty[:] = False
         offsets = self._tiles.offset[self._slot_tile[robots // self.robots_per_slot]]
         if len(self._proxy_body) <= _FEW and not self._mover_body:
@@ -819,7 +817,7 @@ class Physics:
             pymunk.batch.get_space_bodies(self.space, pymunk.batch.BodyFields.POSITION, buf)
             after = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 2)[self._row_of_proxy[proxies]]
         self._positions[robots] = after - offsets
-        return np.vstack(touched) if touched else np.zeros((0, 2), np.uintp)
+        return np.frombuffer(b"".join(touched), np.uintp).reshape(-1, 2)
 
     def _step_alone(self, v: np.ndarray) -> bool:
         """:meth:`step` for one robot, moving straight among static obstacles and holding no proxy,
@@ -874,7 +872,7 @@ class Physics:
                 vx, vy = body.velocity
                 body.velocity = (vx + dx, vy + dy)
             return
-        fields = pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.VELOCITY
+        fields = _BODY_FIELDS
         buf = self._buffer
         buf.clear()
         pymunk.batch.get_space_bodies(self.space, fields, buf)
