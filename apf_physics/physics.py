@@ -176,6 +176,7 @@ class Physics:
         self._proxy_moved = np.zeros(0, bool)         # ... for those that must be put there
         self._robot_proxy = np.full(self.num_robots, -1, np.intp)
         self._proxy_held = False                     # some robot holds a proxy
+        self._alone = np.zeros(1, np.intp)            # the robots of a batch of one (_step_alone)
         self._buffer = pymunk.batch.Buffer()
         self._arbiters = pymunk.batch.Buffer()
         self._touching = Touching(self.space, self._arbiters)
@@ -290,23 +291,26 @@ class Physics:
         self._proxy_dirty[proxies] = True
 
     def _lend(self, robots: np.ndarray) -> None:
-        """Give each of ``robots`` (none holding one) a clean proxy of its radius and kind, placed where it is."""
+        """Give each of ``robots`` (none holding one, sorted) a clean proxy of its radius and kind,
+        placed where it is: the free proxies of each kind in order (:func:`_lend_free`), then new
+        ones for those left, kind by kind."""
         if not len(robots):
             return
         slots = robots // self.robots_per_slot
         radius = self._slot_radius[slots]
         solo = ~self._shared[slots] & ~self._slot_moving[slots] & (self.robots_per_slot == 1)
-        for r, alone in sorted(set(zip(radius.tolist(), solo.tolist()))):
-            mine = robots[(radius == r) & (solo == alone)]
-            free = np.flatnonzero((self._proxy_robot < 0) & ~self._proxy_dirty & (self._proxy_radius == r)
-                                  & (self._proxy_solo == alone))
-            while len(free) < len(mine):
-                free = np.append(free, self._new_proxy(r, alone))
-            proxies = free[:len(mine)]
-            self._proxy_robot[proxies] = mine
-            self._robot_proxy[mine] = proxies
-            self._proxy_target[proxies] = self._positions[mine] + self._tiles.offset[self._slot_tile[mine // self.robots_per_slot]]
-            self._proxy_moved[proxies] = True
+        left = _lend_free(robots, radius, solo, self._proxy_robot, self._proxy_dirty, self._proxy_radius,
+                          self._proxy_solo, self._robot_proxy)
+        if len(left):   # the pool is short: new proxies, kind by kind in order (as the pool grew before)
+            kinds = sorted(set(zip(radius[left].tolist(), solo[left].tolist())))
+            for r, alone in kinds:
+                for robot in robots[left][(radius[left] == r) & (solo[left] == alone)].tolist():
+                    k = self._new_proxy(r, alone)
+                    self._proxy_robot[k] = robot
+                    self._robot_proxy[robot] = k
+        proxies = self._robot_proxy[robots]
+        self._proxy_target[proxies] = self._positions[robots] + self._tiles.offset[self._slot_tile[slots]]
+        self._proxy_moved[proxies] = True
 
     def _index_rows(self) -> None:
         """Map pymunk.batch rows to proxies (rows are not in insertion order)."""
@@ -498,9 +502,10 @@ class Physics:
             The contacts seen during the step (read-only).
         """
         v = np.asarray(velocities, dtype=float)
-        if self.num_robots == 1 and not self._any_moving and not self._proxy_held and active is None \
-                and v.size == 2 and self._step_alone(v):
-            return self._touch_free
+        if self.num_robots == 1 and not self._any_moving and active is None and v.size == 2:
+            log = self._step_alone(v)
+            if log is not None:
+                return log
         per_substep = v.ndim == 3
         if per_substep:
             v = v.reshape(self.num_robots, self.substeps, 2)
@@ -768,15 +773,19 @@ class Physics:
             self._index_rows()
         proxies = self._robot_proxy[robots]
         per_substep = v.ndim == 3   # a velocity per substep (unicycles driving arcs)
-        velocity = np.zeros((len(self._proxy_body), 2))
-        velocity[proxies] = (v[robots, 0] if per_substep else v[robots]) / self.control_dt
+        commanded = (v[robots, 0] if per_substep else v[robots]) / self.control_dt
         moved = np.flatnonzero(self._proxy_moved)
-        if len(self._proxy_body) <= _FEW and not self._mover_body:
+        few = len(self._proxy_body) <= _FEW and not self._mover_body
+        if few:   # body by body, on Python floats: the moved put where they are to be, the rest at rest
+            bodies, target = self._proxy_body, self._proxy_target
             for k in moved.tolist():
-                self._proxy_body[k].position = tuple(self._proxy_target[k])
-            for k, (vx, vy) in enumerate(velocity.tolist()):
-                self._proxy_body[k].velocity = (vx, vy)
+                bodies[k].position = tuple(target[k].tolist())
+            velocity = dict(zip(proxies.tolist(), map(tuple, commanded.tolist())))
+            for k, body in enumerate(bodies):
+                body.velocity = velocity.get(k, (0.0, 0.0))
         else:
+            velocity = np.zeros((len(self._proxy_body), 2))
+            velocity[proxies] = commanded
             # every body's position and velocity in one read and one write (static bodies are
             # rows too: they are written back as they were read)
             fields = _BODY_FIELDS
@@ -809,40 +818,62 @@ class Physics:
                 touched.append(touching_pair_bytes(self.space, self._arbiters))
         self._proxy_dirty[:] = False
         offsets = self._tiles.offset[self._slot_tile[robots // self.robots_per_slot]]
-        if len(self._proxy_body) <= _FEW and not self._mover_body:
-            after = np.array([tuple(self._proxy_body[k].position) for k in proxies.tolist()]).reshape(-1, 2)
+        if few:
+            for robot, k, (ox, oy) in zip(robots.tolist(), proxies.tolist(), offsets.tolist()):
+                x, y = self._proxy_body[k].position
+                self._positions[robot] = (x - ox, y - oy)
         else:
             buf = self._buffer
             buf.clear()
             pymunk.batch.get_space_bodies(self.space, pymunk.batch.BodyFields.POSITION, buf)
             after = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 2)[self._row_of_proxy[proxies]]
-        self._positions[robots] = after - offsets
+            self._positions[robots] = after - offsets
         return np.frombuffer(b"".join(touched), np.uintp).reshape(-1, 2)
 
-    def _step_alone(self, v: np.ndarray) -> bool:
-        """:meth:`step` for one robot, moving straight among static obstacles and holding no proxy,
-        when its move comes near nothing: the array path's operations, in the same order, on
-        Python floats (``tests/test_physics.py`` checks both paths give the same steps to the bit).
+    def _step_alone(self, v: np.ndarray) -> ContactLog | None:
+        """:meth:`step` for one robot moving straight among static obstacles: the array path's
+        operations, in the same order, without its arrays' fixed costs (``tests/test_physics.py``
+        checks that both paths give the same steps to the bit). A move that comes near nothing is
+        done on Python floats; one that does goes to pymunk as the array path sends it, less the
+        free-move test (done here) and the bookkeeping of the robots that do not go.
 
         Returns:
-            Whether it moved; False (nothing done) when it needs pymunk, is absent, or its command
+            The step's contacts; None (nothing done) when the robot is absent or its command
             exceeds the top speed: the array path takes it.
         """
         vx, vy = v.reshape(2).tolist()
         if not self.present[0] or np.hypot(vx, vy) > self.max_speed:
-            return False
+            return None
         x, y = self._positions[0].tolist()
         dt, control = self.dt, self.control_dt
         if self._sweeps.near_one(int(self._sweep_world[0]), x, y, x + vx * control, y + vy * control,
                                  float(self._keep_off[0])):
-            return False
+            return self._simulate_alone(v.reshape(1, 2))
+        if self._proxy_held:   # it went to pymunk last step: its proxy goes back to the parking
+            self._release(self._alone)
+            self._proxy_held = False
         ox, oy = self._tiles.offset[self._slot_tile[0]].tolist()
         vx, vy = vx / control, vy / control
         x, y = x + ox, y + oy
         for _ in range(self.substeps):   # as _free_moves
             x, y = x + vx * dt, y + vy * dt
         self._positions[0] = (x - ox, y - oy)
-        return True
+        return self._touch_free
+
+    def _simulate_alone(self, v: np.ndarray) -> ContactLog:
+        """The rest of :meth:`step` for one robot alone whose move needs pymunk (``v`` (1, 2))."""
+        robots = self._alone
+        if self._robot_proxy[0] < 0:
+            self._lend(robots)
+        self._ensure_obstacles(robots, v * self.control_dt)
+        before = self._positions[robots].copy()
+        pairs = self._simulate(robots, v)
+        self._proxy_held = True
+        if not len(pairs):
+            return self._touch_free
+        log = self._log(pairs)
+        self._settle(robots[:0], robots, before)   # (a robot alone touches no robot: none is put back)
+        return log
 
     def _move_free(self, robots: np.ndarray, v: np.ndarray) -> None:
         """Move ``robots`` as pymunk moves a free disc, to the bit: put where the robot's proxy
@@ -894,6 +925,39 @@ class Physics:
     def _contact_rows(self, pairs: np.ndarray) -> np.ndarray:
         """(K, 3) sorted distinct rows ``(robot, kind, other)`` of the touching body-id pairs."""
         return contact_rows(pairs, self._labels, self._proxy_ids, self._proxy_order, self._proxy_robot)
+
+
+@kernel
+def _lend_free(robots, radius, solo, proxy_robot, proxy_dirty, proxy_radius, proxy_solo, robot_proxy):
+    """Lend ``robots`` (sorted) the parked clean proxies of their kind (radius and ``solo``), each
+    kind's in order of index, writing ``proxy_robot`` and ``robot_proxy``.
+
+    Returns:
+        The indices (into ``robots``) of those left without one, in order.
+    """
+    left = np.empty(len(robots), np.int64)
+    count = 0
+    cursor = np.zeros(len(robots), np.int64)   # per robot's kind (its first robot): the next proxy to try
+    kind = np.empty(len(robots), np.int64)
+    for i in range(len(robots)):
+        kind[i] = i
+        for j in range(i):
+            if radius[j] == radius[i] and solo[j] == solo[i]:
+                kind[i] = kind[j]
+                break
+        k = cursor[kind[i]]
+        while k < len(proxy_robot) and not (proxy_robot[k] < 0 and not proxy_dirty[k] and proxy_radius[k] == radius[i]
+                                            and proxy_solo[k] == solo[i]):
+            k += 1
+        if k < len(proxy_robot):
+            proxy_robot[k] = robots[i]
+            robot_proxy[robots[i]] = k
+            cursor[kind[i]] = k + 1
+        else:
+            cursor[kind[i]] = k
+            left[count] = i
+            count += 1
+    return left[:count].copy()
 
 
 @kernel

@@ -180,13 +180,14 @@ def test_skipping_pymunk_changes_nothing(worlds_dir, robots_per_slot):
 
 
 def test_one_robot_steps_in_floats_as_the_array_path_does(worlds_dir):
-    """Physics.step of a lone robot takes a path of its own (Python floats, Physics._step_alone)
-    when its move comes near nothing; forced onto the array path, the same steps to the bit."""
+    """Physics.step of a lone robot takes a path of its own (Physics._step_alone: Python floats
+    when its move comes near nothing, pymunk without the batch's bookkeeping when it does);
+    forced onto the array path, the same steps and contacts to the bit."""
     world = load_world(worlds_dir / "fixed20.yaml")
     rng = np.random.default_rng(5)
     scalar, array = Physics([world]), Physics([world])
-    array._step_alone = lambda v: False
-    alone = 0
+    array._step_alone = lambda v: None
+    alone = through = 0
     for episode in range(30):
         start = world.random_free_positions(rng, 1, margin=0.4)
         for physics in (scalar, array):
@@ -196,11 +197,13 @@ def test_one_robot_steps_in_floats_as_the_array_path_does(worlds_dir):
             held = scalar._proxy_held
             log_s, log_a = scalar.step(v), array.step(v)
             alone += not held and not scalar._proxy_held
+            through += scalar._proxy_held
             np.testing.assert_array_equal(scalar.positions, array.positions)
             np.testing.assert_array_equal(log_s.pairs, log_a.pairs)
             if log_s.touched:
                 break
     assert alone > 200   # the float path was taken
+    assert through > 20   # and pymunk, after a float step or a pymunk step
 
 
 def test_needs_physics_is_conservative(worlds_dir):
