@@ -125,6 +125,38 @@ def observation_raster(world: World, margin: int, resolution: int) -> Raster:
     return world.cached(("observation", int(margin), int(resolution)), build)
 
 
+class Repellers:
+    """M shapes whose repulsive terms :meth:`Observer._add_near` adds to windows: a world's moving
+    obstacles where they are written (their offsets apart), or other robots' discs.
+
+    Attributes:
+        shapes: The shapes (None for a disc given by its centre and radius alone).
+        lo, hi: (M, 2) their bounding boxes.
+        centre, radius: (M, 2), (M,) the discs; NaN for polygons, measured by
+            ``shapes[s].signed_distance``.
+        polygon: (M,) bool, which are polygons; polygons: whether any is.
+    """
+
+    def __init__(self, shapes: list, lo: np.ndarray, hi: np.ndarray, centre: np.ndarray, radius: np.ndarray):
+        self.shapes = shapes
+        self.lo, self.hi, self.centre, self.radius = lo, hi, centre, radius
+        self.polygon = np.isnan(radius)
+        self.polygons = bool(self.polygon.any())
+
+
+def moving_repellers(world: World) -> Repellers:
+    """The moving obstacles of ``world`` (in :attr:`World.moving` order) as :class:`Repellers`; cached."""
+    def build() -> Repellers:
+        shapes = [world.obstacles[i] for i in world.moving]
+        boxes = [s.bounds for s in shapes]
+        lo = np.array([lo for lo, _ in boxes], float).reshape(-1, 2)
+        hi = np.array([hi for _, hi in boxes], float).reshape(-1, 2)
+        centre = np.array([getattr(s, "center", (np.nan, np.nan)) for s in shapes], float).reshape(-1, 2)
+        radius = np.array([getattr(s, "radius", np.nan) for s in shapes], float)
+        return Repellers(shapes, lo, hi, centre, radius)
+    return world.cached("moving_repellers", build)
+
+
 class Observer:
     """Builds observations for ``num`` robots, each in a world of its own.
 
@@ -150,6 +182,7 @@ class Observer:
         self._log_range = np.zeros(0)
         self._range = (np.inf, -np.inf)      # least and highest U of the registered worlds' rasters
         self._moving = False
+        self._movers: list[Repellers | None] = []   # each registered world's moving obstacles (None: none)
         self._everyone = np.arange(self.num)
         half = config.size // 2
         steps = np.arange(config.size, dtype=float) - half
@@ -168,6 +201,7 @@ class Observer:
             self._world_ids[key] = self._atlas.add(raster)
             self.worlds.append(world)
             self._moving = self._moving or bool(world.moving)
+            self._movers.append(moving_repellers(world) if world.moving else None)
             self._log_range = np.append(self._log_range, np.log1p(world.u_wall - raster.values.min()))
             self._range = (min(self._range[0], float(raster.values.min())), max(self._range[1], float(world.u_wall)))
         return self._world_ids[key]
@@ -238,11 +272,13 @@ class Observer:
 
         ``offsets`` is the window's lattice (``self._offsets``) or one point (``[[0, 0]]``). Only
         the window points within ``p0`` of an obstacle's box are measured (a few points of the
-        k²), for all robots and obstacles of a world at once.
+        k²), for all robots and obstacles of a world at once. The obstacles' offsets at whole
+        steps are read from the world's motion table where they are (no per-robot copy).
         """
         crowd = discs is not None and len(discs) > 0
         if not self._moving and not crowd:
             return values
+        lattice = len(offsets) > 1
         when = np.asarray(t, float)
         if when.ndim == 0:
             when = np.full(len(robots), float(when))
@@ -257,56 +293,40 @@ class Observer:
                 groups.append((w, mine, positions[mine], when[mine]))
         for w, mine, where, at in groups:
             world = self.worlds[w]
-            if world.moving:
-                shift = world.moving_offsets(at)                                        # (m, M, 2)
-                shapes, lo, hi, centre, radius = self._moving_shapes(world)
-                # where[:, None, :] - shift, by arrays of one shape (broadcasting over an axis of
-                # 2 costs numpy a call of its inner loop per pair)
-                local = np.repeat(where, len(shapes), axis=0).reshape(shift.shape) - shift
-                self._add_near(values, mine, local, lo, hi, centre, radius, shapes, world, len(offsets) > 1)
+            movers = self._movers[w]
+            if movers is not None:
+                table, steps = world.motion_table(at)                     # (T, M, 2), (m,)
+                self._add_near(values, mine, where, table, steps, movers, world, lattice)
             if crowd:   # other robots: discs of the robot radius where they are (in the world's frame)
                 centre = np.asarray(discs, float).reshape(-1, 2)
                 r = np.full(len(centre), world.robot_radius)
-                local = np.broadcast_to(where[:, None, :], (len(mine), len(centre), 2))
-                self._add_near(values, mine, local, centre - world.robot_radius, centre + world.robot_radius,
-                               centre, r, [None] * len(centre), world, len(offsets) > 1)
+                still = np.zeros((1, len(centre), 2))                    # they do not move: offsets 0
+                self._add_near(values, mine, where, still, np.zeros(len(mine), np.intp),
+                               Repellers([None] * len(centre), centre - r[:, None], centre + r[:, None], centre, r),
+                               world, lattice)
         return values
 
-    def _add_near(self, values: np.ndarray, mine: np.ndarray, local: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                  centre: np.ndarray, radius: np.ndarray, shapes: list, world: World, lattice: bool) -> None:
-        """Add, in place, the repulsive terms of M shapes to the windows of robots ``mine``.
+    def _add_near(self, values: np.ndarray, mine: np.ndarray, where: np.ndarray, table: np.ndarray,
+                  steps: np.ndarray, near: Repellers, world: World, lattice: bool) -> None:
+        """Add, in place, the repulsive terms of M shapes ``near`` to the windows of robots ``mine``.
 
-        ``local`` (m, M, 2): each robot in each shape's frame; ``lo``, ``hi`` (M, 2): the shapes'
-        boxes in their frames; discs by ``centre`` and ``radius`` (NaN radius: a polygon,
-        measured by ``shapes[i].signed_distance``). One compiled loop (:func:`_add_terms`), where
-        numpy's fixed cost per call was most of the cost; the polygons' distances alone are
-        numpy's, at the points :func:`_polygon_points` lists.
+        ``where`` (m, 2): the robots; ``table`` (T, M, 2), ``steps`` (m,): robot ``r`` is at
+        ``where[r] − table[steps[r], s]`` in shape ``s``'s frame (the shapes' offsets: a world's
+        motion table, or zeros). One compiled loop (:func:`_add_terms`), where numpy's fixed cost
+        per call was most of the cost; the polygons' distances alone are numpy's, at the points
+        :func:`_polygon_points` lists.
         """
         field = world.field
         half = self.config.size // 2 if lattice else 0   # one point (potential_at): a 1×1 window
         polygon_d = _NO_POINTS
-        polygon = np.isnan(radius)
-        if np.count_nonzero(polygon):
-            shape, px, py = _polygon_points(local, lo, hi, field.p0, half, polygon)
+        if near.polygons:
+            shape, px, py = _polygon_points(where, table, steps, near.lo, near.hi, field.p0, half, near.polygon)
             polygon_d = np.empty(len(shape))
             for index in np.unique(shape).tolist():
                 chosen = shape == index
-                polygon_d[chosen], _ = shapes[index].signed_distance(np.stack([px[chosen], py[chosen]], -1))
-        _add_terms(values, mine, local, lo, hi, centre, radius, polygon_d, field.krep, field.p0, field.u_max,
-                   world.u_wall, half)
-
-    def _moving_shapes(self, world: World) -> tuple[list, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The world's moving obstacles where they are written: the shapes, their bounding boxes
-        ``lo``, ``hi`` ``(M, 2)``, and the discs' centres ``(M, 2)`` and radii ``(M,)`` (NaN for polygons)."""
-        def build():
-            shapes = [world.obstacles[i] for i in world.moving]
-            boxes = [s.bounds for s in shapes]
-            lo = np.array([lo for lo, _ in boxes], float).reshape(-1, 2)
-            hi = np.array([hi for _, hi in boxes], float).reshape(-1, 2)
-            centre = np.array([getattr(s, "center", (np.nan, np.nan)) for s in shapes], float).reshape(-1, 2)
-            radius = np.array([getattr(s, "radius", np.nan) for s in shapes], float)
-            return shapes, lo, hi, centre, radius
-        return world.cached("moving_shapes", build)
+                polygon_d[chosen], _ = near.shapes[index].signed_distance(np.stack([px[chosen], py[chosen]], -1))
+        _add_terms(values, mine, where, table, steps, near.lo, near.hi, near.centre, near.radius, polygon_d,
+                   field.krep, field.p0, field.u_max, world.u_wall, half)
 
     def observe(self, positions: np.ndarray, robots: np.ndarray | None = None,
                 t: np.ndarray | float = 0.0, discs: np.ndarray | None = None) -> np.ndarray:
@@ -355,75 +375,88 @@ def _repulsive_term(d, krep, p0, u_max):
 
 
 @kernel
-def _polygon_points(local, lo, hi, p0, half, polygon):
+def _polygon_points(where, table, steps, lo, hi, p0, half, polygon):
     """The window points near the shapes ``s`` with ``polygon[s]``, in the order :func:`_add_terms`
-    meets them: ``(shape, x, y)``, each point's shape and where it is in that shape's frame."""
+    meets them: ``(shape, x, y)``, each point's shape and where it is in that shape's frame
+    (robot ``r`` at ``where[r] − table[steps[r], s]``, as there)."""
     count = 0
-    for r in range(local.shape[0]):
-        for s in range(local.shape[1]):
+    for r in range(where.shape[0]):
+        for s in range(table.shape[1]):
             if polygon[s]:
-                x0, x1 = _window_span(local[r, s, 0], lo[s, 0], hi[s, 0], p0, half)
-                y0, y1 = _window_span(local[r, s, 1], lo[s, 1], hi[s, 1], p0, half)
+                x, y = where[r, 0] - table[steps[r], s, 0], where[r, 1] - table[steps[r], s, 1]
+                x0, x1 = _window_span(x, lo[s, 0], hi[s, 0], p0, half)
+                y0, y1 = _window_span(y, lo[s, 1], hi[s, 1], p0, half)
                 count += max(x1 - x0 + 1, 0) * max(y1 - y0 + 1, 0)
     shape = np.empty(count, np.intp)
-    x = np.empty(count)
-    y = np.empty(count)
+    px = np.empty(count)
+    py = np.empty(count)
     i = 0
-    for r in range(local.shape[0]):
-        for s in range(local.shape[1]):
+    for r in range(where.shape[0]):
+        for s in range(table.shape[1]):
             if polygon[s]:
-                x0, x1 = _window_span(local[r, s, 0], lo[s, 0], hi[s, 0], p0, half)
-                y0, y1 = _window_span(local[r, s, 1], lo[s, 1], hi[s, 1], p0, half)
+                x, y = where[r, 0] - table[steps[r], s, 0], where[r, 1] - table[steps[r], s, 1]
+                x0, x1 = _window_span(x, lo[s, 0], hi[s, 0], p0, half)
+                y0, y1 = _window_span(y, lo[s, 1], hi[s, 1], p0, half)
                 for dx in range(x0, x1 + 1):
                     for dy in range(y0, y1 + 1):
-                        shape[i], x[i], y[i] = s, local[r, s, 0] + dx, local[r, s, 1] + dy
+                        shape[i], px[i], py[i] = s, x + dx, y + dy
                         i += 1
-    return shape, x, y
+    return shape, px, py
 
 
 @kernel
-def _add_terms(values, rows, local, lo, hi, centre, radius, polygon_d, krep, p0, u_max, u_wall, half):
+def _add_terms(values, rows, where, table, steps, lo, hi, centre, radius, polygon_d, krep, p0, u_max, u_wall, half):
     """Add to each robot's window the repulsive terms of the shapes near it.
 
     Robot ``r``'s window is ``values[rows[r]]`` (``k²`` points, ``k = 2·half + 1``); it is at
-    ``local[r, s]`` in shape ``s``'s frame, so its window point ``[half − dy, half + dx]`` is at
-    ``local[r, s] + (dx, dy)``. The points within ``p0`` of the shape's box ``[lo[s], hi[s]]``
-    are measured: their signed distance ``d`` to the disc ``centre[s]``, ``radius[s]``, or, for
-    a polygon (NaN radius), the next of ``polygon_d`` (its points in the order met here: robots,
-    shapes, ``dx``, ``dy``, as :func:`_polygon_points` lists them). A window point's terms
-    (:func:`_repulsive_term`) are summed in shape order, from 0, then added to its value, which
-    stays at most ``u_wall``; a point inside a shape reads ``u_wall``.
+    ``(x, y) = where[r] − table[steps[r], s]`` in shape ``s``'s frame (the shape moved by that
+    offset), so its window point ``[half − dy, half + dx]`` is at ``(x + dx, y + dy)``. The
+    points within ``p0`` of the shape's box ``[lo[s], hi[s]]`` are measured: their signed
+    distance ``d`` to the disc ``centre[s]``, ``radius[s]``, or, for a polygon (NaN radius), the
+    next of ``polygon_d`` (its points in the order met here: robots, shapes, ``dx``, ``dy``, as
+    :func:`_polygon_points` lists them). A window point's terms (:func:`_repulsive_term`) are
+    summed in shape order, from 0, then added to its value, which stays at most ``u_wall``; a
+    point inside a shape reads ``u_wall``.
     """
     k = 2 * half + 1
-    added = np.zeros(k * k)             # one robot's sums, by window point
-    hit = np.zeros(k * k, np.bool_)
-    inside = np.zeros(k * k, np.bool_)
-    touched = np.empty(k * k, np.intp)  # the points hit, in the order first hit
+    added = np.empty(k * k)             # one robot's sums, by window point (where marked)
+    mark = np.zeros(k * k, np.int8)     # 0: no shape near, 1: near, 2: inside one
+    touched = np.empty(k * k, np.intp)  # the points near, in the order first met
     j = 0                               # the next polygon point
-    for r in range(local.shape[0]):
+    for r in range(where.shape[0]):
         count = 0
-        for s in range(local.shape[1]):
-            x, y = local[r, s, 0], local[r, s, 1]
+        step = steps[r]
+        for s in range(table.shape[1]):
+            x = where[r, 0] - table[step, s, 0]
             x0, x1 = _window_span(x, lo[s, 0], hi[s, 0], p0, half)
+            if x0 > x1:                 # no column of the window near it (most shapes)
+                continue
+            y = where[r, 1] - table[step, s, 1]
             y0, y1 = _window_span(y, lo[s, 1], hi[s, 1], p0, half)
+            polygon = np.isnan(radius[s])
             for dx in range(x0, x1 + 1):
                 for dy in range(y0, y1 + 1):
-                    if np.isnan(radius[s]):
+                    if polygon:
                         d = polygon_d[j]
                         j += 1
                     else:
                         d = np.hypot(x + dx - centre[s, 0], y + dy - centre[s, 1]) - radius[s]
                     c = (half - dy) * k + (half + dx)
-                    added[c] += _repulsive_term(d, krep, p0, u_max)
-                    inside[c] = inside[c] or d <= 0.0
-                    if not hit[c]:
-                        hit[c] = True
+                    term = _repulsive_term(d, krep, p0, u_max)
+                    if mark[c] == 0:    # the first term here: 0 + term is term
+                        added[c] = term
+                        mark[c] = 1
                         touched[count] = c
                         count += 1
+                    else:
+                        added[c] += term
+                    if d <= 0.0:
+                        mark[c] = 2
         row = rows[r]
-        for c in touched[:count]:
-            values[row, c] = u_wall if inside[c] else min(values[row, c] + added[c], u_wall)
-            added[c], hit[c], inside[c] = 0.0, False, False
+        for i in range(count):
+            c = touched[i]
+            values[row, c] = u_wall if mark[c] == 2 else min(values[row, c] + added[c], u_wall)
+            mark[c] = 0
 
 
 class VisitMemory:

@@ -235,27 +235,40 @@ class World:
     @property
     def moving(self) -> tuple[int, ...]:
         """Indices (in :attr:`obstacles`) of the obstacles that move."""
-        return self.cached("moving", lambda: tuple(i for i, o in enumerate(self.obstacles) if o.motion is not None))
+        moving = self._cache.get("moving")   # read on every observation: no closure built to ask for it
+        if moving is None:
+            moving = self._cache["moving"] = tuple(i for i, o in enumerate(self.obstacles) if o.motion is not None)
+        return moving
 
     def moving_offsets(self, t: np.ndarray | float) -> np.ndarray:
         """``(..., M, 2)``: the route offset of each moving obstacle (in :attr:`moving` order) at steps ``t``.
 
-        Whole steps (episodes are at whole steps) are read from a table built once and grown as
-        needed; fractional steps are computed.
+        The rows of :meth:`motion_table` at ``t``.
         """
         t = np.asarray(t, float)
         if not self.moving:
             return np.zeros(t.shape + (0, 2))
-        rows, last = _table_rows(t.ravel())                     # the table starts at step -1
-        if not t.size or last < 0:
-            return np.stack([self.obstacles[i].motion.offset(t) for i in self.moving], axis=-2)
+        table, rows = self.motion_table(t.ravel())
+        return table.reshape(len(table), 2 * len(self.moving)).take(rows, axis=0).reshape(t.shape + table.shape[1:])
+
+    def motion_table(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(table, rows)``: the route offset of moving obstacle ``s`` (in :attr:`moving` order) at
+        step ``t[i]`` (``t`` 1-D) is ``table[rows[i], s]``; ``table`` is ``(T, M, 2)``.
+
+        Whole steps (episodes are at whole steps) are rows of a table built once and grown as
+        needed, so that a caller reads the offsets where they are instead of copying them (the
+        observations do); if a step is fractional, the offsets are computed, one row per step.
+        """
+        rows, last = _table_rows(t)                             # the table starts at step -1
+        if last < 0 or not len(t):
+            return np.stack([self.obstacles[i].motion.offset(t) for i in self.moving], axis=-2), np.arange(len(t))
         table = self._cache.get("motion_table")
         if table is None or last >= table.shape[0]:
             length = max(256, 2 * last + 1)
             at = np.arange(length) - 1.0
             table = np.stack([self.obstacles[i].motion.offset(at) for i in self.moving], axis=1)   # (T, M, 2)
             self._cache["motion_table"] = table
-        return table.reshape(len(table), -1).take(rows, axis=0).reshape(t.shape + table.shape[1:])
+        return table, rows
 
     def at(self, t: float = 0.0) -> Moment:
         """The world at control step ``t`` (fractional steps allowed): see :class:`Moment`.

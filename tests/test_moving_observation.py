@@ -6,6 +6,9 @@ it replaced is kept here as the reference: from random robots, steps, discs, pol
 other robots' discs, both give the same observations to the last bit. That numpy version was
 replaced in turn by compiled loops; it is kept here too (``numpy_add_near``, what
 ``tools/bench_moving.py`` times as "before"; ``tests/test_observation_kernel.py`` compares all three).
+And ``Observer._add_moving`` as it was before the compiled loops read the world's motion table
+where it is (``reference_add_moving``: each robot in each shape's frame, ``local``, computed by
+numpy from ``World.moving_offsets``), which the observers of the reference use.
 """
 
 from __future__ import annotations
@@ -123,6 +126,47 @@ def numpy_add_near(self, values: np.ndarray, mine: np.ndarray, local: np.ndarray
         flat[cell[inside]] = world.u_wall
 
 
+def reference_moving_shapes(world: World) -> tuple[list, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The world's moving obstacles where they are written: the shapes, their bounding boxes
+    ``lo``, ``hi`` ``(M, 2)``, and the discs' centres ``(M, 2)`` and radii ``(M,)`` (NaN for polygons)."""
+    shapes = [world.obstacles[i] for i in world.moving]
+    boxes = [s.bounds for s in shapes]
+    lo = np.array([lo for lo, _ in boxes], float).reshape(-1, 2)
+    hi = np.array([hi for _, hi in boxes], float).reshape(-1, 2)
+    centre = np.array([getattr(s, "center", (np.nan, np.nan)) for s in shapes], float).reshape(-1, 2)
+    radius = np.array([getattr(s, "radius", np.nan) for s in shapes], float)
+    return shapes, lo, hi, centre, radius
+
+
+def reference_add_moving(self, values: np.ndarray, positions: np.ndarray, robots: np.ndarray, t, offsets: np.ndarray,
+                         discs: np.ndarray | None = None, add_near=reference_add_near) -> np.ndarray:
+    """``Observer._add_moving`` of 2026-11-25 (before the motion table was read in the compiled
+    loop), adding the terms by ``add_near`` (``reference_add_near`` or ``numpy_add_near``)."""
+    crowd = discs is not None and len(discs) > 0
+    if not self._moving and not crowd:
+        return values
+    when = np.asarray(t, float)
+    if when.ndim == 0:
+        when = np.full(len(robots), float(when))
+    worlds = self.world_of[robots]
+    for w in np.unique(worlds).tolist():
+        mine = np.flatnonzero(worlds == w)
+        where, at = positions[mine], when[mine]
+        world = self.worlds[w]
+        if world.moving:
+            shift = world.moving_offsets(at)                                        # (m, M, 2)
+            shapes, lo, hi, centre, radius = reference_moving_shapes(world)
+            local = np.repeat(where, len(shapes), axis=0).reshape(shift.shape) - shift
+            add_near(self, values, mine, local, lo, hi, centre, radius, shapes, world, len(offsets) > 1)
+        if crowd:
+            centre = np.asarray(discs, float).reshape(-1, 2)
+            r = np.full(len(centre), world.robot_radius)
+            local = np.broadcast_to(where[:, None, :], (len(mine), len(centre), 2))
+            add_near(self, values, mine, local, centre - world.robot_radius, centre + world.robot_radius,
+                     centre, r, [None] * len(centre), world, len(offsets) > 1)
+    return values
+
+
 def crowded_world():
     """fixed20 with 8 moving discs and 2 moving polygons."""
     base = apf_physics.load_world("fixed20")
@@ -145,7 +189,7 @@ def test_moving_terms_are_added_as_before(worlds_dir, scale, channels, robots):
     config = ObserverConfig(channels=channels, scale=scale)
     new = Observer(config, robots, worlds)
     old = Observer(config, robots, worlds)
-    old._add_near = reference_add_near.__get__(old)
+    old._add_moving = reference_add_moving.__get__(old)
     rng = np.random.default_rng(robots)
     for trial in range(6):
         which = rng.integers(0, 2, robots)
@@ -158,3 +202,51 @@ def test_moving_terms_are_added_as_before(worlds_dir, scale, channels, robots):
                                       old.observe(positions, t=t, discs=discs))
         np.testing.assert_array_equal(new.potential_at(positions, t=t, discs=discs),
                                       old.potential_at(positions, t=t, discs=discs))
+
+
+@pytest.mark.parametrize("steps", ["whole", "fractional", "mixed", "early"])
+@pytest.mark.parametrize("many_worlds", [False, True])
+def test_table_rows_and_computed_offsets_as_before(worlds_dir, steps, many_worlds):
+    """Whole steps are read from the world's motion table inside the compiled loop (rows past its
+    first length grow it); a fractional step, or one before −1, has its offsets computed, one row
+    per robot: both as the reference adds them, in the window, the previous channel (t − 1),
+    ``potential_at`` and with other robots' discs, in one world or among several (one without
+    moving obstacles)."""
+    worlds = [crowded_world()]
+    if many_worlds:
+        worlds += [load_world(worlds_dir / "moving_obstacles.yaml"), apf_physics.load_world("fixed20")]
+    robots = 40
+    config = ObserverConfig(channels=("potential", "previous"), scale="log")
+    new, old = Observer(config, robots, worlds), Observer(config, robots, worlds)
+    old._add_moving = reference_add_moving.__get__(old)
+    rng = np.random.default_rng([len(worlds), len(steps)])
+    for trial in range(4):
+        which = rng.integers(0, len(worlds), robots)
+        positions = np.concatenate([worlds[i].random_free_positions(rng, 1) for i in which])
+        for observer in (new, old):
+            observer.reset(np.arange(robots), positions, [worlds[i] for i in which])
+        t = {"whole": lambda: rng.integers(0, 400, robots).astype(float),
+             "fractional": lambda: rng.uniform(0, 60, robots),
+             "mixed": lambda: rng.integers(0, 60, robots) + rng.choice([0.0, 0.25], robots),
+             "early": lambda: rng.integers(-4, 3, robots).astype(float)}[steps]()
+        discs = positions[:4] + 0.6 if trial % 2 else None
+        some = rng.permutation(robots)[:25]           # robots listed out of order
+        np.testing.assert_array_equal(new.observe(positions[some], some, t[some], discs),
+                                      old.observe(positions[some], some, t[some], discs))
+        np.testing.assert_array_equal(new.potential_at(positions, t=t, discs=discs),
+                                      old.potential_at(positions, t=t, discs=discs))
+        one = some[:1]                                # one robot, one step for all
+        np.testing.assert_array_equal(new.observe(positions[one], one, float(t[one[0]]), discs),
+                                      old.observe(positions[one], one, float(t[one[0]]), discs))
+
+
+def test_motion_table_rows_are_the_offsets():
+    """``World.motion_table``: whole steps as rows of the table, others computed; ``moving_offsets`` reads it."""
+    world = crowded_world()
+    for t in (np.arange(-1.0, 600.0), np.array([3.5, 2.0]), np.array([-2.0]), np.zeros(0)):
+        table, rows = world.motion_table(t)
+        expected = np.stack([world.obstacles[i].motion.offset(t) for i in world.moving], axis=-2)
+        np.testing.assert_array_equal(table[rows], expected)
+        np.testing.assert_array_equal(world.moving_offsets(t), expected)
+    assert world.motion_table(np.array([5.0, 7.0]))[0].shape[0] >= 600    # the grown table is kept
+    np.testing.assert_array_equal(world.moving_offsets(3.0), world.moving_offsets(np.array([3.0]))[0])

@@ -5,8 +5,10 @@ terms are added to random windows by random shapes, many times over, so that eve
 meets the cases that could differ by a bit: points exactly ``p0`` from a disc or on its rim,
 several shapes' terms summed at one point, values at ``u_wall`` (and its float32 rounding,
 which may lie above it), windows of one point (the float64 values of ``potential_at``),
-polygons among discs, robots listed out of order. ``==`` throughout. And the memory channel's
-windows (``VisitMemory.window``, a compiled loop too) against its numpy version.
+polygons among discs, robots listed out of order, several robots at one row of the offsets'
+table. The compiled loops read each robot in each shape's frame as ``where[r] − table[steps[r], s]``;
+the numpy implementations are given that ``local`` computed by numpy. ``==`` throughout. And
+the memory channel's windows (``VisitMemory.window``, a compiled loop too) against its numpy version.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import pytest
 from apf_physics import observation
 from apf_physics.field import FieldParams
 from apf_physics.obstacles import PolygonObstacle
-from apf_physics.observation import Observer, ObserverConfig, VisitMemory
+from apf_physics.observation import Observer, ObserverConfig, Repellers, VisitMemory
 from test_moving_observation import numpy_add_near, reference_add_near
 
 FIELDS = [FieldParams(katt=2.0, krep=20.0, kstr=8.0, p0=0.5, ps=8.0, u_max=100.0),
@@ -27,8 +29,9 @@ FIELDS = [FieldParams(katt=2.0, krep=20.0, kstr=8.0, p0=0.5, ps=8.0, u_max=100.0
 
 
 def random_case(rng: np.random.Generator, size: int, lattice: bool, polygons: bool):
-    """Robots and shapes of one random call of ``_add_near``: ``(values, mine, local, lo, hi, centre,
-    radius, shapes, world)``."""
+    """Robots and shapes of one random call of ``_add_near``: ``(values, mine, (where, table, steps),
+    (local, lo, hi, centre, radius, shapes), world)``: the compiled loops' robots and offsets, and
+    the numpy implementations' arguments, ``local = where[:, None] − table[steps]``."""
     field = FIELDS[int(rng.integers(len(FIELDS)))]
     u_wall = float(rng.choice([field.u_max * 3 + 0.1, 311.3, 1e3 / 3]))
     world = SimpleNamespace(field=field, u_wall=u_wall)
@@ -51,13 +54,24 @@ def random_case(rng: np.random.Generator, size: int, lattice: bool, polygons: bo
             radius[s], centre[s] = np.nan, np.nan
     lo = np.array([s.bounds[0] if s is not None else c - r for s, c, r in zip(shapes, centre, radius)])
     hi = np.array([s.bounds[1] if s is not None else c + r for s, c, r in zip(shapes, centre, radius)])
-    local = rng.uniform(-4, 4, (robots, count, 2))
-    whole = rng.random((robots, count)) < 0.3
-    local[whole] = np.round(local[whole])
-    if not lattice:   # a single point: put half of them near a shape
+    # robots, some at whole coordinates, and the shapes' offsets (some whole, some zero), in a
+    # table of fewer rows than robots (rows shared) or of one row per robot
+    where = rng.uniform(-4, 4, (robots, 2))
+    whole = rng.random(robots) < 0.4
+    where[whole] = np.round(where[whole])
+    rows = int(rng.choice([1, max(1, robots // 3), robots]))
+    table = rng.uniform(-1.5, 1.5, (rows, count, 2)) * (rng.random((rows, count, 1)) < 0.8)
+    whole = rng.random((rows, count)) < 0.4
+    table[whole] = np.round(table[whole])
+    steps = rng.integers(0, rows, robots) if rows < robots else rng.permutation(robots)
+    if not lattice:   # a single point: put half of them near a shape (each robot its own row of offsets)
         near = rng.random((robots, count)) < 0.5
-        local[near] = (lo + rng.uniform(-0.6, 0.6, (count, 2)) * (hi - lo + 2 * field.p0)
-                       + (hi - lo) / 2)[np.nonzero(near)[1]]
+        r, s = np.nonzero(near)
+        aim = (lo + rng.uniform(-0.6, 0.6, (count, 2)) * (hi - lo + 2 * field.p0) + (hi - lo) / 2)[s]
+        table = np.zeros((robots, count, 2)) if rows < robots else table
+        steps = np.arange(robots) if rows < robots else steps
+        table[steps[r], s] = where[r] - aim
+    local = where[:, None, :] - table[steps]
     q = size * size if lattice else 1
     if lattice:
         values = rng.uniform(-50, u_wall, (n, q)).astype(np.float32)
@@ -65,7 +79,13 @@ def random_case(rng: np.random.Generator, size: int, lattice: bool, polygons: bo
     else:
         values = rng.uniform(-50, u_wall, (n, q))
         values[rng.random((n, q)) < 0.1] = u_wall
-    return values, mine, local, lo, hi, centre, radius, shapes, world
+    return values, mine, (where, table, steps), (local, lo, hi, centre, radius, shapes), world
+
+
+def add_compiled(observer: Observer, values, mine, robots, shaped, world, lattice: bool) -> None:
+    """``observer._add_near`` with the arguments of :func:`random_case`."""
+    _, lo, hi, centre, radius, shapes = shaped
+    observer._add_near(values, mine, *robots, Repellers(shapes, lo, hi, centre, radius), world, lattice)
 
 
 @pytest.mark.parametrize("polygons", [False, True])
@@ -75,11 +95,11 @@ def test_terms_match_the_replaced_implementations(size, lattice, polygons):
     observer = Observer(ObserverConfig(size=size), 1)
     rng = np.random.default_rng([size, lattice, polygons])
     for trial in range(150):
-        values, *args = random_case(rng, size, lattice, polygons)
+        values, mine, robots, shaped, world = random_case(rng, size, lattice, polygons)
         new, old, before = values.copy(), values.copy(), values.copy()
-        observer._add_near(new, *args, lattice)
-        reference_add_near(observer, old, *args, lattice)
-        numpy_add_near(observer, before, *args, lattice)
+        add_compiled(observer, new, mine, robots, shaped, world, lattice)
+        reference_add_near(observer, old, mine, *shaped, world, lattice)
+        numpy_add_near(observer, before, mine, *shaped, world, lattice)
         np.testing.assert_array_equal(new, old, err_msg=f"trial {trial}")
         np.testing.assert_array_equal(new, before, err_msg=f"trial {trial}")
         assert new.dtype == values.dtype
@@ -94,13 +114,14 @@ def test_many_points_at_once():
     centre = rng.uniform(0, 30, (count, 2))
     radius = rng.uniform(0.1, 1.0, count)
     positions = rng.uniform(0, 30, (robots, 2))
-    local = np.broadcast_to(positions[:, None, :], (robots, count, 2))    # as other robots' discs are given
+    local = np.broadcast_to(positions[:, None, :], (robots, count, 2))    # as other robots' discs were given
     values = rng.uniform(-20, 200, (robots, 121)).astype(np.float32)
     new, old = values.copy(), values.copy()
-    args = (np.arange(robots), local, centre - radius[:, None], centre + radius[:, None], centre, radius,
-            [None] * count, world, True)
-    observer._add_near(new, *args)
-    reference_add_near(observer, old, *args)
+    shaped = (local, centre - radius[:, None], centre + radius[:, None], centre, radius, [None] * count)
+    # as they are given now: offsets of zero
+    add_compiled(observer, new, np.arange(robots), (positions, np.zeros((1, count, 2)), np.zeros(robots, np.intp)),
+                 shaped, world, True)
+    reference_add_near(observer, old, np.arange(robots), *shaped, world, True)
     assert (new != values).sum() > 10_000
     np.testing.assert_array_equal(new, old)
 
@@ -112,12 +133,12 @@ def test_python_source_is_the_compiled_rule(monkeypatch):
     for lattice in (True, False):
         values, *args = random_case(rng, 5, lattice, polygons=True)
         compiled = values.copy()
-        observer._add_near(compiled, *args, lattice)
+        add_compiled(observer, compiled, *args, lattice)
         with monkeypatch.context() as patch:
             for name in ("_window_span", "_repulsive_term", "_polygon_points", "_add_terms"):
                 patch.setattr(observation, name, getattr(observation, name).py_func)
             python = values.copy()
-            observer._add_near(python, *args, lattice)
+            add_compiled(observer, python, *args, lattice)
         np.testing.assert_array_equal(compiled, python)
     memory = VisitMemory(3, 5, 2)
     memory.reset(np.arange(3), np.array([[0.5, 0.5], [3.2, 1.5], [6.0, 6.9]]), [SimpleNamespace(size=(7, 7))] * 3)

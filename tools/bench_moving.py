@@ -9,13 +9,15 @@ varied steps), frozen beside moving, and their ratio (aim ≤ 2). ``Observer.obs
 one implementation of both the environments' observations and ``eval``'s (the DQN planner's).
 Frozen and moving are timed in alternating blocks; each figure is the median of its blocks.
 A third column times moving discs through the numpy implementation that the compiled loops of
-``Observer._add_near`` replaced (kept in ``tests/test_moving_observation.py``;
-``tests/test_observation_kernel.py`` checks that both add the same terms): before and after in one run.
+``Observer._add_moving`` and ``Observer._add_near`` replaced (kept in
+``tests/test_moving_observation.py``, which checks that both add the same terms): before and
+after in one run.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib.util
 import os
 import statistics
@@ -28,22 +30,23 @@ from apf_physics.observation import Observer, ObserverConfig
 from bench_env import moving_world   # the same worlds as bench_env's moving-obstacle rows (this folder)
 
 
-def numpy_add_near():
-    """The numpy implementation of ``Observer._add_near`` of 2026-11-25 (from the test that keeps it)."""
+def numpy_add_moving():
+    """The numpy implementation of ``Observer._add_moving`` and ``_add_near`` of 2026-11-25 (from
+    the test that keeps it)."""
     path = Path(__file__).resolve().parent.parent / "tests" / "test_moving_observation.py"
     spec = importlib.util.spec_from_file_location("test_moving_observation", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    return module.numpy_add_near
+    return functools.partial(module.reference_add_moving, add_near=module.numpy_add_near)
 
 
 class Case:
     """An observer of ``robots`` robots at random free positions of ``world``, at varied steps."""
 
-    def __init__(self, world, robots: int, config: ObserverConfig, add_near=None):
+    def __init__(self, world, robots: int, config: ObserverConfig, add_moving=None):
         self.observer = Observer(config, robots, [world])
-        if add_near is not None:
-            self.observer._add_near = add_near.__get__(self.observer)
+        if add_moving is not None:
+            self.observer._add_moving = functools.partial(add_moving, self.observer)
         rng = np.random.default_rng(1)
         self.positions = world.random_free_positions(rng, robots)
         self.observer.reset(np.arange(robots), self.positions, [world] * robots)
@@ -72,12 +75,12 @@ def main() -> None:
     print(f"load average at start: {os.getloadavg()[0]:.2f}")
     print(f"observations in fixed20 with 8 discs, channels {config.channels} "
           f"(median of {args.blocks} alternating blocks)")
-    before_add_near = numpy_add_near()
+    before_add_moving = numpy_add_moving()
     print(f"  {'robots':>6} {'frozen us/robot':>16} {'moving us/robot':>16} {'moving / frozen':>16} "
           f"{'before: moving':>15} {'before / frozen':>16}")
     for n in args.robots:
         frozen, moving = Case(frozen_world, n, config), Case(moving_world_, n, config)
-        before = Case(moving_world_, n, config, before_add_near)
+        before = Case(moving_world_, n, config, before_add_moving)
         repeats = max(20, args.repeats * 64 // max(n, 64))
         f, m, b = [], [], []
         for _ in range(args.blocks):
