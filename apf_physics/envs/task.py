@@ -161,9 +161,12 @@ class NavigationTask:
             self.ranges.seed(seeds)
 
     def start(self, slots: np.ndarray, world_ids: np.ndarray, leaders: np.ndarray,
-              headings: np.ndarray | None = None) -> None:
+              headings: np.ndarray | None = None, observe: bool = True) -> None:
         """Begin episodes in ``slots``, leaders at ``leaders`` (k, 2) in ``worlds[world_ids]``
         (unicycles headed ``headings`` (k,), default toward the nearest target).
+
+        ``observe=False``: their observations are left to the caller's next :meth:`_observe`
+        (:meth:`step` observes the slots it restarts with the ones it moved, in one call).
 
         Raises:
             UserError: A formation's followers find no free position near its leader.
@@ -189,7 +192,8 @@ class NavigationTask:
                 self.unicycle_followers[slot] = followers
         self.observer.reset(slots, leaders, worlds)
         self._moved[slots] = 0.0
-        self._observe(None if self.num == 1 else slots)   # (a batch of one: its one slot)
+        if observe:
+            self._observe(None if self.num == 1 else slots)   # (a batch of one: its one slot)
 
     def _observe(self, slots: np.ndarray | None) -> None:
         """Refresh the observations (and the potential at the leader) of ``slots`` (None: all)."""
@@ -234,10 +238,18 @@ class NavigationTask:
             return self._scan[rows]
         return {"window": self._obs[rows], "lidar": self._scan[rows]}
 
-    def step(self, actions: np.ndarray | int) -> TaskStep:
+    def step(self, actions: np.ndarray | int, restart: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+             ) -> TaskStep:
         """Advance every running slot by its action (slots not running do not move; a batch of
-        one may be given its action as an int)."""
-        if self._thesis_one and self.stepper.scalar and self.stepper.outcome[0] == RUNNING:
+        one may be given its action as an int).
+
+        ``restart``: ``(slots, world_ids, leaders)`` of slots not running, to :meth:`start` anew
+        once the others have moved (a vector env's automatic reset); the observation returned
+        is theirs at the new start. Their observations are made with the moved slots' in one call.
+        """
+        if restart is not None and not len(restart[0]):
+            restart = None
+        if self._thesis_one and self.stepper.scalar and self.stepper.outcome[0] == RUNNING and restart is None:
             return self._step_one(int(actions) if isinstance(actions, (int, np.integer))
                                   else int(np.asarray(actions).reshape(-1)[0]))
         commands = self.robot.commands(actions, self.num)
@@ -261,7 +273,13 @@ class NavigationTask:
             revisits[moved] = self.observer.visit(leaders[moved], slots)
         u_before = self._u
         self._u = self._u.copy()
-        self._observe(slots)
+        observed = slots
+        if restart is not None:
+            self.start(*restart, observe=False)
+            now = moved.copy()
+            now[restart[0]] = True
+            observed = None if now.all() else np.flatnonzero(now)
+        self._observe(observed)
         walked = np.sqrt(np.sum((leaders - before) ** 2, axis=1)) if self.weights.length else None
         terms = reward_terms(self.weights, report.collided, report.reached, u_before, self._u,
                              revisits if self.weights.revisit else None, walked)

@@ -110,7 +110,11 @@ class NavigateVectorEnv(VectorEnv):
         self._drawn[slots] += 1
         return u
 
-    def _start(self, slots: np.ndarray, options: dict | None = None) -> None:
+    def _starts(self, slots: np.ndarray, options: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(slots, world_ids, starts)``: where the episodes of ``slots`` begin anew, drawn from
+        each copy's own generator."""
+        if not len(slots):
+            return slots, np.zeros(0, np.intp), np.zeros((0, 2))
         if options:
             chosen = [self.chooser.choose(self._rngs[i], options) for i in slots.tolist()]
             worlds = np.array([w for w, _ in chosen], np.intp)
@@ -118,10 +122,17 @@ class NavigateVectorEnv(VectorEnv):
             self._drawn[slots] = _BLOCK   # the generators moved on: draw afresh next time
         else:
             worlds, starts = self.chooser.draw(self._uniforms_for(slots))
-        self._task.start(slots, worlds, starts)
+        return slots, worlds, starts
+
+    def _started(self, slots: np.ndarray, starts: np.ndarray) -> None:
         self._needs_reset[slots] = False
         if len(slots) and slots[0] == 0:   # (slots ascending)
             self._trail = [starts[0].copy()]
+
+    def _start(self, slots: np.ndarray, options: dict | None = None) -> None:
+        slots, worlds, starts = self._starts(slots, options)
+        self._task.start(slots, worlds, starts)
+        self._started(slots, starts)
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
         if seed is not None:
@@ -137,10 +148,10 @@ class NavigateVectorEnv(VectorEnv):
 
     def step(self, actions):
         actions = np.asarray(actions).reshape(self.num_envs, *self.single_action_space.shape)
-        restarting = np.flatnonzero(self._needs_reset)
-        result = self._task.step(actions)
-        if len(restarting):
-            self._start(restarting)
+        # the copies whose episode ended last step begin anew once the others have moved
+        restart = self._starts(np.flatnonzero(self._needs_reset))
+        result = self._task.step(actions, restart)
+        self._started(restart[0], restart[2])
         if self.render_mode is not None and not self._needs_reset[0]:  # the trail is only drawn
             self._trail.append(self._task.positions[0, 0].copy())
         self._needs_reset = result.terminated | result.truncated
