@@ -326,12 +326,13 @@ class Atlas:
 
         if self._image is None:
             self._build()
+            self._shift_floats = self._shift.tolist()   # the shifts as Python floats (one window)
         points = np.asarray(points, dtype=float).reshape(-1, 2)
         if offsets is not None and len(points) == 1:
             # one window (a single robot): its corner in Python floats, then the same float32 maps
             # as below (a fixed cost of five small array operations less)
             (x, y), = points.tolist()
-            sx, sy = self._shift[np.reshape(ids, -1)[0]].tolist()
+            sx, sy = self._shift_floats[ids.item(0) if isinstance(ids, np.ndarray) else int(ids)]
             scaled = self._scaled_offsets(offsets)
             map_x = scaled[0] + np.float32(x * self.resolution + sx)
             map_y = scaled[1] + np.float32(y * self.resolution + sy)

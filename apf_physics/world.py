@@ -259,7 +259,12 @@ class World:
         needed, so that a caller reads the offsets where they are instead of copying them (the
         observations do); if a step is fractional, the offsets are computed, one row per step.
         """
-        rows, last = _table_rows(t)                             # the table starts at step -1
+        if len(t) == 1:   # one step (one robot): the rule of _table_rows on a Python float, a compiled call less
+            step = float(t[0])
+            last = int(step) + 1 if -1.0 <= step < 2.0 ** 52 and step == int(step) else -1
+            rows = np.array([last])
+        else:
+            rows, last = _table_rows(t)                         # the table starts at step -1
         if last < 0 or not len(t):
             return np.stack([self.obstacles[i].motion.offset(t) for i in self.moving], axis=-2), np.arange(len(t))
         table = self._cache.get("motion_table")

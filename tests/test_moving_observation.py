@@ -249,4 +249,37 @@ def test_motion_table_rows_are_the_offsets():
         np.testing.assert_array_equal(table[rows], expected)
         np.testing.assert_array_equal(world.moving_offsets(t), expected)
     assert world.motion_table(np.array([5.0, 7.0]))[0].shape[0] >= 600    # the grown table is kept
+    # one step (read in Python) as in a batch (the compiled rule): rows of the table, or computed
+    table = world.motion_table(np.array([5.0, 7.0]))[0]
+    for step in (-1.0, -0.0, -0.5, 2.5, 7.0, 599.0, -2.0, np.nan, 2.0 ** 52, 2.0 ** 60):
+        one, row = world.motion_table(np.array([step]))
+        two, rows = world.motion_table(np.array([step, step]))
+        assert (one is table) == (two is table) == (-1.0 <= step <= 599.0 and step == int(step))
+        np.testing.assert_array_equal(one[row], two[rows][:1])
     np.testing.assert_array_equal(world.moving_offsets(3.0), world.moving_offsets(np.array([3.0]))[0])
+
+
+def test_one_robot_reads_what_it_reads_among_many(worlds_dir):
+    """One robot's window (``Atlas.sample``'s one-window path, its shift as Python floats, one step's
+    row of the motion table in Python) is its row of the windows of many, in any of several worlds."""
+    worlds = [crowded_world(), apf_physics.load_world("fixed20"), load_world(worlds_dir / "moving_obstacles.yaml")]
+    robots = 30
+    observer = Observer(ObserverConfig(channels=("potential", "previous"), scale="log"), robots, worlds)
+    rng = np.random.default_rng(5)
+    which = rng.integers(0, len(worlds), robots)
+    positions = np.concatenate([worlds[i].random_free_positions(rng, 1) for i in which])
+    observer.reset(np.arange(robots), positions, [worlds[i] for i in which])
+    t = np.concatenate([rng.integers(-1, 300, robots - 6).astype(float), [0.5, -1.5, -3.0, 2000.0, 7.25, 0.0]])
+    everyone = observer.observe(positions, t=t)
+    atlas = observer._atlas
+    for r in range(robots):
+        np.testing.assert_array_equal(observer.observe(positions[r], [r], t[r]), everyone[r:r + 1])
+        np.testing.assert_array_equal(observer.observe(positions[r:r + 1], np.array([r]), t[r:r + 1]), everyone[r:r + 1])
+        np.testing.assert_array_equal(atlas.sample(positions[r], int(which[r]), observer._offsets),
+                                      atlas.sample(positions[r:r + 1], which[r:r + 1], observer._offsets))
+        np.testing.assert_array_equal(atlas.sample(positions[r], int(which[r]), observer._offsets)[0],
+                                      atlas.sample(positions, which, observer._offsets)[r])
+    world = worlds[0]
+    for step in t.tolist():
+        table, rows = world.motion_table(np.array([step]))
+        np.testing.assert_array_equal(table[rows], world.moving_offsets(np.array([step, step]))[:1])
