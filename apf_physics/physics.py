@@ -342,6 +342,15 @@ class Physics:
             UserError: A centre inside an obstacle or outside the map, or robots that cannot be
                 separated in free space.
         """
+        if self.num_robots == 1 and not self._any_moving and np.size(robots) == 1:   # a single env's resets, in floats
+            (x, y), = np.asarray(positions, dtype=float).reshape(1, 2).tolist()
+            if self._robot_proxy[0] >= 0:
+                self._release(self._alone)
+            self._positions[0] = (x, y)
+            if self.present[0] and self._sweeps.near_one(int(self._sweep_world[0]), x, y, x, y,
+                                                         float(self._slot_radius[0]) + 1e-6):
+                self._separate(0, self._alone)
+            return
         robots = np.asarray(robots, dtype=np.intp).ravel()
         self._release(robots)
         self._positions[robots] = np.asarray(positions, dtype=float).reshape(-1, 2)

@@ -206,6 +206,30 @@ def test_one_robot_steps_in_floats_as_the_array_path_does(worlds_dir):
     assert through > 20   # and pymunk, after a float step or a pymunk step
 
 
+def test_one_robot_is_placed_as_a_batch_places_it(worlds_dir):
+    """Physics.place of a lone robot takes a float path of its own; a robot of a batch placed at
+    the same point ends where it does, to the bit, edges and obstacles' sides included, and a
+    centre inside an obstacle is refused by both."""
+    world = load_world(worlds_dir / "fixed20.yaml")
+    rng = np.random.default_rng(3)
+    one, batch = Physics([world]), Physics([world, world])
+    points = np.concatenate([world.random_free_positions(rng, 40, margin=0.0),
+                             rng.uniform(0.0, 0.3, (10, 2)),                       # against the map's corner
+                             world.random_free_positions(rng, 10, margin=0.4)])
+    pushed = 0
+    for p in points:
+        try:
+            batch.place([0], p[None])
+        except UserError:
+            with pytest.raises(UserError):
+                one.place([0], p[None])
+            continue
+        one.place([0], p[None])
+        np.testing.assert_array_equal(one.positions, batch.positions[:1])
+        pushed += bool(np.any(one.positions[0] != p))
+    assert pushed >= 5   # robots placed over an edge were moved off it, by both
+
+
 def test_needs_physics_is_conservative(worlds_dir):
     # every robot the test lets skip pymunk keeps clear of everything along its whole move
     world = load_world(worlds_dir / "fixed20.yaml")
