@@ -416,7 +416,8 @@ def _add_terms(values, rows, where, table, steps, lo, hi, centre, radius, polygo
     next of ``polygon_d`` (its points in the order met here: robots, shapes, ``dx``, ``dy``, as
     :func:`_polygon_points` lists them). A window point's terms (:func:`_repulsive_term`) are
     summed in shape order, from 0, then added to its value, which stays at most ``u_wall``; a
-    point inside a shape reads ``u_wall``.
+    point inside a shape reads ``u_wall``. A disc's ``d`` is not measured where the squared
+    distance from its centre settles the term (surely beyond ``p0``: 0; surely inside: ``u_max``).
     """
     k = 2 * half + 1
     added = np.empty(k * k)             # one robot's sums, by window point (where marked)
@@ -434,13 +435,23 @@ def _add_terms(values, rows, where, table, steps, lo, hi, centre, radius, polygo
             y = where[r, 1] - table[step, s, 1]
             y0, y1 = _window_span(y, lo[s, 1], hi[s, 1], p0, half)
             polygon = np.isnan(radius[s])
+            # squared distances from the disc's centre beyond which a point is surely more than
+            # p0 from its rim, and within which surely inside it (margins of 1e-9, a million
+            # times the rounding of either side): there the term is 0, or u_max, whatever d is
+            beyond = (radius[s] + p0) ** 2 * (1.0 + 1e-9)
+            within = radius[s] ** 2 * (1.0 - 1e-9)
             for dx in range(x0, x1 + 1):
                 for dy in range(y0, y1 + 1):
                     if polygon:
                         d = polygon_d[j]
                         j += 1
                     else:
-                        d = np.hypot(x + dx - centre[s, 0], y + dy - centre[s, 1]) - radius[s]
+                        ex, ey = x + dx - centre[s, 0], y + dy - centre[s, 1]
+                        q = ex * ex + ey * ey
+                        if (q > beyond) | (q < within):   # no hypot (half the loop's time): d only picks the term
+                            d = -1.0 if q < within else p0 + 1.0
+                        else:
+                            d = np.hypot(ex, ey) - radius[s]
                     c = (half - dy) * k + (half + dx)
                     term = _repulsive_term(d, krep, p0, u_max)
                     if mark[c] == 0:    # the first term here: 0 + term is term

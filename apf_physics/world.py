@@ -253,7 +253,8 @@ class World:
 
     def motion_table(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(table, rows)``: the route offset of moving obstacle ``s`` (in :attr:`moving` order) at
-        step ``t[i]`` (``t`` 1-D) is ``table[rows[i], s]``; ``table`` is ``(T, M, 2)``.
+        step ``t[i]`` (``t`` 1-D floats) is ``table[rows[i], s]``; ``table`` is ``(T, M, 2)`` (a
+        world with moving obstacles).
 
         Whole steps (episodes are at whole steps) are rows of a table built once and grown as
         needed, so that a caller reads the offsets where they are instead of copying them (the
@@ -262,7 +263,7 @@ class World:
         if len(t) == 1:   # one step (one robot): the rule of _table_rows on a Python float, a compiled call less
             step = float(t[0])
             last = int(step) + 1 if -1.0 <= step < 2.0 ** 52 and step == int(step) else -1
-            rows = np.array([last])
+            rows = np.array([last], np.intp)
         else:
             rows, last = _table_rows(t)                         # the table starts at step -1
         if last < 0 or not len(t):

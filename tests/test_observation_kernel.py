@@ -180,3 +180,41 @@ def test_memory_windows_match_the_numpy_version(size, cap):
         window = memory.window(positions, robots)
         assert window.dtype == np.float32 and window.shape == (len(robots), size, size)
         np.testing.assert_array_equal(window, numpy_memory_window(memory, positions, robots))
+
+
+@pytest.mark.parametrize("field", FIELDS)
+def test_points_at_the_edges_of_the_shortcut_read_as_by_hypot(field):
+    """``_add_terms`` skips ``hypot`` where a point's squared distance from a disc's centre is a
+    relative 1e-9 beyond ``(r + p0)²`` or within ``r²``: points at every distance around those
+    (a few ulps to a relative 1e-6 either side, and on the rim and at ``p0`` exactly), in every
+    direction, read as the numpy implementations read them."""
+    observer = Observer(ObserverConfig(size=1), 1)
+    world = SimpleNamespace(field=field, u_wall=field.u_max * 3 + 0.1)
+    radius = np.array([0.25, 0.5, 1.0 / 3.0, 0.7])
+    centre = np.array([[0.0, 0.0], [3.0, -2.0], [-1.5, 0.5], [0.1, 0.2]])
+    shaped_for = []
+    rel = np.concatenate([[0.0], np.ldexp(1.0, np.arange(-53, -48)), 10.0 ** np.arange(-12.0, -5.0)])
+    rel = np.concatenate([-rel[::-1], rel[1:]])
+    for s, r in enumerate(radius):
+        for rho in np.concatenate([r * (1 + rel), (r + field.p0) * (1 + rel)]):
+            for angle in (0.0, 0.3, np.pi / 4, 2.0, np.pi):
+                shaped_for.append((s, centre[s] + rho * np.array([np.cos(angle), np.sin(angle)])))
+    where = np.array([p for _, p in shaped_for])
+    robots = len(where)
+    # each robot measured against its own disc: the others' offsets put them far away
+    table = np.full((robots, len(radius), 2), 1e3)
+    for i, (s, _) in enumerate(shaped_for):
+        table[i, s] = 0.0
+    steps = np.arange(robots)
+    local = where[:, None, :] - table[steps]
+    lo, hi = centre - radius[:, None], centre + radius[:, None]
+    shaped = (local, lo, hi, centre, radius, [None] * len(radius))
+    values = np.random.default_rng(0).uniform(-50, 50, (robots, 1))
+    values[::2] = 0.0       # where the faint terms just within p0 (~1e-20) show
+    new, old, before = values.copy(), values.copy(), values.copy()
+    add_compiled(observer, new, np.arange(robots), (where, table, steps), shaped, world, False)
+    reference_add_near(observer, old, np.arange(robots), *shaped, world, False)
+    numpy_add_near(observer, before, np.arange(robots), *shaped, world, False)
+    assert (new != values).sum() > robots // 3
+    np.testing.assert_array_equal(new, old)
+    np.testing.assert_array_equal(new, before)

@@ -1,6 +1,6 @@
 """Benchmark observations among moving obstacles: 8 moving discs beside the same discs frozen.
 
-    python tools/bench_moving.py [--repeats 200] [--robots 1 64 256]
+    python tools/bench_moving.py [--repeats 200] [--blocks 7] [--robots 1 64 256] [--previous]
 
 fixed20 with 8 discs of radius 0.5 that move back and forth across it, and the same world
 with the discs standing where they start (so they are in the observation's static raster).
