@@ -44,6 +44,10 @@ RASTER_CHUNK = 1 << 16
 """Raster nodes computed at a time (bounds the temporaries of a large map)."""
 MOMENTS_KEPT = 8
 """Moments a world keeps (:meth:`World.at`): the steps of the slots of a batch in one world, at most."""
+MOTION_TABLE_STEPS = 1 << 16
+"""Whole steps up to this are read from a world's table of its moving obstacles' offsets
+(:meth:`World.motion_table`); later ones are computed, so that a far step never builds a table
+the size of its number."""
 
 
 @dataclass(frozen=True)
@@ -257,12 +261,13 @@ class World:
         world with moving obstacles).
 
         Whole steps (episodes are at whole steps) are rows of a table built once and grown as
-        needed, so that a caller reads the offsets where they are instead of copying them (the
-        observations do); if a step is fractional, the offsets are computed, one row per step.
+        needed, up to :data:`MOTION_TABLE_STEPS`, so that a caller reads the offsets where they are
+        instead of copying them (the observations do); if a step is fractional or beyond the
+        table's reach, the offsets are computed (the same values), one row per step.
         """
         if len(t) == 1:   # one step (one robot): the rule of _table_rows on a Python float, a compiled call less
             step = float(t[0])
-            last = int(step) + 1 if -1.0 <= step < 2.0 ** 52 and step == int(step) else -1
+            last = int(step) + 1 if -1.0 <= step < MOTION_TABLE_STEPS and step == int(step) else -1
             rows = np.array([last], np.intp)
         else:
             rows, last = _table_rows(t)                         # the table starts at step -1
@@ -670,11 +675,12 @@ class Moment:
 @kernel
 def _table_rows(t):
     """``(rows, last)``: each step of ``t`` (1-D) as a row of the motion table (the step + 1) and
-    the last row needed, or ``last`` −1 if a step is not whole or not from step −1 to 2⁵²."""
+    the last row needed, or ``last`` −1 if a step is not whole or not from step −1 to
+    :data:`MOTION_TABLE_STEPS`."""
     rows = np.empty(t.shape[0], np.intp)
     last = 0
     for i in range(t.shape[0]):
-        if not (-1.0 <= t[i] < 2.0 ** 52 and t[i] == np.floor(t[i])):
+        if not (-1.0 <= t[i] < MOTION_TABLE_STEPS and t[i] == np.floor(t[i])):
             return rows, -1
         rows[i] = int(t[i]) + 1
         last = max(last, rows[i])

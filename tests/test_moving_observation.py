@@ -22,7 +22,7 @@ import apf_physics
 from apf_physics import field as apf
 from apf_physics.obstacles import CircleObstacle, Motion, PolygonObstacle
 from apf_physics.observation import Observer, ObserverConfig
-from apf_physics.world import World  # noqa: F401 (the reference's annotations)
+from apf_physics.world import MOTION_TABLE_STEPS, World  # noqa: F401 (World: the reference's annotations)
 from apf_physics.worldfile import load_world
 
 
@@ -257,6 +257,13 @@ def test_motion_table_rows_are_the_offsets():
         assert (one is table) == (two is table) == (-1.0 <= step <= 599.0 and step == int(step))
         np.testing.assert_array_equal(one[row], two[rows][:1])
     np.testing.assert_array_equal(world.moving_offsets(3.0), world.moving_offsets(np.array([3.0]))[0])
+    # a far whole step is computed, not read from a table grown to its size
+    far = np.array([float(MOTION_TABLE_STEPS), 2.0 ** 40, 3.0])
+    table, rows = world.motion_table(far)
+    assert len(table) == 3
+    np.testing.assert_array_equal(table[rows], np.stack([world.obstacles[i].motion.offset(far) for i in world.moving],
+                                                        axis=-2))
+    assert world.motion_table(np.array([5.0, 7.0]))[0].shape[0] <= 2 * MOTION_TABLE_STEPS
 
 
 def test_one_robot_reads_what_it_reads_among_many(worlds_dir):
