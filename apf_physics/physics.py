@@ -45,8 +45,8 @@ import pymunk
 import pymunk.batch
 
 from apf_physics.contacts import (FEW_PAIRS, MOVING, BodyLabels, CollisionType, ContactLog, Touching, body_robots,
-                                  deep_planes,
-                                  contact_log, contact_rows, contact_rows_few, touching_depths, touching_pair_bytes)
+                                  contact_log, contact_rows, contact_rows_few, deep_planes, touching_depths,
+                                  touching_pair_bytes)
 from apf_physics.contacts import KINDS, Contact  # noqa: F401 (public here too)
 from apf_physics.compiled import kernel
 from apf_physics.errors import UserError
