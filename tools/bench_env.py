@@ -1,6 +1,6 @@
 """Benchmark the environments: Navigate-v0 beside CartPole-v1, and the vector env beside VMAS.
 
-    python tools/bench_env.py [--steps 20000] [--vmas] [--sizes 64 256 1024] [--robots-kinds]
+    python tools/bench_env.py [--steps 20000] [--vmas] [--sizes 64 256 1024] [--robots-kinds] [--no-chipmunk]
 
 Prints, from one process:
 
@@ -18,6 +18,9 @@ Prints, from one process:
   and with ``--vmas`` VMAS's ``navigation`` with its lidar at 12 rays (its default, the first
   table's) and at 64 (``n_lidar_rays=64``);
 - how many robots per step needed pymunk (the others moved without it);
+- with ``--no-chipmunk``, our vector env again with chipmunk's ``Space.step`` stubbed out
+  (nothing moves in pymunk, nothing touches): an estimate of the rest of our step, and its ratio
+  to VMAS with ``--vmas``;
 - the cost of an observation in fixed20 with 8 moving discs beside the same discs frozen
   (aim ≤ 2×);
 - with ``--contacts``, whether contacts hold (issue 25): robots driven at random headings
@@ -35,6 +38,7 @@ import time
 
 import gymnasium as gym
 import numpy as np
+import pymunk
 
 import apf_physics  # noqa: F401  (registers the ids)
 from apf_physics.envs import NavigateVectorEnv
@@ -100,6 +104,20 @@ class OursVector:
         return simulated / (50 * self.env.num_envs)
 
 
+class OursWithoutChipmunk(OursVector):
+    """:class:`OursVector` with chipmunk's ``Space.step`` stubbed out while it runs (``--no-chipmunk``):
+    robots sent to pymunk stay where they are and nothing touches, so its rate estimates
+    everything of our step but chipmunk's own work (an estimate, not a physics)."""
+
+    def run(self, block: slice) -> None:
+        step = pymunk.Space.step
+        pymunk.Space.step = lambda space, dt: None
+        try:
+            super().run(block)
+        finally:
+            pymunk.Space.step = step
+
+
 class VmasVector:
     """VMAS's ``navigation`` scenario (CPU, one agent per env, continuous random actions, one torch thread).
 
@@ -126,16 +144,19 @@ class VmasVector:
             self.env.step(a)
 
 
-def vector_rates(num_envs: int, steps: int, vmas: bool, block: int = 25, kinds: bool = False) -> dict:
+def vector_rates(num_envs: int, steps: int, vmas: bool, block: int = 25, kinds: bool = False,
+                 no_chipmunk: bool = False) -> dict:
     """Robot-steps per second of ours (and VMAS's), wall clock and CPU time of this process.
 
     The runners are stepped in alternating blocks of ``block`` steps, so that a machine whose load
     changes during the run slows all alike; the CPU-time rate is the steadier of the two on a
     shared machine (it does not count the time the process waits for a core). ``kinds`` adds
     our env with :data:`LIDAR_ROBOT` ("lidar") and, with ``vmas``, VMAS's navigation with a
-    64-ray lidar ("vmas lidar64").
+    64-ray lidar ("vmas lidar64"). ``no_chipmunk`` adds :class:`OursWithoutChipmunk` ("no chipmunk").
     """
     runners = {"ours": OursVector(num_envs, steps)}
+    if no_chipmunk:
+        runners["no chipmunk"] = OursWithoutChipmunk(num_envs, steps)
     if kinds:
         runners["lidar"] = OursVector(num_envs, steps, LIDAR_ROBOT)
     if vmas:
@@ -277,6 +298,9 @@ def main() -> None:
                         help="also step our vector env with a unicycle, continuous actions and a 64-beam lidar beside "
                              "the window env (and, with --vmas, VMAS's navigation with 64 lidar rays), and print "
                              "their rates and the ratio lidar env / window env")
+    parser.add_argument("--no-chipmunk", action="store_true",
+                        help="also step our vector env with chipmunk's Space.step stubbed out (nothing moves in "
+                             "pymunk, nothing touches): an estimate of the rest of our step, beside VMAS with --vmas")
     parser.add_argument("--contacts", type=int, default=0, metavar="STEPS",
                         help="also count contacts that do not hold over STEPS steps of random crowds (e.g. 200)")
     args = parser.parse_args()
@@ -305,12 +329,16 @@ def main() -> None:
     print(header)
     kinds = []
     for n in args.sizes:
-        r = vector_rates(n, args.vector_steps, args.vmas, kinds=args.robots_kinds)
+        r = vector_rates(n, args.vector_steps, args.vmas, kinds=args.robots_kinds, no_chipmunk=args.no_chipmunk)
         kinds.append((n, r))
         line = f"  {n:>5} {r['ours wall']:>20,.0f} {r['via pymunk']:>10.1%}"
         if args.vmas:
             line += (f" {r['vmas wall']:>17,.0f} {r['ours wall'] / r['vmas wall']:>12.2f}"
                      f" {r['ours cpu'] / r['vmas cpu']:>11.2f}")
+        if args.no_chipmunk:
+            line += f"   without chipmunk's stepping: {r['no chipmunk wall']:,.0f}"
+            if args.vmas:
+                line += f" ({r['no chipmunk wall'] / r['vmas wall']:.2f} x VMAS)"
         print(line)
     if args.robots_kinds:
         print_kinds(kinds, args.vmas)
