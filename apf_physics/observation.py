@@ -375,6 +375,16 @@ def _repulsive_term(d, krep, p0, u_max):
 
 
 @kernel
+def _near_window(where, table, steps, lo, hi, p0, half, r, s):
+    """Robot ``r`` in shape ``s``'s frame, ``(x, y) = where[r] − table[steps[r], s]``, and the
+    window offsets near the shape's box: ``(x, y, x0, x1, y0, y1)`` (:func:`_window_span` of each axis)."""
+    x, y = where[r, 0] - table[steps[r], s, 0], where[r, 1] - table[steps[r], s, 1]
+    x0, x1 = _window_span(x, lo[s, 0], hi[s, 0], p0, half)
+    y0, y1 = _window_span(y, lo[s, 1], hi[s, 1], p0, half)
+    return x, y, x0, x1, y0, y1
+
+
+@kernel
 def _polygon_points(where, table, steps, lo, hi, p0, half, polygon):
     """The window points near the shapes ``s`` with ``polygon[s]``, in the order :func:`_add_terms`
     meets them: ``(shape, x, y)``, each point's shape and where it is in that shape's frame
@@ -383,9 +393,7 @@ def _polygon_points(where, table, steps, lo, hi, p0, half, polygon):
     for r in range(where.shape[0]):
         for s in range(table.shape[1]):
             if polygon[s]:
-                x, y = where[r, 0] - table[steps[r], s, 0], where[r, 1] - table[steps[r], s, 1]
-                x0, x1 = _window_span(x, lo[s, 0], hi[s, 0], p0, half)
-                y0, y1 = _window_span(y, lo[s, 1], hi[s, 1], p0, half)
+                _, _, x0, x1, y0, y1 = _near_window(where, table, steps, lo, hi, p0, half, r, s)
                 count += max(x1 - x0 + 1, 0) * max(y1 - y0 + 1, 0)
     shape = np.empty(count, np.intp)
     px = np.empty(count)
@@ -394,9 +402,7 @@ def _polygon_points(where, table, steps, lo, hi, p0, half, polygon):
     for r in range(where.shape[0]):
         for s in range(table.shape[1]):
             if polygon[s]:
-                x, y = where[r, 0] - table[steps[r], s, 0], where[r, 1] - table[steps[r], s, 1]
-                x0, x1 = _window_span(x, lo[s, 0], hi[s, 0], p0, half)
-                y0, y1 = _window_span(y, lo[s, 1], hi[s, 1], p0, half)
+                x, y, x0, x1, y0, y1 = _near_window(where, table, steps, lo, hi, p0, half, r, s)
                 for dx in range(x0, x1 + 1):
                     for dy in range(y0, y1 + 1):
                         shape[i], px[i], py[i] = s, x + dx, y + dy
