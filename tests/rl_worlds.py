@@ -10,8 +10,8 @@ from pathlib import Path
 
 import yaml
 
-from apf_physics.world import World
-from apf_physics.worldfile import world_from_dict
+from apf_physics.world.core import World
+from apf_physics.world.io.worldfile import world_from_dict
 
 TINY = {
     "name": "tiny",

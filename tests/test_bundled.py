@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from apf_physics.bundled import bundled_dir, list_bundled, resolve_world
+from apf_physics.world.bundled import bundled_dir, list_bundled, resolve_world
 from apf_physics.cli import main
 from apf_physics.errors import WorldError
 
@@ -69,7 +69,7 @@ def test_a_mistyped_world_name_gets_the_nearest_bundled_one(spec, nearest, tmp_p
 
 
 def test_load_world_resolves_bundled_names(tmp_path, monkeypatch):
-    # Needs the world loader's hook: path = resolve_world(path) (see apf_physics.bundled).
+    # Needs the world loader's hook: path = resolve_world(path) (see apf_physics.world.bundled).
     from apf_physics import load_world, load_worlds
 
     monkeypatch.chdir(tmp_path)

@@ -5,10 +5,10 @@ import io
 import pytest
 
 from apf_physics.cli import main
-from apf_physics.commands.eval import EvalProgress
-from apf_physics.evaluate import evaluate
+from apf_physics.cli.eval import EvalProgress
+from apf_physics.experiments.evaluate import evaluate
 from apf_physics.planners import make_planner
-from apf_physics.worldfile import world_from_dict
+from apf_physics.world.io.worldfile import world_from_dict
 from conftest import simple_world_dict
 
 

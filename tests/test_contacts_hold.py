@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from apf_physics import world_from_dict
-from apf_physics.physics import Physics
+from apf_physics.sim.physics import Physics
 from conftest import WORLDS, simple_world_dict
 from contacts_check import assert_contacts_hold, overlaps
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from apf_physics import world_from_dict
-from apf_physics.engine import COLLISION, REACHED, RUNNING, TIMEOUT, TRAPPED, Stepper, TrapDetector, TrapWatch
+from apf_physics.sim.engine import COLLISION, REACHED, RUNNING, TIMEOUT, TRAPPED, Stepper, TrapDetector, TrapWatch
 
 from conftest import simple_world_dict
 

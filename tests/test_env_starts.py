@@ -13,7 +13,7 @@ import pytest
 import apf_physics  # noqa: F401  (registers the ids)
 from apf_physics.envs import NavigateVectorEnv
 from apf_physics.envs.options import StartChooser
-from apf_physics.worldfile import load_world
+from apf_physics.world.io.worldfile import load_world
 
 
 @pytest.mark.parametrize("starts", ["world", "random"])

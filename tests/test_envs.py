@@ -6,7 +6,7 @@ import pytest
 
 import apf_physics  # noqa: F401  (registers the ids)
 from apf_physics import world_from_dict
-from apf_physics.actions import ACTIONS
+from apf_physics.control.shield import ACTIONS
 from apf_physics.envs import NavigateVectorEnv, register_envs
 from apf_physics.errors import UserError
 

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from apf_physics import load_world
-from apf_physics.actions import ACTIONS
-from apf_physics.engine import TrapDetector
+from apf_physics.control.shield import ACTIONS
+from apf_physics.sim.engine import TrapDetector
 from apf_physics.envs import NavigateVectorEnv
 from apf_physics.errors import UserError
 from apf_physics.planners import make_planner
 from apf_physics.planners.base import Planner
-from apf_physics.rollout import default_max_steps, rollout
+from apf_physics.experiments.rollout import default_max_steps, rollout
 
 UP, DOWN, LEFT = 0, 1, 2
 

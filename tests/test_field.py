@@ -6,9 +6,9 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 import apf_physics
-from apf_physics import field as apf
+from apf_physics.world import field as apf
 from apf_physics import world_from_dict
-from apf_physics.geometry import points_in_polygon
+from apf_physics.common.geometry import points_in_polygon
 from conftest import simple_world_dict
 
 WORLD = world_from_dict(simple_world_dict(
@@ -61,7 +61,7 @@ def test_potential_near_and_inside_obstacles():
                      rng.uniform([11, 3], [13, 5], (100, 2))])
     for p in pts:
         assert WORLD.potential(p[None])[0] == pytest.approx(reference_potential(WORLD, p), rel=2e-3, abs=2e-3)
-    from apf_physics import field as apf
+    from apf_physics.world import field as apf
 
     inside = np.array([[6.5, 7.0], [12, 4], [13.5, 12]])
     f = WORLD.field
@@ -71,8 +71,8 @@ def test_potential_near_and_inside_obstacles():
 
 
 def test_terms_by_hand():
-    from apf_physics.field import black_hole, repulsive_term
-    from apf_physics import field as apf
+    from apf_physics.world.field import black_hole, repulsive_term
+    from apf_physics.world import field as apf
 
     t = np.array([[0.0, 0.0]])
     p = np.array([[3.0, 4.0]])
@@ -137,7 +137,7 @@ def test_raster_equals_potential_at_nodes_and_interpolates():
 
 
 def test_grid_conversion_round_trips():
-    from apf_physics.field import Grid
+    from apf_physics.world.field import Grid
 
     grid = Grid.covering((-3, -2), (10, 8), 4)
     pts = np.random.default_rng(0).uniform(-3, 8, (20, 2))
@@ -193,7 +193,7 @@ def test_the_black_hole_has_no_gradient_at_its_target_and_computes_it_without_a_
 
 
 def test_a_shape_set_too_short_for_p0_is_refused_by_name():
-    from apf_physics.spatial import ShapeSet
+    from apf_physics.world.spatial import ShapeSet
 
     short = ShapeSet(WORLD.obstacles, 0.5)
     with pytest.raises(ValueError, match=r"reach 0\.5 cannot give a field of range p0 = 1\.5"):
@@ -201,7 +201,7 @@ def test_a_shape_set_too_short_for_p0_is_refused_by_name():
 
 
 def test_discs_repel_as_circle_obstacles_do():
-    from apf_physics.obstacles import CircleObstacle
+    from apf_physics.world.obstacles import CircleObstacle
 
     params = WORLD.field
     centres = np.array([[6.0, 6.0], [7.5, 6.5], [14.0, 3.0]])

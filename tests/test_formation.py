@@ -7,9 +7,9 @@ import pytest
 import apf_physics  # noqa: F401
 from apf_physics import UserError, load_world, world_from_dict
 from apf_physics.planners import make_planner
-from apf_physics.formation import formation_offsets, initial_followers, swept_distance
-from apf_physics.rollout import rollout
-from apf_physics.world import FormationSpec
+from apf_physics.control.formation import formation_offsets, initial_followers, swept_distance
+from apf_physics.experiments.rollout import rollout
+from apf_physics.world.core import FormationSpec
 from conftest import simple_world_dict
 
 

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from apf_physics import WorldError, load_world, world_from_dict
-from apf_physics.evaluate import evaluate
-from apf_physics.formation import FormationCrowd, right_of_way
-from apf_physics.generate import generate_world
+from apf_physics.experiments.evaluate import evaluate
+from apf_physics.control.formation import FormationCrowd, right_of_way
+from apf_physics.world.generate import generate_world
 from apf_physics.planners import make_planner
-from apf_physics.rollout import rollout_formations
+from apf_physics.experiments.rollout import rollout_formations
 
 THREE = [{"start": [3, 3], "target": [45, 45], "followers": 2, "shape": "line", "spacing": 1.0, "comm_range": 3.0},
          {"start": [45, 3], "target": [3, 45], "followers": 2, "shape": "wedge"},
@@ -108,14 +108,14 @@ def test_parallel_env_passes_pettingzoo_api_test(agents):
     pytest.importorskip("pettingzoo", reason="the [pettingzoo] extra is not installed")
     from pettingzoo.test import parallel_api_test
 
-    from apf_physics.envs.formations import FormationsParallelEnv
+    from apf_physics.envs.parallel import FormationsParallelEnv
 
     parallel_api_test(FormationsParallelEnv("four_formations", agents=agents), num_cycles=50)
 
 
 def test_parallel_env_is_deterministic_and_leaders_never_touch():
     pytest.importorskip("pettingzoo", reason="the [pettingzoo] extra is not installed")
-    from apf_physics.envs.formations import FormationsParallelEnv
+    from apf_physics.envs.parallel import FormationsParallelEnv
 
     runs = []
     for _ in range(2):
@@ -137,7 +137,7 @@ def test_parallel_env_is_deterministic_and_leaders_never_touch():
 
 
 def test_spatial_hash_finds_exactly_the_near_points():
-    from apf_physics.geometry import near_any
+    from apf_physics.common.geometry import near_any
 
     rng = np.random.default_rng(0)
     for _ in range(100):
@@ -150,5 +150,5 @@ def test_spatial_hash_finds_exactly_the_near_points():
 
 def test_the_parallel_env_is_importable_where_the_readme_says():
     import apf_physics.envs as envs
-    from apf_physics.envs.formations import FormationsParallelEnv
+    from apf_physics.envs.parallel import FormationsParallelEnv
     assert envs.FormationsParallelEnv is FormationsParallelEnv and "FormationsParallelEnv" in envs.__all__

@@ -10,11 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from apf_physics.curriculum import load_curriculum
+from apf_physics.learning.curriculum import load_curriculum
 from apf_physics.errors import UserError
-from apf_physics.rl import dqn, phases_for_curriculum, preset, train
-from apf_physics.rl.config import HELDOUT_SEED
-from apf_physics.rl.phases import draw_pool
+from apf_physics.learning import dqn, phases_for_curriculum, preset, train
+from apf_physics.learning.config import HELDOUT_SEED
+from apf_physics.learning.phases import draw_pool
 
 ROOT = Path(__file__).resolve().parent.parent
 CURRICULUM = ROOT / "worlds" / "curricula" / "thesis.yaml"
@@ -122,9 +122,9 @@ def test_smoke_run_writes_best_and_csv_and_resumes(tmp_path):
 def _shipped_on_test_worlds():
     """The shipped general model itself (not the ``dqn`` default for this field, the map network), shielded,
     from the starts of the thesis's four test worlds."""
-    from apf_physics.evaluate import evaluate
+    from apf_physics.experiments.evaluate import evaluate
     from apf_physics.planners import make_planner
-    from apf_physics.worldfile import load_world
+    from apf_physics.world.io.worldfile import load_world
 
     worlds = [load_world(ROOT / "worlds" / "thesis" / f"test{i}.yaml") for i in range(1, 5)]
     planner = make_planner("dqn", model=str(SHIPPED))
@@ -135,7 +135,7 @@ def _shipped_on_test_worlds():
 
 @pytest.mark.skipif(not SHIPPED.is_file(), reason="no shipped general model")
 def test_shipped_general_model_loads_and_runs_the_test_worlds_without_collisions():
-    from apf_physics.field import FIELD_PRESETS
+    from apf_physics.world.field import FIELD_PRESETS
     from apf_physics.models import DQNPolicy
     from apf_physics.models.files import load_model
 

@@ -9,14 +9,14 @@ from pathlib import Path
 import pytest
 
 from apf_physics.cli import main
-from apf_physics.commands import eval as eval_command
+from apf_physics.cli import eval as eval_command
 
 WORLD = "fixed20"
 
 
 def no_work(monkeypatch):
     """Fail the test if an evaluation starts (patched where the command calls it: its module is
-    imported once, so patching ``apf_physics.evaluate`` would leak into later tests)."""
+    imported once, so patching ``apf_physics.experiments.evaluate`` would leak into later tests)."""
     monkeypatch.setattr(eval_command, "evaluate", lambda *a, **k: pytest.fail("the evaluation ran"))
 
 

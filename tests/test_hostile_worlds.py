@@ -23,10 +23,10 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from apf_physics import WorldError, load_world, world_from_dict
-from apf_physics.bundled import bundled_dir, list_bundled
-from apf_physics.generate import generate_world
-from apf_physics.physics import substeps_for
-from apf_physics.worldfile import MAX_PROBLEMS, MAX_SIDE, MIN_ROBOT_RADIUS, dump_world_yaml, memory_budget, raster_memory
+from apf_physics.world.bundled import bundled_dir, list_bundled
+from apf_physics.world.generate import generate_world
+from apf_physics.sim.physics import substeps_for
+from apf_physics.world.io.worldfile import MAX_PROBLEMS, MAX_SIDE, MIN_ROBOT_RADIUS, dump_world_yaml, memory_budget, raster_memory
 
 EXAMPLES = int(os.environ.get("APF_FUZZ_EXAMPLES", 150))
 """Examples per fuzz test; CI runs the same ones every time unless ``APF_FUZZ_RANDOM`` is set."""

@@ -81,7 +81,7 @@ def test_wheel_ships_worlds_models_license_and_typing_marker(wheel):
 @pytest.mark.slow
 def test_installed_wheel_runs_the_demo_from_an_empty_folder(installed, tmp_path):
     where = run_in_empty_folder(tmp_path / "probe", str(installed / "python"), "-c",
-                                "import apf_physics, apf_physics.bundled as b; print(apf_physics.__file__); "
+                                "import apf_physics, apf_physics.world.bundled as b; print(apf_physics.__file__); "
                                 "print(b.bundled_dir())")
     assert where.returncode == 0, where.stderr
     module, bundled = where.stdout.split()

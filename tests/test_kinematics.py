@@ -1,4 +1,4 @@
-"""Unicycle kinematics (apf_physics.kinematics): exact arcs, substep velocities, limits, action mappings."""
+"""Unicycle kinematics (apf_physics.world.kinematics): exact arcs, substep velocities, limits, action mappings."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from apf_physics.actions import ACTIONS
-from apf_physics.physics import substeps_for
-from apf_physics.kinematics import (UNICYCLE_ACTION_NAMES, UNICYCLE_ACTIONS, UnicycleLimits, arc_points,
+from apf_physics.control.shield import ACTIONS
+from apf_physics.sim.physics import substeps_for
+from apf_physics.world.kinematics import (UNICYCLE_ACTION_NAMES, UNICYCLE_ACTIONS, UnicycleLimits, arc_points,
                                     distance_bearing, holonomic_from_unit, holonomic_to_unit, integrate,
                                     substep_velocities, to_robot_frame, wrap_angle)
 

@@ -42,19 +42,21 @@ ROOT = "apf_physics"
 
 LAZY_ALLOWED = {"torch", "cv2", "av", "ray", "numba"}
 """Third-party imports that may be deferred into a function (heavy, and not needed by every user;
-numba's import takes half a second, paid where a compiled loop first runs: apf_physics.compiled)."""
+numba's import takes half a second, paid where a compiled loop first runs: apf_physics.common.compiled)."""
 
 DYNAMIC_ALLOWED = {
-    ("apf_physics.cli", 'module = importlib.import_module(f"apf_physics.commands.{name}")'): "apf_physics.commands",
+    ("apf_physics.cli", 'module = importlib.import_module(f"apf_physics.cli.{name}")'): "apf_physics.cli",
     ("apf_physics.planners", "return getattr(importlib.import_module(module), cls)(**kwargs)"): "apf_physics.planners",
-    ("apf_physics.bundled", 'return Path(str(importlib.resources.files("apf_physics.worlds")))'): "apf_physics.worlds",
+    ("apf_physics.world.bundled", 'return Path(str(importlib.resources.files("apf_physics.worlds")))'): "apf_physics.worlds",
+    ("apf_physics._compat", "module = importlib.import_module(self.new)"): "apf_physics",
 }
 """(module, source line) of each dynamic import there may be → the package its targets lie in.
 
 ``cli`` loads the subcommand being run (:data:`apf_physics.cli.COMMANDS`), the only way ``cli``
-reaches ``commands`` (the contract keeps the two independent otherwise); ``planners`` loads the
+reaches its subcommands (the contract keeps them independent of one another); ``planners`` loads the
 planner named (:data:`apf_physics.planners.PLANNERS`), so that ``gradient`` never loads torch;
-``bundled`` finds the world files' data package. Any other dynamic import fails
+``bundled`` finds the world files' data package; ``_compat`` aliases the flat layout's old module
+paths to their new homes (:data:`apf_physics._compat.MOVED`). Any other dynamic import fails
 :func:`test_no_dynamic_imports_but_the_allowed`: import statically, or add it here with a reason."""
 
 DYNAMIC_CALLS = {"import_module", "__import__", "reload", "module_from_spec", "spec_from_file_location",
@@ -166,7 +168,7 @@ def test_contracts_kept(main_lint):
 # -- every module has a layer ------------------------------------------------------------------
 
 def source_modules(package: Path = PACKAGE) -> dict[str, Path]:
-    """Every module of the package from its files: ``apf_physics.rl.config`` → its path."""
+    """Every module of the package from its files: ``apf_physics.learning.config`` → its path."""
     found = {}
     for path in sorted(package.rglob("*.py")):
         parts = (ROOT,) + path.relative_to(package).with_suffix("").parts
@@ -269,7 +271,7 @@ def test_dynamic_import_targets_stay_in_their_package():
     """The registries the allowed dynamic imports read name modules where the allow-list says."""
     modules = source_modules()
     places = {module: place for (module, _), place in DYNAMIC_ALLOWED.items()}
-    commands = [f"apf_physics.commands.{name}" for name in _registry("apf_physics.cli", "COMMANDS")]
+    commands = [f"apf_physics.cli.{name}" for name in _registry("apf_physics.cli", "COMMANDS")]
     planners = [entry.split(":")[0] for entry, _ in _registry("apf_physics.planners", "PLANNERS").values()]
     for importer, targets in (("apf_physics.cli", commands), ("apf_physics.planners", planners)):
         assert targets
@@ -339,32 +341,35 @@ def test_readme_layout_is_the_contract():
 
 PLANTED = [
     # (id, file, code appended, importer, imported, contract container)
-    ("absolute", "geometry.py", "import apf_physics.cli", "apf_physics.geometry", "apf_physics.cli", ROOT),
-    ("absolute-as", "field.py", "import apf_physics.engine as engine", "apf_physics.field", "apf_physics.engine", ROOT),
-    ("from-root-module", "spatial.py", "from apf_physics import cli", "apf_physics.spatial", "apf_physics.cli", ROOT),
-    ("from-root-name", "geometry.py", "from apf_physics import load_world", "apf_physics.geometry", ROOT, ROOT),
+    ("absolute", "common/geometry.py", "import apf_physics.cli", "apf_physics.common.geometry", "apf_physics.cli", ROOT),
+    ("absolute-as", "world/field.py", "import apf_physics.sim.engine as engine", "apf_physics.world.field", "apf_physics.sim.engine", ROOT),
+    ("from-root-module", "world/spatial.py", "from apf_physics import cli", "apf_physics.world.spatial", "apf_physics.cli", ROOT),
+    ("from-root-name", "common/geometry.py", "from apf_physics import load_world", "apf_physics.common.geometry", ROOT, ROOT),
     ("relative", "errors.py", "from . import cli", "apf_physics.errors", "apf_physics.cli", ROOT),
     ("relative-parent", "envs/reward.py", "from ..cli import main", "apf_physics.envs.reward", "apf_physics.cli", ROOT),
-    ("from-package-module", "world.py", "from apf_physics.rl import trainer", "apf_physics.world", "apf_physics.rl.trainer", ROOT),
-    ("in-function", "obstacles.py", "def _planted():\n    from apf_physics.engine import Stepper",
-     "apf_physics.obstacles", "apf_physics.engine", ROOT),
-    ("type-checking", "physics.py", "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from apf_physics.engine import Stepper",
-     "apf_physics.physics", "apf_physics.engine", ROOT),
-    ("sibling", "models/__init__.py", "from apf_physics.render import drawing", "apf_physics.models", "apf_physics.render.drawing", ROOT),
-    ("inside-package", "rl/config.py", "from apf_physics.rl import trainer", "apf_physics.rl.config", "apf_physics.rl.trainer", "apf_physics.rl"),
+    ("from-package-module", "world/core.py", "from apf_physics.learning import trainer", "apf_physics.world.core", "apf_physics.learning.trainer", ROOT),
+    ("in-function", "world/obstacles.py", "def _planted():\n    from apf_physics.sim.engine import Stepper",
+     "apf_physics.world.obstacles", "apf_physics.sim.engine", ROOT),
+    ("type-checking", "world/core.py", "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from apf_physics.sim.engine import Stepper",
+     "apf_physics.world.core", "apf_physics.sim.engine", ROOT),
+    ("inside-package-type-checking", "sim/physics.py",
+     "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from apf_physics.sim.engine import Stepper",
+     "apf_physics.sim.physics", "apf_physics.sim.engine", "apf_physics.sim"),
+    ("sibling", "sim/engine.py", "from apf_physics.render import drawing", "apf_physics.sim.engine", "apf_physics.render.drawing", ROOT),
+    ("inside-package", "learning/config.py", "from apf_physics.learning import trainer", "apf_physics.learning.config", "apf_physics.learning.trainer", "apf_physics.learning"),
     ("inside-package-relative", "render/drawing.py", "from .page import PAGE", "apf_physics.render.drawing", "apf_physics.render.page", "apf_physics.render"),
-    ("inside-package-sibling", "commands/eval.py", "from apf_physics.commands import demo", "apf_physics.commands.eval", "apf_physics.commands.demo", "apf_physics.commands"),
+    ("inside-package-sibling", "cli/eval.py", "from apf_physics.cli import demo", "apf_physics.cli.eval", "apf_physics.cli.demo", "apf_physics.cli"),
 ]
 """Each upward import is planted alone in its own copy of the package. The planted line is the
 one the report must show (for ``from apf_physics import load_world``: the edge to the root,
 which re-exports from above)."""
 
 DYNAMIC_PLANTED = [
-    ("geometry.py", 'import importlib\nimportlib.import_module("apf_physics.cli")'),
+    ("common/geometry.py", 'import importlib\nimportlib.import_module("apf_physics.cli")'),
     ("errors.py", "from importlib import import_module"),
-    ("spatial.py", '__import__("apf_physics.cli")'),
-    ("rl/config.py", 'import importlib as il\n_load = il.import_module'),
-    ("field.py", 'exec("import apf_physics.cli")'),
+    ("world/spatial.py", '__import__("apf_physics.cli")'),
+    ("learning/config.py", 'import importlib as il\n_load = il.import_module'),
+    ("world/field.py", 'exec("import apf_physics.cli")'),
 ]
 
 

@@ -1,4 +1,4 @@
-"""The range sensor (apf_physics.lidar): exact against a brute-force reference, one ray and one shape at a time."""
+"""The range sensor (apf_physics.sensing.lidar): exact against a brute-force reference, one ray and one shape at a time."""
 
 from __future__ import annotations
 
@@ -11,12 +11,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from apf_physics import geometry, lidar
-from apf_physics.field import FieldParams
-from apf_physics.lidar import Lidar, LidarConfig, scan, teammates
-from apf_physics.obstacles import CircleObstacle, GridObstacle, Motion, PolygonObstacle
-from apf_physics.world import World
-from apf_physics.worldfile import load_world
+from apf_physics.common import geometry
+from apf_physics.sensing import lidar
+from apf_physics.world.field import FieldParams
+from apf_physics.sensing.lidar import Lidar, LidarConfig, scan, teammates
+from apf_physics.world.obstacles import CircleObstacle, GridObstacle, Motion, PolygonObstacle
+from apf_physics.world.core import World
+from apf_physics.world.io.worldfile import load_world
 
 from conftest import WORLDS
 

@@ -11,9 +11,10 @@ import pytest
 from hypothesis import given, settings, strategies as st
 from hypothesis.extra import numpy as hnp
 
-from apf_physics import mapfiles
+from apf_physics.common.geometry import occupancy_rectangles
+from apf_physics.world.io import mapfiles
 from apf_physics.errors import WorldError
-from apf_physics.mapfiles import (OccupancyMap, Scenario, occupancy_rectangles, read_image, read_movingai_map,
+from apf_physics.world.io.mapfiles import (OccupancyMap, Scenario, read_image, read_movingai_map,
                                   read_movingai_scen, read_ros_map, scenario_points, write_pgm)
 
 grids = hnp.arrays(bool, hnp.array_shapes(min_dims=2, max_dims=2, min_side=1, max_side=12))

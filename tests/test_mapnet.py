@@ -10,15 +10,15 @@ import torch
 
 from apf_physics import world_from_dict
 from apf_physics.errors import ModelError
-from apf_physics.evaluate import evaluate
+from apf_physics.experiments.evaluate import evaluate
 from apf_physics.models import MapNetwork, MapPolicy, load_policy, model_meta, save_model
 from apf_physics.models.mapnet import UNREACHED
-from apf_physics.observation import MapView
+from apf_physics.sensing.observation import MapView
 from apf_physics.planners.dqn import DQNPlanner
-from apf_physics.rl.config import preset
-from apf_physics.rl import train
-from apf_physics.rl.imitation import Teacher, batch, map_network, update
-from apf_physics.rl.phases import phases_for_curriculum
+from apf_physics.learning.config import preset
+from apf_physics.learning import train
+from apf_physics.learning.imitation import Teacher, batch, map_network, update
+from apf_physics.learning.phases import phases_for_curriculum
 
 from conftest import simple_world_dict
 
@@ -78,7 +78,7 @@ def test_map_model_files_round_trip_and_refuse_what_does_not_fit(tmp_path):
 
 def test_training_and_acting_see_the_same_per_move_inputs():
     """The teacher's batches carry exactly what the planner computes when it acts (policy.move_inputs)."""
-    from apf_physics.actions import MOVE_SETS
+    from apf_physics.control.shield import MOVE_SETS
     from apf_physics.models.policy import move_inputs
     world = world_from_dict(WALLED)
     config = preset("map", demo_positions=64)
@@ -90,9 +90,9 @@ def test_training_and_acting_see_the_same_per_move_inputs():
 
 
 def test_the_teacher_demonstrates_only_moves_the_exact_room_finds_safe():
-    from apf_physics.actions import FINE_ACTIONS
+    from apf_physics.control.shield import FINE_ACTIONS
     from apf_physics.models.policy import move_inputs
-    from apf_physics.rl.imitation import teacher_room
+    from apf_physics.learning.imitation import teacher_room
     world = world_from_dict(WALLED)
     points = np.random.default_rng(0).uniform(0, 20, size=(300, 2))
     exact, _ = move_inputs(world, points, FINE_ACTIONS)
@@ -117,7 +117,7 @@ def test_imitation_lowers_the_loss_and_the_planner_follows_the_values():
 
 
 def test_a_tiny_imitation_run_writes_a_usable_model_and_resumes(tmp_path):
-    from apf_physics.curriculum import load_curriculum
+    from apf_physics.learning.curriculum import load_curriculum
     from conftest import WORLDS
     config = preset("map", total_steps=6, eval_every=6, validation_worlds=2, validation_starts=1, pool_size=2,
                     map_sizes=(30.0,), families=("point", "narrow_gap"), demo_positions=64, grad_iterations=4)
@@ -134,7 +134,7 @@ def test_fixed_point_equals_the_sweeps_to_the_bit(world_name):
     """The label-correcting search finds exactly what sweeping the whole grid to a fixed point does."""
     from apf_physics.models.mapnet import UNREACHED, _neighbours, _shift, _sweep, fixed_point
     from apf_physics.models import resolve_model
-    from apf_physics.observation import MapView
+    from apf_physics.sensing.observation import MapView
     from apf_physics import load_world
     world = load_world(world_name)
     policy = load_policy(resolve_model("map"))
@@ -167,15 +167,15 @@ def _tiny_map_config(**overrides):
 
 
 def _phases(config):
-    from apf_physics.curriculum import load_curriculum
+    from apf_physics.learning.curriculum import load_curriculum
     from conftest import WORLDS
     return phases_for_curriculum(load_curriculum(WORLDS / "curricula" / "thesis.yaml"), config)
 
 
 def _validation_success(network, phase):
-    from apf_physics.rl import evaluation
+    from apf_physics.learning import validation
     planner = DQNPlanner(policy=MapPolicy(network), shield=False)     # as the preset evaluates: unshielded
-    return evaluation.summarise(evaluate(planner, phase.validation.worlds).episodes, phase.validation)
+    return validation.summarise(evaluate(planner, phase.validation.worlds).episodes, phase.validation)
 
 
 def test_a_short_imitation_run_beats_the_untrained_network_on_its_validation_set(tmp_path):

@@ -13,7 +13,7 @@ from apf_physics import load_world
 from apf_physics.envs import NavigateEnv, NavigateVectorEnv
 from apf_physics.models.files import model_meta, save_model
 from apf_physics.models.network import QNetwork, relative_log
-from apf_physics.observation import Observer, ObserverConfig, VisitMemory
+from apf_physics.sensing.observation import Observer, ObserverConfig, VisitMemory
 from apf_physics.planners.dqn import DQNPlanner
 
 
@@ -132,7 +132,7 @@ def test_planner_observation_matches_environment(fixed20):
 
 
 def test_dqn_planner_runs_a_memory_model(tmp_path, fixed20):
-    from apf_physics.rollout import rollout
+    from apf_physics.experiments.rollout import rollout
 
     world = load_world(fixed20)
     torch.manual_seed(0)
@@ -149,7 +149,7 @@ def test_dqn_planner_runs_a_memory_model(tmp_path, fixed20):
 def test_general_memory_presets_train_a_two_channel_network(tmp_path, name):
     from apf_physics.errors import UserError
     from apf_physics.models.files import load_model
-    from apf_physics.rl import CURRICULUM_DEFAULT, TrainConfig, phases_for_curriculum, preset, train
+    from apf_physics.learning import CURRICULUM_DEFAULT, TrainConfig, phases_for_curriculum, preset, train
 
     weights = preset(name).env.reward_weights
     if name == "general-revisit":

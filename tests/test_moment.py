@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from apf_physics import field as apf
+from apf_physics.world import field as apf
 from apf_physics import load_world
-from apf_physics.actions import ACTIONS, move_clearance
-from apf_physics.obstacles import CircleObstacle, PolygonObstacle, obstacle_at
+from apf_physics.control.shield import ACTIONS, move_clearance
+from apf_physics.world.obstacles import CircleObstacle, PolygonObstacle, obstacle_at
 from apf_physics.planners import make_planner
-from apf_physics.rollout import rollout
-from apf_physics.world import Moment
+from apf_physics.experiments.rollout import rollout
+from apf_physics.world.core import Moment
 
 
 @pytest.fixture(scope="module")

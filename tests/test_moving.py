@@ -12,11 +12,11 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from apf_physics import world_from_dict
-from apf_physics.engine import Stepper
-from apf_physics.obstacles import CircleObstacle, Motion, PolygonObstacle
-from apf_physics.observation import Observer, ObserverConfig
+from apf_physics.sim.engine import Stepper
+from apf_physics.world.obstacles import CircleObstacle, Motion, PolygonObstacle
+from apf_physics.sensing.observation import Observer, ObserverConfig
 from apf_physics.planners import make_planner
-from apf_physics.rollout import rollout
+from apf_physics.experiments.rollout import rollout
 
 from conftest import simple_world_dict
 
@@ -210,8 +210,8 @@ def test_a_start_touching_a_moving_obstacle_at_step_0_is_refused():
 
 
 def test_generated_moving_worlds_are_valid_and_solvable():
-    from apf_physics.generate import generate_world
-    from apf_physics.search import reachable
+    from apf_physics.world.generate import generate_world
+    from apf_physics.world.search import reachable
 
     rng = np.random.default_rng(3)
     for _ in range(4):

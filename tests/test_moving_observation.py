@@ -19,11 +19,11 @@ import numpy as np
 import pytest
 
 import apf_physics
-from apf_physics import field as apf
-from apf_physics.obstacles import CircleObstacle, Motion, PolygonObstacle
-from apf_physics.observation import Observer, ObserverConfig
-from apf_physics.world import MOTION_TABLE_STEPS, World  # noqa: F401 (World: the reference's annotations)
-from apf_physics.worldfile import load_world
+from apf_physics.world import field as apf
+from apf_physics.world.obstacles import CircleObstacle, Motion, PolygonObstacle
+from apf_physics.sensing.observation import Observer, ObserverConfig
+from apf_physics.world.core import MOTION_TABLE_STEPS, World  # noqa: F401 (World: the reference's annotations)
+from apf_physics.world.io.worldfile import load_world
 
 
 def reference_add_near(self, values: np.ndarray, mine: np.ndarray, local: np.ndarray, lo: np.ndarray, hi: np.ndarray,

@@ -18,10 +18,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from apf_physics import observation
-from apf_physics.field import FieldParams
-from apf_physics.obstacles import PolygonObstacle
-from apf_physics.observation import Observer, ObserverConfig, Repellers, VisitMemory
+from apf_physics.sensing import observation
+from apf_physics.world.field import FieldParams
+from apf_physics.world.obstacles import PolygonObstacle
+from apf_physics.sensing.observation import Observer, ObserverConfig, Repellers, VisitMemory
 from test_moving_observation import numpy_add_near, reference_add_near
 
 FIELDS = [FieldParams(katt=2.0, krep=20.0, kstr=8.0, p0=0.5, ps=8.0, u_max=100.0),

@@ -19,7 +19,7 @@ import pytest
 
 from apf_physics import world_from_dict
 from apf_physics.errors import UserError
-from apf_physics.evaluate import evaluate
+from apf_physics.experiments.evaluate import evaluate
 from apf_physics.planners import make_planner
 from apf_physics.render import write_video
 from apf_physics.render.page import PAGE, Section, Video, write_page, write_results

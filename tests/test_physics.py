@@ -13,9 +13,9 @@ import pytest
 from hypothesis import assume
 
 from apf_physics import UserError, WorldError, load_world, world_from_dict
-from apf_physics.physics import Physics
-from apf_physics.geometry import triangulate
-from apf_physics.geometry import polygon_area
+from apf_physics.sim.physics import Physics
+from apf_physics.common.geometry import triangulate
+from apf_physics.common.geometry import polygon_area
 from conftest import simple_world_dict
 from contacts_check import assert_contacts_hold
 
@@ -356,8 +356,8 @@ def test_skipping_arbiter_reads_on_untouched_substeps_changes_nothing():
     shapes touch (counted by begin/separate callbacks); reading them after every substep (as it
     does with many) gives the same contacts."""
     from apf_physics import load_world
-    from apf_physics.actions import ACTIONS
-    from apf_physics.engine import Stepper
+    from apf_physics.control.shield import ACTIONS
+    from apf_physics.sim.engine import Stepper
 
     world = load_world("fixed20")
 

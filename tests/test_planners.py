@@ -4,7 +4,7 @@ import numpy as np
 
 from apf_physics import load_world
 from apf_physics.planners import GradientPlanner
-from apf_physics.rollout import rollout
+from apf_physics.experiments.rollout import rollout
 
 
 def run(worlds_dir, name):

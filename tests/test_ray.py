@@ -19,13 +19,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from apf_physics.campaign import batches, evaluate_on_ray, task_count
+from apf_physics.experiments.campaign import batches, evaluate_on_ray, task_count
 from apf_physics.cli import main
 from apf_physics.errors import UserError
-from apf_physics.evaluate import evaluate
+from apf_physics.experiments.evaluate import evaluate
 from apf_physics.planners import make_planner
-from apf_physics.rl.sweep import load_sweep
-from apf_physics.worldfile import load_world
+from apf_physics.learning.sweep import load_sweep
+from apf_physics.world.io.worldfile import load_world
 
 ROOT = Path(__file__).resolve().parent.parent
 TINY_SWEEP = ROOT / "sweeps" / "tiny.yaml"
@@ -151,7 +151,7 @@ def _interrupt_at_first_checkpoint(folder: Path) -> threading.Thread:
 @pytest.mark.skipif(not hasattr(signal, "SIGUSR1"), reason="needs SIGUSR1 to interrupt Tune")
 def test_sweep_is_interrupted_resumed_and_picks_the_better_trial(local_ray, tmp_path):
     from apf_physics.models import load_model
-    from apf_physics.rl.sweep import run_sweep
+    from apf_physics.learning.sweep import run_sweep
 
     sweep = load_sweep(TINY_SWEEP)
     out = tmp_path / "sweep"
@@ -183,7 +183,7 @@ def test_sweep_is_interrupted_resumed_and_picks_the_better_trial(local_ray, tmp_
 def test_a_map_preset_sweep_trains_the_map_network(local_ray, tmp_path):
     """``preset: map`` trains the map network by imitation, through the same loop as DQN (not a Q-network)."""
     from apf_physics.models import MapPolicy, load_policy
-    from apf_physics.rl.sweep import run_sweep
+    from apf_physics.learning.sweep import run_sweep
 
     curriculum = ROOT / "worlds" / "curricula" / "thesis.yaml"
     path = tmp_path / "map.yaml"

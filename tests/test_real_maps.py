@@ -7,12 +7,12 @@ import pytest
 from hypothesis import assume, given, settings, strategies as st
 
 from apf_physics.errors import WorldError
-from apf_physics.evaluate import evaluate
-from apf_physics.mapfiles import write_pgm
-from apf_physics.obstacles import GridObstacle
-from apf_physics.physics import Physics
+from apf_physics.experiments.evaluate import evaluate
+from apf_physics.world.io.mapfiles import write_pgm
+from apf_physics.world.obstacles import GridObstacle
+from apf_physics.sim.physics import Physics
 from apf_physics.planners import make_planner
-from apf_physics.worldfile import load_world, world_from_dict
+from apf_physics.world.io.worldfile import load_world, world_from_dict
 
 MAZE = """type octile
 height 7
@@ -152,7 +152,7 @@ def test_eval_runs_movingai_scenarios_per_bucket(tmp_path, capsys):
 
 
 def test_scenarios_for_another_map_are_refused(tmp_path):
-    from apf_physics.benchmark import scenario_trials
+    from apf_physics.experiments.movingai import scenario_trials
     (tmp_path / "maze.map").write_text(MAZE)
     (tmp_path / "x.scen").write_text("version 1\n0\tmaze.map\t10\t7\t1\t1\t3\t1\t4\n")
     with pytest.raises(WorldError, match="x.scen"):
@@ -161,7 +161,7 @@ def test_scenarios_for_another_map_are_refused(tmp_path):
 
 def test_a_building_floor_at_5cm_loads_within_the_default_budget(tmp_path, monkeypatch):
     """A SLAM map of one floor: 2000 x 2000 pixels at 5 cm, a robot of 0.2 m moving 0.25 m a step."""
-    from apf_physics.worldfile import MEMORY_BUDGET_VARIABLE, memory_budget, raster_memory
+    from apf_physics.world.io.worldfile import MEMORY_BUDGET_VARIABLE, memory_budget, raster_memory
     monkeypatch.delenv(MEMORY_BUDGET_VARIABLE, raising=False)
     occupied = np.zeros((2000, 2000), bool)
     occupied[:, :4] = occupied[:, -4:] = occupied[:4] = occupied[-4:] = True

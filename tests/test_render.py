@@ -396,7 +396,7 @@ def test_colour_scale_runs_from_the_lowest_potential_upwards(world, scaling):
 
 
 def test_plot_field_command(world, tmp_path, capsys):
-    from apf_physics.commands import plot_field as command
+    from apf_physics.cli import plot_field as command
 
     world_file = tmp_path / "w.yaml"
     save_world(world, world_file)
@@ -414,7 +414,7 @@ def test_plot_field_command(world, tmp_path, capsys):
 
 
 def test_render_command_writes_h264_and_png_into_a_new_folder(world, tmp_path, capsys):
-    from apf_physics.commands import render as command
+    from apf_physics.cli import render as command
 
     world_file = tmp_path / "w.yaml"
     save_world(world, world_file)
@@ -451,7 +451,7 @@ def test_render_refuses_a_symlink_before_any_work(tmp_path):
     (tmp_path / "link.mp4").symlink_to(target)
     # The world does not exist: the output is checked first, so that is not what is reported.
     with pytest.raises(UserError, match="link.mp4: it is a symbolic link"):
-        from apf_physics.commands import render as command
+        from apf_physics.cli import render as command
 
         parser = argparse.ArgumentParser()
         command.add_parser(parser.add_subparsers())
@@ -511,7 +511,7 @@ def test_plot_curve_to_an_unwritable_place_fails_with_one_line(tmp_path):
 
 
 def test_plot_curve_legend_stays_outside_the_axes(tmp_path):
-    from apf_physics.rl.plot import plot_training_curve
+    from apf_physics.learning.plot import plot_training_curve
 
     # No data: whatever is drawn inside the axes boxes can only be the legend.
     csv = tmp_path / "train.csv"

@@ -23,12 +23,12 @@ import torch
 import torch.nn.functional as F
 
 from apf_physics.errors import ModelError, UserError
-from apf_physics.evaluate import evaluate
+from apf_physics.experiments.evaluate import evaluate
 from apf_physics.models import DQNPolicy, QNetwork, load_model
 from apf_physics.models.files import MAGIC, read_file, write_file
 from apf_physics.models.network import max_pool_2x2_stride1, relative_log
 from apf_physics.planners import make_planner
-from apf_physics.rl import (
+from apf_physics.learning import (
     PRESETS,
     ReplayBuffer,
     TrainConfig,
@@ -38,13 +38,13 @@ from apf_physics.rl import (
     preset,
     train,
 )
-from apf_physics.rl import evaluation
-from apf_physics.rl.config import replace
-from apf_physics.rl.phases import reachable_mask, training_starts, validation_starts
-from apf_physics.rl.rundir import RunDir
-from apf_physics.rl.config import load_config
-from apf_physics.rl.dqn import q_network
-from apf_physics.rl.trainer import CSV_COLUMNS
+from apf_physics.learning import validation
+from apf_physics.learning.config import replace
+from apf_physics.learning.phases import reachable_mask, training_starts, validation_starts
+from apf_physics.learning.rundir import RunDir
+from apf_physics.learning.config import load_config
+from apf_physics.learning.dqn import q_network
+from apf_physics.learning.trainer import CSV_COLUMNS
 from rl_worlds import TINY_OPTIONS, tiny_world, write_tiny_world
 
 TINY_FIELD = tiny_world().field
@@ -273,22 +273,22 @@ def _episode(success: bool, length: float, outcome: str | None = None):
 
 
 def test_summary_figures_spl_and_length_ratio():
-    evalset = evaluation.EvalSet((), np.array([True, True, False, False]), np.array([4.0, 5.0, 2.0, np.nan]))
+    evalset = validation.EvalSet((), np.array([True, True, False, False]), np.array([4.0, 5.0, 2.0, np.nan]))
     episodes = [_episode(True, 8.0), _episode(False, 3.0, "collision"), _episode(True, 2.0), _episode(True, 7.0)]
-    s = evaluation.summarise(episodes, evalset)
+    s = validation.summarise(episodes, evalset)
     assert s["success"] == 0.75 and s["trap_success"] == 0.5 and s["collisions"] == 1
     assert s["length_ratio"] == pytest.approx((8 + 2) / (4 + 2))     # successes with an A* length
     assert s["spl"] == pytest.approx((4 / 8 + 0 + 1 + 1) / 4)          # no A* length: counts as 1
-    none = evaluation.summarise([_episode(False, 1.0)], evaluation.EvalSet((), np.array([False]), np.array([3.0])))
+    none = validation.summarise([_episode(False, 1.0)], validation.EvalSet((), np.array([False]), np.array([3.0])))
     assert none["trap_success"] is None and none["length_ratio"] is None and none["spl"] == 0
 
 
 def test_score_orders_by_the_selected_figures():
     a = {"success": 0.9, "collisions": 0, "spl": 0.7}
     b = {"success": 1.0, "collisions": 2, "spl": 0.8}
-    assert evaluation.score(b, ("success",)) > evaluation.score(a, ("success",))
-    assert evaluation.score(a, ("-collisions", "spl")) > evaluation.score(b, ("-collisions", "spl"))
-    assert evaluation.score(a, ("success", "random_success")) == (0.9, -np.inf)  # a missing figure ranks lowest
+    assert validation.score(b, ("success",)) > validation.score(a, ("success",))
+    assert validation.score(a, ("-collisions", "spl")) > validation.score(b, ("-collisions", "spl"))
+    assert validation.score(a, ("success", "random_success")) == (0.9, -np.inf)  # a missing figure ranks lowest
 
 
 # ---------------------------------------------------------------------------- training
@@ -487,7 +487,7 @@ def test_interrupt_saves_and_prints_the_resume_command_and_a_second_run_is_refus
 
 
 def test_cli_overrides_are_read_as_yaml():
-    from apf_physics.commands.train import parse_overrides
+    from apf_physics.cli.train import parse_overrides
 
     assert parse_overrides(["total_steps=5000", "double_dqn=false", "filters=[4, 4]", "max_grad_norm=null",
                             "learning_rate=1e-4"]) == {
@@ -566,7 +566,7 @@ def test_write_file_replaces_atomically_and_leaves_no_temporaries(tmp_path):
 
 
 def test_reachable_mask_is_integer_moves_within_the_tolerance(worlds_dir):
-    from apf_physics.worldfile import load_world
+    from apf_physics.world.io.worldfile import load_world
 
     points = np.array([[1.0, 1.0], [12.5, 15.5], [3.3, 7.2], [3.4, 7.4], [16.6, 16.0]])
     half = SimpleNamespace(targets=np.array([[16.0, 16.0]]), goal_tolerance=0.5)
@@ -578,7 +578,7 @@ def test_reachable_mask_is_integer_moves_within_the_tolerance(worlds_dir):
 
 
 def test_lattice_reachable_and_validation_starts(worlds_dir):
-    from apf_physics.worldfile import load_world
+    from apf_physics.world.io.worldfile import load_world
 
     world = load_world(worlds_dir / "fixed20.yaml")
     lattice = training_starts(world, "lattice", seed=0)
@@ -597,7 +597,7 @@ def test_lattice_reachable_and_validation_starts(worlds_dir):
 
 
 def test_a_list_of_whole_numbers_sets_a_tuple_of_floats():
-    from apf_physics.rl.config import preset, replace
+    from apf_physics.learning.config import preset, replace
     config = replace(preset("map"), map_sizes=[50, 100, 250])
     assert config.schedule.map_sizes == (50.0, 100.0, 250.0)
     with pytest.raises(UserError, match="map_sizes must be a list of float"):
@@ -637,8 +637,8 @@ def test_train_prints_progress_lines_and_a_finished_run_names_the_limit_to_lift(
 
 
 def test_the_target_is_measured_on_the_held_out_starts_when_there_are_some():
-    from apf_physics.rl.learner import Counters
-    from apf_physics.rl.trainer import Evaluations, stop_reason
+    from apf_physics.learning.learner import Counters
+    from apf_physics.learning.trainer import Evaluations, stop_reason
     config = tiny_config(target_success=0.9, eval_random_starts=20)
     phases = phases_for_world(tiny_world(), config)
     c, evals = Counters(), Evaluations()

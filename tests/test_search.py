@@ -6,15 +6,15 @@ import numpy as np
 import pytest
 
 from apf_physics import load_world, world_from_dict
-from apf_physics.curriculum import load_curriculum, rehearsal_worlds
+from apf_physics.learning.curriculum import load_curriculum, rehearsal_worlds
 from apf_physics.errors import UserError, WorldError
-from apf_physics.generate import FAMILIES, generate_world
-from apf_physics.worldsets import generate_set
+from apf_physics.world.generate import FAMILIES, generate_world
+from apf_physics.experiments.worldsets import generate_set
 from apf_physics.planners import GradientPlanner, make_planner
 from apf_physics.planners.astar import AStarPlanner
-from apf_physics.search import reachable, shortest_path, shortest_path_length
+from apf_physics.world.search import reachable, shortest_path, shortest_path_length
 from apf_physics.planners.escape import EscapePlanner
-from apf_physics.rollout import rollout
+from apf_physics.experiments.rollout import rollout
 
 from conftest import simple_world_dict
 
@@ -272,7 +272,7 @@ def _dijkstra(free, sources, steps):
 
 @pytest.mark.parametrize("seed", range(6))
 def test_vectorised_shortest_paths_are_dijkstras(seed):
-    from apf_physics.search import _NEIGHBOURS, shortest_paths
+    from apf_physics.world.search import _NEIGHBOURS, shortest_paths
     rng = np.random.default_rng(seed)
     free = rng.random((23, 31)) > 0.3
     sources = rng.choice(np.flatnonzero(free.ravel()), size=2, replace=False)

@@ -14,15 +14,15 @@ import numpy as np
 import pytest
 import torch
 
-from apf_physics.benchmark import bucket_summary
+from apf_physics.experiments.movingai import bucket_summary
 from apf_physics.errors import UserError, closest_match, did_you_mean
-from apf_physics.evaluate import Evaluation, figures
-from apf_physics.formation import FormationCrowd, FormationTeam, formation_success, link_lengths, links_in_range
+from apf_physics.experiments.evaluate import Evaluation, figures
+from apf_physics.control.formation import FormationCrowd, FormationTeam, formation_success, link_lengths, links_in_range
 from apf_physics.models.network import relative_log
-from apf_physics.rollout import Episode, FormationRecord
-from apf_physics.safefile import Replacement, atomic_path, check_writable, stale_temporaries, write_text
-from apf_physics.transforms import signed_log
-from apf_physics.world import FormationSpec
+from apf_physics.experiments.rollout import Episode, FormationRecord
+from apf_physics.common.safefile import Replacement, atomic_path, check_writable, stale_temporaries, write_text
+from apf_physics.common.transforms import signed_log
+from apf_physics.world.core import FormationSpec
 
 
 # -- did you mean ------------------------------------------------------------------------------

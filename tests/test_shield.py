@@ -9,17 +9,17 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from apf_physics import load_world
-from apf_physics.actions import ACTIONS, SAFETY, move_clearance
+from apf_physics.control.shield import ACTIONS, SAFETY, move_clearance
 from apf_physics.envs import NavigateVectorEnv
 from apf_physics.envs.reward import REWARD_PRESETS, TERMS, RewardWeights
-from apf_physics.observation import ObserverConfig
+from apf_physics.sensing.observation import ObserverConfig
 from apf_physics.planners import make_planner
 from apf_physics.planners.base import Planner
 from apf_physics.planners.dqn import DQNPlanner, shielded_argmax
-from apf_physics.engine import TrapDetector
-from apf_physics.rollout import rollout
-from apf_physics.world import MOVE_REACH
-from apf_physics.worldfile import world_from_dict
+from apf_physics.sim.engine import TrapDetector
+from apf_physics.experiments.rollout import rollout
+from apf_physics.world.core import MOVE_REACH
+from apf_physics.world.io.worldfile import world_from_dict
 
 from conftest import simple_world_dict
 
@@ -216,7 +216,7 @@ def test_move_clearance_takes_moving_obstacles_where_they_are_at_step_t():
     # (the world at step t, World.at(t); a World itself: its static obstacles only)
     import dataclasses
 
-    from apf_physics.obstacles import CircleObstacle, Motion
+    from apf_physics.world.obstacles import CircleObstacle, Motion
 
     base = world_from_dict(simple_world_dict(obstacles=[]))
     disc = CircleObstacle(np.array([10.0, 14.0]), 1.0, Motion(np.array([[0.0, -8.0]]), 0.5))

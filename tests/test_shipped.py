@@ -20,7 +20,7 @@ def test_shipped_fixed20_model_loads_and_fits_the_world(worlds_dir):
 
 
 def test_shipped_fixed20_model_reaches_the_target_from_every_start(worlds_dir):
-    from apf_physics.evaluate import evaluate
+    from apf_physics.experiments.evaluate import evaluate
     from apf_physics.planners import make_planner
 
     world = load_world(worlds_dir / "fixed20.yaml")

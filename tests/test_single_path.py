@@ -1,7 +1,7 @@
 """One robot: the single environment's scalar path gives exactly the array path's episodes.
 
 A batch of one robot (``Navigate-v0``) is stepped by the scalar path of
-:class:`~apf_physics.engine.Stepper` and :class:`~apf_physics.envs.task.NavigationTask`
+:class:`~apf_physics.sim.engine.Stepper` and :class:`~apf_physics.envs.task.NavigationTask`
 (``Stepper.scalar``); the vector environment by the array path. From the same seed and
 actions both give the same episodes to the last bit: observations, rewards and their terms,
 ends, positions, distances. The vector environment is compared with one copy (its array path
@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 import apf_physics  # noqa: F401  (registers the ids)
-from apf_physics.engine import Stepper, TrapDetector
+from apf_physics.sim.engine import Stepper, TrapDetector
 from apf_physics.envs import NavigateVectorEnv
-from apf_physics.worldfile import load_world
+from apf_physics.world.io.worldfile import load_world
 
 CASES = [
     ("fixed20.yaml", {}),

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from apf_physics import field as apf
-from apf_physics.field import FieldParams
-from apf_physics.obstacles import CircleObstacle, GridObstacle, PolygonObstacle
-from apf_physics.spatial import LOOSE_AT_MOST, ShapeSet
+from apf_physics.world import field as apf
+from apf_physics.world.field import FieldParams
+from apf_physics.world.obstacles import CircleObstacle, GridObstacle, PolygonObstacle
+from apf_physics.world.spatial import LOOSE_AT_MOST, ShapeSet
 
 
 def random_shapes(rng: np.random.Generator, count: int, size: float = 20.0):

@@ -11,12 +11,12 @@ import yaml
 
 from apf_physics import world_from_dict
 from apf_physics.cli import main
-from apf_physics.generate import (GAP_WIDTH, PATH_SHARE, START_CLEARANCE, STRUCTURE_FAMILIES, STRUCTURE_ROBOT_RADIUS,
+from apf_physics.world.generate import (GAP_WIDTH, PATH_SHARE, START_CLEARANCE, STRUCTURE_FAMILIES, STRUCTURE_ROBOT_RADIUS,
                                   TARGET_CLEARANCE, generate_world, step_limit)
-from apf_physics.rollout import default_max_steps
-from apf_physics.search import reachable, shortest_path_length
-from apf_physics.worldfile import dump_world_yaml
-from apf_physics.worldsets import generate_set
+from apf_physics.experiments.rollout import default_max_steps
+from apf_physics.world.search import reachable, shortest_path_length
+from apf_physics.world.io.worldfile import dump_world_yaml
+from apf_physics.experiments.worldsets import generate_set
 
 
 def fingerprint(world) -> str:

@@ -1,4 +1,4 @@
-"""The physics' exact swept distances (apf_physics.sweep): what decides who goes to pymunk, and
+"""The physics' exact swept distances (apf_physics.sim.swept): what decides who goes to pymunk, and
 how robots alone in their slots are pushed out of what they overlap."""
 
 import dataclasses
@@ -10,10 +10,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from apf_physics import load_world
-from apf_physics.obstacles import GridObstacle
-from apf_physics.physics import CONTACT_MARGIN, Physics
-from apf_physics.sweep import Sweeps, _segment_distance
-from apf_physics.worldfile import world_from_dict
+from apf_physics.world.obstacles import GridObstacle
+from apf_physics.sim.physics import CONTACT_MARGIN, Physics
+from apf_physics.sim.swept import Sweeps, _segment_distance
+from apf_physics.world.io.worldfile import world_from_dict
 
 ROWS = ["............",     # row 0 is the lowest y
         "..####......",

@@ -12,14 +12,14 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from apf_physics import load_world
-from apf_physics.actions import (ACTIONS, HORIZON, SAFETY, assess_moves, every_sequence, move_clearance, predicted_offsets,
+from apf_physics.control.shield import (ACTIONS, HORIZON, SAFETY, assess_moves, every_sequence, move_clearance, predicted_offsets,
                                  shield_over_time)
 from apf_physics.planners import make_planner
 from apf_physics.planners.base import Planner
 from apf_physics.planners.dqn import DQNPlanner
-from apf_physics.rollout import rollout
-from apf_physics.search import escape_moves, physics_offsets, timed_move_clearance, timed_path
-from apf_physics.worldfile import world_from_dict
+from apf_physics.experiments.rollout import rollout
+from apf_physics.world.search import escape_moves, physics_offsets, timed_move_clearance, timed_path
+from apf_physics.world.io.worldfile import world_from_dict
 
 from conftest import simple_world_dict
 

@@ -1,4 +1,4 @@
-"""Tracking (apf_physics.tracking): unicycle robots driving holonomic plans, geometrically (no physics)."""
+"""Tracking (apf_physics.control.tracking): unicycle robots driving holonomic plans, geometrically (no physics)."""
 
 from __future__ import annotations
 
@@ -9,13 +9,13 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from apf_physics.formation import formation_spec, initial_followers
-from apf_physics.kinematics import UnicycleLimits, arc_points, integrate
+from apf_physics.control.formation import formation_spec, initial_followers
+from apf_physics.world.kinematics import UnicycleLimits, arc_points, integrate
 from apf_physics.planners.astar import AStarPlanner
-from apf_physics.tracking import (PathFollower, UnicycleFollowers, cross_track_error, point_at, pursue, slot_points,
+from apf_physics.control.tracking import (PathFollower, UnicycleFollowers, cross_track_error, point_at, pursue, slot_points,
                                   track_moves)
-from apf_physics.world import FormationSpec
-from apf_physics.worldfile import load_world
+from apf_physics.world.core import FormationSpec
+from apf_physics.world.io.worldfile import load_world
 
 from conftest import WORLDS
 

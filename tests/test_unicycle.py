@@ -25,9 +25,9 @@ from hypothesis import strategies as st
 
 import apf_physics
 from apf_physics import world_from_dict
-from apf_physics.engine import Stepper
+from apf_physics.sim.engine import Stepper
 from apf_physics.errors import UserError
-from apf_physics.kinematics import UnicycleLimits, integrate
+from apf_physics.world.kinematics import UnicycleLimits, integrate
 from conftest import simple_world_dict
 from contacts_check import assert_contacts_hold
 from test_contacts_hold import thin_walls

@@ -22,10 +22,10 @@ from gymnasium.utils.env_checker import check_env
 
 from apf_physics import world_from_dict
 from apf_physics.cli import main
-from apf_physics.kinematics import UnicycleLimits, arc_points
+from apf_physics.world.kinematics import UnicycleLimits, arc_points
 from apf_physics.planners import make_planner
-from apf_physics.rollout import robot_limits, rollout, rollout_formations
-from apf_physics.tracking import track_safely
+from apf_physics.experiments.rollout import robot_limits, rollout, rollout_formations
+from apf_physics.control.tracking import track_safely
 from conftest import simple_world_dict
 
 GENERAL_FIELD = {"katt": 1, "krep": 20, "kstr": 8, "p0": 3, "ps": 8, "u_max": 100}

@@ -11,8 +11,8 @@ import yaml
 
 from apf_physics import WorldError, load_world, world_from_dict
 from apf_physics.errors import UserError
-from apf_physics.obstacles import PolygonObstacle
-from apf_physics.worldfile import dump_world_yaml, load_worlds, save_world
+from apf_physics.world.obstacles import PolygonObstacle
+from apf_physics.world.io.worldfile import dump_world_yaml, load_worlds, save_world
 from conftest import simple_world_dict
 
 
@@ -157,7 +157,7 @@ def test_yaml_beyond_the_limits_is_one_line(tmp_path, text, words):
 
 
 def test_yaml_merge_keys_and_shared_values_read_as_safe_load_reads_them(tmp_path, worlds_dir):
-    from apf_physics.worldfile import read_yaml_file
+    from apf_physics.world.io.worldfile import read_yaml_file
 
     text = ("base: &field {katt: 1, krep: 20}\nfield:\n  <<: *field\n  krep: 5\n"
             "point: &p [1, 2]\npoints: [*p, *p]\nmany:\n  <<: [{a: 1}, {a: 2, b: 3}]\n")
@@ -189,7 +189,7 @@ def test_only_regular_files_are_read(tmp_path):
 
 
 def test_a_file_over_the_size_limit_is_refused_before_it_is_read(tmp_path):
-    from apf_physics.worldfile import MAX_FILE_BYTES
+    from apf_physics.world.io.worldfile import MAX_FILE_BYTES
 
     path = tmp_path / "big.yaml"
     with open(path, "wb") as f:
@@ -223,8 +223,8 @@ def test_values_that_would_break_the_layers_above_are_refused(tmp_path, override
 
 
 def test_the_smallest_allowed_robot_keeps_the_physics_within_256_substeps():
-    from apf_physics.physics import substeps_for
-    from apf_physics.worldfile import MIN_ROBOT_RADIUS
+    from apf_physics.sim.physics import substeps_for
+    from apf_physics.world.io.worldfile import MIN_ROBOT_RADIUS
 
     world = world_from_dict(simple_world_dict(robot_radius=MIN_ROBOT_RADIUS))
     assert substeps_for(world.robot_radius) == 256
@@ -244,11 +244,11 @@ def test_the_memory_budget_can_be_raised_for_big_machines(monkeypatch):
 RASTER_PEAK = """
 import sys
 import numpy as np
-from apf_physics.mapfiles import write_pgm
-from apf_physics.observation import MapView, observation_raster
-from apf_physics.search import SearchGrid
-from apf_physics.sweep import Sweeps
-from apf_physics.worldfile import raster_memory, world_from_dict
+from apf_physics.world.io.mapfiles import write_pgm
+from apf_physics.sensing.observation import MapView, observation_raster
+from apf_physics.world.search import SearchGrid
+from apf_physics.sim.swept import Sweeps
+from apf_physics.world.io.worldfile import raster_memory, world_from_dict
 if sys.argv[1] == "grid":   # a random occupancy grid of 150 x 150 cells, one unit each
     occupied = np.random.default_rng(0).random((150, 150)) < 0.2
     occupied[70:80, 70:80] = occupied[15:25, 135:145] = False
@@ -290,7 +290,7 @@ def test_the_raster_memory_estimate_covers_what_an_evaluation_builds(kind, tmp_p
 
 
 def test_a_polygon_of_20k_vertices_is_refused_before_its_simplicity_is_checked(tmp_path, monkeypatch):
-    from apf_physics import geometry
+    from apf_physics.common import geometry
 
     angles = np.linspace(0, 2 * np.pi, 20_000, endpoint=False)
     ring = np.column_stack([10 + 5 * np.cos(angles), 10 + 5 * np.sin(angles)]).round(6).tolist()
@@ -300,9 +300,9 @@ def test_a_polygon_of_20k_vertices_is_refused_before_its_simplicity_is_checked(t
 
 
 def test_too_many_obstacles_or_vertices_are_refused_before_any_is_parsed(tmp_path, monkeypatch):
-    from apf_physics import worldschema
+    from apf_physics.world.io import schema
 
-    monkeypatch.setattr(worldschema, "_parse_obstacle", lambda *a: pytest.fail("parsed an obstacle of a refused list"))
+    monkeypatch.setattr(schema, "_parse_obstacle", lambda *a: pytest.fail("parsed an obstacle of a refused list"))
     points = [{"circle": {"center": [10, 10], "radius": 0}}] * 10_001
     assert "obstacles: at most 10,000 obstacles, got 10,001" in one_line_error(
         lambda: world_from_dict(simple_world_dict(obstacles=points), "w.yaml"))
@@ -331,7 +331,7 @@ def test_every_problem_is_reported_one_line_each_with_did_you_mean(tmp_path):
 
 
 def test_problems_are_listed_to_a_cap_then_counted(tmp_path):
-    from apf_physics.worldschema import MAX_COUNTED, MAX_PROBLEMS
+    from apf_physics.world.io.schema import MAX_COUNTED, MAX_PROBLEMS
 
     with pytest.raises(WorldError) as err:
         world_from_dict(simple_world_dict(starts=[["x", "y"]] * 100), "w.yaml")
@@ -356,7 +356,7 @@ def test_values_are_shortened_in_messages():
 
 
 def test_a_bounded_number_of_generated_worlds_stay_within_the_limits():
-    from apf_physics.generate import FAMILIES, generate_world
+    from apf_physics.world.generate import FAMILIES, generate_world
 
     rng = np.random.default_rng(3)
     for family in FAMILIES:

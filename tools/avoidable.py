@@ -1,7 +1,7 @@
 """Starts from which no sequence of moves escapes the moving obstacles: a check of a world set.
 
 For every start of every world (a generated set's directory, or world files), a breadth-first
-search of the time-expanded graph of the nine unit moves (:func:`apf_physics.search.escape_moves`,
+search of the time-expanded graph of the nine unit moves (:func:`apf_physics.world.search.escape_moves`,
 the obstacles where the physics has them at each moment) asks whether any sequence of
 ``--steps`` moves from the start at step 0 touches nothing. A start from which none does is a
 robot cornered from the start (for instance by an obstacle faster than itself): no planner can
@@ -20,8 +20,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from apf_physics.search import escape_moves  # noqa: E402
-from apf_physics.worldfile import load_world  # noqa: E402
+from apf_physics.world.search import escape_moves  # noqa: E402
+from apf_physics.world.io.worldfile import load_world  # noqa: E402
 
 
 def main(argv=None) -> int:

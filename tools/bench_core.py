@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from apf_physics import world_from_dict
-from apf_physics.physics import Physics
+from apf_physics.sim.physics import Physics
 
 
 def make_world(n_obstacles: int = 10, seed: int = 0):

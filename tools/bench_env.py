@@ -42,8 +42,8 @@ import pymunk
 
 import apf_physics  # noqa: F401  (registers the ids)
 from apf_physics.envs import NavigateVectorEnv
-from apf_physics.obstacles import CircleObstacle, Motion
-from apf_physics.observation import Observer, ObserverConfig
+from apf_physics.world.obstacles import CircleObstacle, Motion
+from apf_physics.sensing.observation import Observer, ObserverConfig
 
 
 def single_rates(steps: int, blocks: int = 10) -> tuple[float, float]:
@@ -225,7 +225,7 @@ def contacts_hold(robots_per_slot: int, slots: int, steps: int, seed: int = 0) -
     Every slot in a world of thin walls of its own; robots at random headings at speed 1 or √2,
     each heading held about ten steps. Overlaps are measured exactly (the world's clearance).
     """
-    from apf_physics.physics import Physics
+    from apf_physics.sim.physics import Physics
 
     rng = np.random.default_rng(seed)
     worlds = [thin_walls(rng) for _ in range(slots)]

@@ -20,7 +20,7 @@ import numpy as np
 
 from apf_physics import world_from_dict
 from apf_physics.planners import make_planner
-from apf_physics.rollout import rollout_formations
+from apf_physics.experiments.rollout import rollout_formations
 
 
 def crossing_world(count: int, size: float = 100.0):

@@ -1,4 +1,4 @@
-"""Benchmark the range sensor (``apf_physics.lidar``) beside the window observation, per robot-step.
+"""Benchmark the range sensor (``apf_physics.sensing.lidar``) beside the window observation, per robot-step.
 
     python tools/bench_lidar.py [--robots 256 [1024 ...]] [--beams 64] [--repeats 20] [--blocks 7]
                                 [--worlds fixed20 moving8 ros_arena] [--baseline REV]
@@ -6,11 +6,11 @@
 For each number of robots and each world, that many robots at random free poses (at varied
 steps, as the slots of a vector env are) and, timed in alternating blocks in the same run:
 
-- ``lidar``: one :func:`~apf_physics.lidar.scan` of ``--beams`` beams over 360° (range 8) for
+- ``lidar``: one :func:`~apf_physics.sensing.lidar.scan` of ``--beams`` beams over 360° (range 8) for
   all robots;
 - ``window``: one ``Observer.observe`` of the default 11 × 11 potential window for all of them
   (the environments' observation today);
-- with ``--baseline REV``: the same scan by ``apf_physics/lidar.py`` as it was at git revision
+- with ``--baseline REV``: the same scan by ``apf_physics/sensing/lidar.py`` as it was at git revision
   ``REV`` (loaded beside today's; its ranges are checked equal), and the speed-up, baseline
   over today's lidar (wall clock).
 
@@ -39,9 +39,9 @@ from pathlib import Path
 import numpy as np
 
 import apf_physics
-from apf_physics.lidar import LidarConfig, scan, static_geometry
-from apf_physics.obstacles import CircleObstacle, Motion
-from apf_physics.observation import Observer, ObserverConfig
+from apf_physics.sensing.lidar import LidarConfig, scan, static_geometry
+from apf_physics.world.obstacles import CircleObstacle, Motion
+from apf_physics.sensing.observation import Observer, ObserverConfig
 
 
 def moving8():
@@ -61,9 +61,9 @@ def world_named(name: str):
 
 
 def baseline_scan(rev: str):
-    """``scan`` of ``apf_physics/lidar.py`` at git revision ``rev``, loaded as a module of its own."""
+    """``scan`` of ``apf_physics/sensing/lidar.py`` at git revision ``rev``, loaded as a module of its own."""
     root = Path(__file__).resolve().parents[1]
-    source = subprocess.run(["git", "show", f"{rev}:apf_physics/lidar.py"], cwd=root, check=True,
+    source = subprocess.run(["git", "show", f"{rev}:apf_physics/sensing/lidar.py"], cwd=root, check=True,
                             capture_output=True, text=True).stdout
     path = Path(tempfile.mkdtemp()) / "lidar_baseline.py"
     path.write_text(source)

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from apf_physics.observation import Observer, ObserverConfig
+from apf_physics.sensing.observation import Observer, ObserverConfig
 from bench_env import moving_world   # the same worlds as bench_env's moving-obstacle rows (this folder)
 
 

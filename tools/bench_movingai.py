@@ -17,10 +17,10 @@ import json
 import time
 from pathlib import Path
 
-from apf_physics.benchmark import bucket_summary, evaluate_trials, scenario_trials, trials_json
-from apf_physics.evaluate import figures
+from apf_physics.experiments.movingai import bucket_summary, evaluate_trials, scenario_trials, trials_json
+from apf_physics.experiments.evaluate import figures
 from apf_physics.planners import make_planner
-from apf_physics.safefile import write_text
+from apf_physics.common.safefile import write_text
 
 MAPS = [  # (family, name): the table's maps, 32 to 512 cells a side
     ("dao", "arena"), ("dao", "den312d"), ("dao", "lak303d"),

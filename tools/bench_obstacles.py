@@ -22,9 +22,9 @@ import time
 import numpy as np
 
 from apf_physics.envs import NavigateVectorEnv
-from apf_physics.evaluate import evaluate
+from apf_physics.experiments.evaluate import evaluate
 from apf_physics.planners import make_planner
-from apf_physics.worldfile import world_from_dict
+from apf_physics.world.io.worldfile import world_from_dict
 
 STARTS = [[2, 2], [2, 50], [2, 98], [50, 2], [98, 2], [50, 98], [30, 70], [70, 30]]
 TARGET = [96.0, 96.0]

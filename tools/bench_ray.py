@@ -2,18 +2,18 @@
 
 Four parts, all on the same worlds and planners:
 
-1. **serial**: :func:`~apf_physics.evaluate.evaluate` of each planner in this process, timing
+1. **serial**: :func:`~apf_physics.experiments.evaluate.evaluate` of each planner in this process, timing
    every world (wall and CPU time);
 2. **Ray start-up**: ``ray.init`` of a local Ray with ``--cpus`` CPUs, then the workers'
    first task (importing the package and torch);
-3. **Ray, warm**: :func:`~apf_physics.campaign.evaluate_on_ray` on that Ray, with each task's
+3. **Ray, warm**: :func:`~apf_physics.experiments.campaign.evaluate_on_ray` on that Ray, with each task's
    wall and CPU time; its episodes must equal the serial run's;
 4. **command line** (unless ``--no-cli``): ``apf-physics eval ... --json`` and the same with
    ``--ray`` as a user runs them (Ray started and stopped inside); their JSON files must be
    byte for byte the same.
 
 Then, on paper, what ``--nodes`` nodes of ``--node-cpus`` CPUs would take: the tasks that
-:func:`~apf_physics.campaign.evaluate_on_ray` makes for that many CPUs, each costing the serial
+:func:`~apf_physics.experiments.campaign.evaluate_on_ray` makes for that many CPUs, each costing the serial
 CPU time of its worlds times the measured Ray overhead (worker CPU over serial CPU, per
 planner), run first come first served on dedicated cores, plus the measured dispatch and
 gather time. The machine's load average is printed beside every figure: a core taken by
@@ -37,10 +37,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from apf_physics.campaign import TaskTiming, batches, episodes_per_world, evaluate_on_ray, task_count  # noqa: E402
-from apf_physics.evaluate import evaluate  # noqa: E402
+from apf_physics.experiments.campaign import TaskTiming, batches, episodes_per_world, evaluate_on_ray, task_count  # noqa: E402
+from apf_physics.experiments.evaluate import evaluate  # noqa: E402
 from apf_physics.planners import make_planner  # noqa: E402
-from apf_physics.worldfile import load_worlds  # noqa: E402
+from apf_physics.world.io.worldfile import load_worlds  # noqa: E402
 
 
 def load() -> str:
@@ -107,7 +107,7 @@ def main() -> int:
     ap.add_argument("worlds", nargs="+", help="world files or folders (e.g. /tmp/heldout)")
     ap.add_argument("--planners", default="gradient,escape,dqn")
     ap.add_argument("--cpus", type=int, default=2, help="CPUs of the local Ray (default 2)")
-    ap.add_argument("--ray-batch", type=int, help="worlds per Ray task (default: the rule of apf_physics.campaign)")
+    ap.add_argument("--ray-batch", type=int, help="worlds per Ray task (default: the rule of apf_physics.experiments.campaign)")
     ap.add_argument("--nodes", type=int, default=4, help="nodes of the cluster worked out on paper (default 4)")
     ap.add_argument("--node-cpus", type=int, default=2, help="CPUs per node on paper (default 2)")
     ap.add_argument("--no-cli", action="store_true", help="skip the command-line comparison")

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from apf_physics import load_world, world_from_dict
-from apf_physics.bundled import bundled_dir
+from apf_physics.world.bundled import bundled_dir
 from apf_physics.render import (CODECS, FieldImage, draw_frame, formation_roles, render_trajectory,
                                 trajectory_snapshots, write_video)
 

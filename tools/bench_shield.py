@@ -20,8 +20,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from apf_physics.actions import ACTIONS, SAFETY, assess_moves, move_clearance, shield_over_time, shielded_argmax  # noqa: E402
-from apf_physics.worldfile import load_world  # noqa: E402
+from apf_physics.control.shield import ACTIONS, SAFETY, assess_moves, move_clearance, shield_over_time, shielded_argmax  # noqa: E402
+from apf_physics.world.io.worldfile import load_world  # noqa: E402
 
 
 def main(argv=None) -> int:

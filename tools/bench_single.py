@@ -34,7 +34,7 @@ import gymnasium as gym
 import numpy as np
 
 import apf_physics  # noqa: F401  (registers the ids)
-from apf_physics.contacts import ContactLog
+from apf_physics.sim.contacts import ContactLog
 
 
 def make(env_id: str):

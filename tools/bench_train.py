@@ -36,13 +36,13 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from apf_physics.commands.train import parse_overrides  # noqa: E402
-from apf_physics.rl import evaluation  # noqa: E402
-from apf_physics.rl.config import preset  # noqa: E402
-from apf_physics.rl.dqn import q_network  # noqa: E402
-from apf_physics.rl.phases import phases_for_world, training_starts  # noqa: E402
-from apf_physics.rl.trainer import train  # noqa: E402
-from apf_physics.worldfile import load_world  # noqa: E402
+from apf_physics.cli.train import parse_overrides  # noqa: E402
+from apf_physics.learning import validation  # noqa: E402
+from apf_physics.learning.config import preset  # noqa: E402
+from apf_physics.learning.dqn import q_network  # noqa: E402
+from apf_physics.learning.phases import phases_for_world, training_starts  # noqa: E402
+from apf_physics.learning.trainer import train  # noqa: E402
+from apf_physics.world.io.worldfile import load_world  # noqa: E402
 
 
 RECIPES = {
@@ -55,11 +55,11 @@ RECIPES = {
 class Clock:
     """Seconds spent in a few functions of the training loop, by wrapping them for a run."""
 
-    PARTS = (("environments", "apf_physics.rl.dqn", "TrainingEnvs", "step"),
-             ("acting (network forward)", "apf_physics.rl.dqn", None, "epsilon_greedy"),
-             ("storing transitions", "apf_physics.rl.buffer", "ReplayBuffer", "add"),
-             ("updates", "apf_physics.rl.dqn", "QLearning", "update"),
-             ("evaluations", "apf_physics.rl.trainer", None, "evaluate"))
+    PARTS = (("environments", "apf_physics.learning.dqn", "TrainingEnvs", "step"),
+             ("acting (network forward)", "apf_physics.learning.dqn", None, "epsilon_greedy"),
+             ("storing transitions", "apf_physics.learning.buffer", "ReplayBuffer", "add"),
+             ("updates", "apf_physics.learning.dqn", "QLearning", "update"),
+             ("evaluations", "apf_physics.learning.trainer", None, "evaluate"))
 
     def __init__(self):
         self.seconds = {name: 0.0 for name, *_ in self.PARTS}
@@ -192,8 +192,8 @@ def bench_sb3(world, steps: int, seed: int, overrides: dict, num_envs: int = 16,
                 self.next_eval += eval_every
                 t = time.perf_counter()
                 network = _SB3Network(self.model.q_net, config.observer.shape)
-                episodes = evaluation.run(network, config.observer, phase.validation, config.evaluation.eval_shield)
-                self.best = max(self.best, evaluation.summarise(episodes, phase.validation)["success"])
+                episodes = validation.run(network, config.observer, phase.validation, config.evaluation.eval_shield)
+                self.best = max(self.best, validation.summarise(episodes, phase.validation)["success"])
                 self.evaluating += time.perf_counter() - t
             return self.num_timesteps < steps and self.best < 1.0
 

@@ -11,7 +11,7 @@ through the physics exactly as ``apf-physics eval`` runs them.
 
 Trap labels and A* lengths come from the directory's ``manifest.json`` (written by
 ``apf-physics generate``); for world files without one they are computed here
-(:func:`apf_physics.worldsets.label_starts`).
+(:func:`apf_physics.experiments.worldsets.label_starts`).
 
 Usage::
 
@@ -37,12 +37,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from apf_physics.evaluate import evaluate, figures  # noqa: E402
-from apf_physics.worldsets import label_starts  # noqa: E402
+from apf_physics.experiments.evaluate import evaluate, figures  # noqa: E402
+from apf_physics.experiments.worldsets import label_starts  # noqa: E402
 from apf_physics.planners import LEARNED, make_planner  # noqa: E402
-from apf_physics.kinematics import KINEMATICS  # noqa: E402
-from apf_physics.safefile import write_text  # noqa: E402
-from apf_physics.worldfile import load_world  # noqa: E402
+from apf_physics.world.kinematics import KINEMATICS  # noqa: E402
+from apf_physics.common.safefile import write_text  # noqa: E402
+from apf_physics.world.io.worldfile import load_world  # noqa: E402
 
 
 def lattice_reachable(world, start) -> bool:
@@ -76,7 +76,7 @@ def family_of(world_name: str) -> str:
 
 
 def summarise(episodes, labels) -> dict:
-    """Overall and trap-start figures for one planner's episodes (:func:`apf_physics.evaluate.figures`)."""
+    """Overall and trap-start figures for one planner's episodes (:func:`apf_physics.experiments.evaluate.figures`)."""
     rows = []
     index: dict[str, int] = {}
     for e in episodes:

@@ -4,7 +4,7 @@ Runs each planner on a generated set (or world files) exactly as ``tools/eval_ge
 (the same episodes, through the physics) and then, for every episode that ends in a collision at
 step ``c``, asks whether it was avoidable: from where the robot was ``--before`` steps earlier
 (step ``c − before``, or the start), does any sequence of the robot's moves
-(:func:`apf_physics.search.escape_moves`: breadth-first over the time-expanded graph of the nine
+(:func:`apf_physics.world.search.escape_moves`: breadth-first over the time-expanded graph of the nine
 unit moves, the obstacles where the physics has them at each moment) touch nothing up to step
 ``c + --after``? Each collision is labelled
 
@@ -34,11 +34,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from eval_general import load_labelled, summarise  # noqa: E402
 
-from apf_physics.evaluate import evaluate  # noqa: E402
+from apf_physics.experiments.evaluate import evaluate  # noqa: E402
 from apf_physics.planners import LEARNED, make_planner  # noqa: E402
 from apf_physics.planners.dqn import DQNPlanner  # noqa: E402
-from apf_physics.safefile import write_text  # noqa: E402
-from apf_physics.search import escape_moves  # noqa: E402
+from apf_physics.common.safefile import write_text  # noqa: E402
+from apf_physics.world.search import escape_moves  # noqa: E402
 
 
 def planner_named(name: str, model: str | None):

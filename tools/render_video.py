@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from apf_physics.commands import render
+from apf_physics.cli import render
 from apf_physics.errors import UserError
 
 

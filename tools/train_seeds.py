@@ -25,7 +25,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from apf_physics.safefile import write_text  # noqa: E402
+from apf_physics.common.safefile import write_text  # noqa: E402
 
 
 def run(command: list[str]) -> None:

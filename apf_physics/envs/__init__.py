@@ -5,7 +5,7 @@ from gymnasium.envs.registration import register, registry
 
 from apf_physics.envs.navigate import ACTIONS, NavigateEnv
 from apf_physics.envs.formation import FormationEnv
-from apf_physics.envs.formations import FormationsParallelEnv
+from apf_physics.envs.parallel import FormationsParallelEnv
 from apf_physics.envs.vector import NavigateVectorEnv
 
 

@@ -10,10 +10,10 @@ import numpy as np
 from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, resolve_worlds, robot_options
 from apf_physics.envs.reward import TERMS, reward_weights
 from apf_physics.envs.task import NavigationTask, TrapOption
-from apf_physics.formation import formation_success, link_lengths, links_in_range
-from apf_physics.observation import ObserverConfig
+from apf_physics.control.formation import formation_success, link_lengths, links_in_range
+from apf_physics.sensing.observation import ObserverConfig
 from apf_physics.render.drawing import Snapshot, draw_frame, field_image, formation_roles
-from apf_physics.world import FormationSpec
+from apf_physics.world.core import FormationSpec
 
 
 class FormationEnv(gym.Env):
@@ -23,7 +23,7 @@ class FormationEnv(gym.Env):
 
     As ``Navigate-v0`` for the leader, while ``followers`` robots follow it in a chain (or in
     the world's formation shape) by their own potential fields
-    (:class:`~apf_physics.formation.FollowerController`). All robots move in the same
+    (:class:`~apf_physics.control.formation.FollowerController`). All robots move in the same
     control step, through the physics.
 
     ## Action Space

@@ -7,11 +7,11 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from apf_physics.actions import ACTION_NAMES, ACTIONS
+from apf_physics.control.shield import ACTION_NAMES, ACTIONS
 from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, resolve_worlds, robot_options
 from apf_physics.envs.reward import TERMS, reward_weights
 from apf_physics.envs.task import NavigationTask, TrapOption
-from apf_physics.observation import ObserverConfig
+from apf_physics.sensing.observation import ObserverConfig
 from apf_physics.render.drawing import Snapshot, draw_frame, field_image
 
 __all__ = ["ACTIONS", "ACTION_NAMES", "NavigateEnv"]
@@ -34,7 +34,7 @@ class NavigateEnv(gym.Env):
 
     ``Discrete(9)``, in the thesis's order (Table 1): 0 up (0,+1), 1 down (0,−1), 2 left
     (−1,0), 3 right (+1,0), 4 left-up (−1,+1), 5 left-down (−1,−1), 6 right-up (+1,+1),
-    7 right-down (+1,−1), 8 stay (``apf_physics.actions.ACTION_NAMES``). Each becomes a
+    7 right-down (+1,−1), 8 stay (``apf_physics.control.shield.ACTION_NAMES``). Each becomes a
     velocity command held for one control step.
 
     ## Observation Space
@@ -52,7 +52,7 @@ class NavigateEnv(gym.Env):
     over the same points, ``min(n, 4) / 4`` where ``n`` counts the control steps (and the
     reset) that ended with the robot's centre in the point's 1×1 cell of the map; points
     outside the map read 1. The counts are cleared at every reset
-    (:class:`~apf_physics.observation.VisitMemory`). A reactive policy sees where it has been
+    (:class:`~apf_physics.sensing.observation.VisitMemory`). A reactive policy sees where it has been
     and can learn to leave a potential well.
 
     With ``previous=True`` the channel after the potential is the same window of the field
@@ -82,7 +82,7 @@ class NavigateEnv(gym.Env):
 
     ## Episode End
 
-    The rules of ``apf-physics eval`` (:mod:`apf_physics.engine`, one definition for both).
+    The rules of ``apf-physics eval`` (:mod:`apf_physics.sim.engine`, one definition for both).
     Terminated when the robot's centre is within ``goal_tolerance`` of a target (success) or
     it touches an obstacle or the map's edge (collision, W1). Truncated after ``tt`` steps,
     set by the registration's ``max_episode_steps`` (100, thesis Tables 3–4). A start already
@@ -93,7 +93,7 @@ class NavigateEnv(gym.Env):
     ``trap`` (default None: no trap rule, as in training) adds ``eval``'s trap detector:
     ``"oscillation"`` truncates the episode once the robot's last 10 positions lie within
     1.5 of their mean, ``"descent"`` also once U stopped dropping over them, and a
-    :class:`~apf_physics.engine.TrapDetector` sets the window and radius; ``info["trapped"]``
+    :class:`~apf_physics.sim.engine.TrapDetector` sets the window and radius; ``info["trapped"]``
     then says whether it did. With the detector of a planner's rule and window (and the step
     limit of ``eval``) an episode driven by the planner's moves ends as ``eval``'s does.
 
@@ -115,10 +115,10 @@ class NavigateEnv(gym.Env):
       potential (default False): in a world with moving obstacles the difference of the two
       shows where each obstacle is going.
     - ``obs_scale``: ``"raw"`` (default) or ``"log"`` (see Observation Space).
-    - ``observer``: an :class:`~apf_physics.observation.ObserverConfig` (or its dict) instead
+    - ``observer``: an :class:`~apf_physics.sensing.observation.ObserverConfig` (or its dict) instead
       of ``obs_size``, ``resolution``, ``memory`` and ``obs_scale``, e.g. a model's.
     - ``trap``: None (default), ``"oscillation"``, ``"descent"`` or a
-      :class:`~apf_physics.engine.TrapDetector` (see Episode End).
+      :class:`~apf_physics.sim.engine.TrapDetector` (see Episode End).
     - ``render_mode``: ``"rgb_array"`` for OpenCV-drawn frames.
 
     ``info`` holds ``position``, ``world`` (its name) and ``distance`` (to the nearest target)

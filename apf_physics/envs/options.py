@@ -9,13 +9,13 @@ from typing import Any, Mapping, Sequence, Union
 import numpy as np
 from gymnasium import spaces
 
-from apf_physics.actions import ACTIONS
+from apf_physics.control.shield import ACTIONS
 from apf_physics.errors import UserError
-from apf_physics.kinematics import KINEMATICS, LIMIT_KEYS, UNICYCLE_ACTIONS, UnicycleLimits, holonomic_from_unit
-from apf_physics.lidar import LidarConfig
-from apf_physics.observation import OBSERVATIONS, ObserverConfig
-from apf_physics.world import World
-from apf_physics.worldfile import load_world
+from apf_physics.world.kinematics import KINEMATICS, LIMIT_KEYS, UNICYCLE_ACTIONS, UnicycleLimits, holonomic_from_unit
+from apf_physics.sensing.lidar import LidarConfig
+from apf_physics.sensing.observation import OBSERVATIONS, ObserverConfig
+from apf_physics.world.core import World
+from apf_physics.world.io.worldfile import load_world
 
 WorldSpec = Union[str, Path, World, Sequence[Union[str, Path, World]]]
 
@@ -40,12 +40,12 @@ class RobotOptions:
 
     Attributes:
         action: ``"discrete"``: ``Discrete(9)``, the thesis's Table 1 for a holonomic robot,
-            :data:`~apf_physics.kinematics.UNICYCLE_ACTIONS` for a unicycle; ``"continuous"``:
+            :data:`~apf_physics.world.kinematics.UNICYCLE_ACTIONS` for a unicycle; ``"continuous"``:
             ``Box(-1, 1, (2,))``, a holonomic robot's velocity (each axis times the top speed,
             one unit per step: the box's corners are Table 1's diagonal moves) or a unicycle's
             ``(v, ω)`` as shares of its limits (:meth:`UnicycleLimits.from_unit`).
         unicycle: The unicycle's limits, or None for a holonomic robot.
-        observation: One of :data:`~apf_physics.observation.OBSERVATIONS`.
+        observation: One of :data:`~apf_physics.sensing.observation.OBSERVATIONS`.
         lidar: The range sensor (used with a ``"lidar"`` observation).
     """
 
@@ -101,9 +101,9 @@ def robot_options(worlds: Sequence[World], action: str = "discrete", kinematics:
         action: ``"discrete"`` or ``"continuous"``.
         kinematics: ``"holonomic"``, ``"unicycle"`` or None (the worlds').
         observation: ``"window"``, ``"lidar"`` or ``"window+lidar"``.
-        lidar: :class:`~apf_physics.lidar.LidarConfig` or its keys (``beams``, ``fov`` [degrees],
+        lidar: :class:`~apf_physics.sensing.lidar.LidarConfig` or its keys (``beams``, ``fov`` [degrees],
             ``max_range``, ``noise``).
-        limits: A unicycle's :class:`~apf_physics.kinematics.UnicycleLimits` or some of its
+        limits: A unicycle's :class:`~apf_physics.world.kinematics.UnicycleLimits` or some of its
             keys, over the world's (default: the world's, else the defaults).
 
     Raises:

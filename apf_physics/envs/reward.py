@@ -21,7 +21,7 @@ class RewardWeights:
             zero or negative. W4 alone makes circling in a well nearly free (each step down
             is paid back by the step up), while climbing out costs at once; W5 makes the
             circling cost. The robot's visit counts are the memory channel's
-            (:class:`~apf_physics.observation.VisitMemory`), so with ``memory=True`` the
+            (:class:`~apf_physics.sensing.observation.VisitMemory`), so with ``memory=True`` the
             term is a function of what the network sees.
         length: Not in the thesis. ``W6 = length · |P_{n+1} − P_n|``, per unit of distance
             moved; zero or negative. W3 charges a diagonal move no more than an axis move, so a

@@ -2,9 +2,9 @@
 
 One step: actions → the stepper's commands (unit moves, Model Table 1; or a continuous
 velocity, or a unicycle's ``(v, ω)``: :class:`~apf_physics.envs.options.RobotOptions`) →
-followers' moves (formations) → one :class:`~apf_physics.engine.Stepper` step for the whole
-batch → observations (one :class:`~apf_physics.observation.Observer` call for the windows,
-one :class:`~apf_physics.observation.RangeObserver` call for the ranges) and the reward's
+followers' moves (formations) → one :class:`~apf_physics.sim.engine.Stepper` step for the whole
+batch → observations (one :class:`~apf_physics.sensing.observation.Observer` call for the windows,
+one :class:`~apf_physics.sensing.observation.RangeObserver` call for the ranges) and the reward's
 named terms. ``Navigate-v0``
 is a batch of one, :class:`~apf_physics.envs.vector.NavigateVectorEnv` a batch of N, and
 ``Formation-v0`` a batch of one formation.
@@ -19,15 +19,15 @@ from typing import Sequence, Union
 import numpy as np
 from gymnasium import spaces
 
-from apf_physics.actions import ACTIONS
-from apf_physics.engine import RUNNING, TIMEOUT, TRAPPED, Stepper, TrapDetector
+from apf_physics.control.shield import ACTIONS
+from apf_physics.sim.engine import RUNNING, TIMEOUT, TRAPPED, Stepper, TrapDetector
 from apf_physics.envs.options import RobotOptions
 from apf_physics.errors import UserError
 from apf_physics.envs.reward import RewardWeights, reward_terms, reward_terms_one
-from apf_physics.formation import FormationCrowd, FormationTeam
-from apf_physics.observation import Observer, ObserverConfig, RangeObserver
-from apf_physics.tracking import UnicycleFollowers
-from apf_physics.world import FormationSpec, World
+from apf_physics.control.formation import FormationCrowd, FormationTeam
+from apf_physics.sensing.observation import Observer, ObserverConfig, RangeObserver
+from apf_physics.control.tracking import UnicycleFollowers
+from apf_physics.world.core import FormationSpec, World
 
 
 _ONE_MOVE = ACTIONS.reshape(-1, 1, 1, 2).copy()   # the stepper's commands of a batch of one robot, per action
@@ -64,9 +64,9 @@ def trap_detector(trap: TrapOption) -> TrapDetector | None:
 
     None (the default): no trap rule, episodes end only by reaching, colliding or the step
     limit (as in training). ``"oscillation"`` or ``"descent"``: that rule of
-    :class:`~apf_physics.engine.TrapDetector` with its defaults (a window of 10 steps, radius
+    :class:`~apf_physics.sim.engine.TrapDetector` with its defaults (a window of 10 steps, radius
     1.5), the detector ``eval`` gives a planner with that rule and no window of its own. A
-    :class:`~apf_physics.engine.TrapDetector`: as it is (e.g. ``TrapDetector(window=40)``,
+    :class:`~apf_physics.sim.engine.TrapDetector`: as it is (e.g. ``TrapDetector(window=40)``,
     a DQN planner's with a visit memory).
 
     Raises:
@@ -104,7 +104,7 @@ class NavigationTask:
             default None: no trap rule).
         robot: The robot's kind, its actions and what it sees (default: the thesis's).
 
-    The episode rules are the stepper's (:mod:`apf_physics.engine`): an episode that starts
+    The episode rules are the stepper's (:mod:`apf_physics.sim.engine`): an episode that starts
     within the goal tolerance of a target has ended at its start, and its next step reports
     it terminated and reached, without moving it and with reward 0.
     """
@@ -295,8 +295,8 @@ class NavigationTask:
 
     def _unicycle_team(self, leader: np.ndarray) -> np.ndarray:
         """(N, m, 2) every unicycle's ``(v, ω)``: each running leader's command within the limits and
-        slowed to its followers' :meth:`~apf_physics.tracking.UnicycleFollowers.leader_cap` (as in
-        ``eval``'s rollouts), the followers' by :meth:`~apf_physics.tracking.UnicycleFollowers.drive`
+        slowed to its followers' :meth:`~apf_physics.control.tracking.UnicycleFollowers.leader_cap` (as in
+        ``eval``'s rollouts), the followers' by :meth:`~apf_physics.control.tracking.UnicycleFollowers.drive`
         (which stops a leader about to meet one of its followers)."""
         limits = self.robot.unicycle
         states = self.stepper.states()
@@ -346,9 +346,9 @@ class NavigationTask:
 class CrowdTask:
     """Several formations of one world at once (its ``formations:``), each to its own target.
 
-    What the PettingZoo environment steps: one :class:`~apf_physics.engine.Stepper` slot per
+    What the PettingZoo environment steps: one :class:`~apf_physics.sim.engine.Stepper` slot per
     formation, all in one crowd (their robots meet), the followers' rule and the right of way
-    of :class:`~apf_physics.formation.FormationCrowd`, one observer row per agent.
+    of :class:`~apf_physics.control.formation.FormationCrowd`, one observer row per agent.
 
     Args:
         world: A world with ``formations``.

@@ -31,7 +31,7 @@ from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, r
 from apf_physics.envs.reward import TERMS, reward_weights
 from apf_physics.envs.task import NavigationTask, TrapOption
 from apf_physics.errors import UserError
-from apf_physics.observation import ObserverConfig
+from apf_physics.sensing.observation import ObserverConfig
 from apf_physics.render.drawing import Snapshot, draw_frame, field_image
 
 _BLOCK = 32  # episode starts drawn ahead per copy

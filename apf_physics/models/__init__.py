@@ -18,7 +18,7 @@ from apf_physics.models.files import FORMAT_VERSION, SavedModel, load_model, mod
 from apf_physics.models.network import QNetwork
 from apf_physics.models.mapnet import MapNetwork
 from apf_physics.models.policy import DQNPolicy, MapPolicy, load_policy
-from apf_physics.world import World
+from apf_physics.world.core import World
 
 MODELS = Path(__file__).resolve().parent
 SHIPPED = {"thesis-fixed": MODELS / "fixed20.pt", "thesis-general": MODELS / "map.pt"}

@@ -33,13 +33,13 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import torch
 
-from apf_physics.actions import ACTIONS, MOVE_SETS
+from apf_physics.control.shield import ACTIONS, MOVE_SETS
 from apf_physics.errors import ModelError
 from apf_physics.models.mapnet import MapNetwork
 from apf_physics.models.network import OBS_TRANSFORMS, QNetwork
-from apf_physics.observation import CHANNELS, SCALES, ObserverConfig
-from apf_physics.safefile import open_regular_file, write_bytes
-from apf_physics.worldfile import RASTER_MARGIN
+from apf_physics.sensing.observation import CHANNELS, SCALES, ObserverConfig
+from apf_physics.common.safefile import open_regular_file, write_bytes
+from apf_physics.world.io.worldfile import RASTER_MARGIN
 
 MAGIC = b"APF-PHYSICS-DQN\n"
 """First line of every model or checkpoint file."""
@@ -79,7 +79,7 @@ def field_dict(field: Any) -> dict[str, float]:
 
 
 def write_file(path: str | os.PathLike, meta: Mapping[str, Any], tensors: Mapping[str, Any]) -> Path:
-    """Write a model or checkpoint file atomically and durably (:func:`~apf_physics.safefile.write_bytes`).
+    """Write a model or checkpoint file atomically and durably (:func:`~apf_physics.common.safefile.write_bytes`).
 
     Args:
         path: Destination; its directory must exist.
@@ -202,7 +202,7 @@ class SavedModel:
         network: The network, in eval mode, on CPU: a window :class:`QNetwork`, or a
             :class:`~apf_physics.models.mapnet.MapNetwork` (``arch.type`` ``"map"``).
         obs_shape: (C, k, k) observation shape it expects (``()`` for a map network, which
-            sees a :class:`~apf_physics.observation.MapView` of any size).
+            sees a :class:`~apf_physics.sensing.observation.MapView` of any size).
         field: Field parameters of the world it was trained on.
         observer: How its observations were built (:func:`observer_of`; None for a map network).
         meta: All metadata of the file (``kind``, ``arch``, ``config``, ``training``, ...).

@@ -1,7 +1,7 @@
 """A Q-network that plans: a learned cost map, value iteration over it, and a per-move head.
 
 The thesis's second direction of future work is an observation that is an image map of the
-world. This network takes one (:class:`~apf_physics.observation.MapView`): every node of a
+world. This network takes one (:class:`~apf_physics.sensing.observation.MapView`): every node of a
 grid over the map (``resolution`` per unit) carries the robot's clearance there and whether a
 target is within reach. It has three parts, all learned:
 
@@ -21,7 +21,7 @@ target is within reach. It has three parts, all learned:
    moving obstacles included). The scores are the action values.
 
 Nothing here searches the world's graph with A* or knows the optimal path: A* is the teacher
-in training (:mod:`apf_physics.rl.imitation`), never consulted when the network acts. One
+in training (:mod:`apf_physics.learning.imitation`), never consulted when the network acts. One
 network serves every map size: the grid grows with the map and the iterations run until the
 values settle.
 """
@@ -36,10 +36,10 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from apf_physics.search import shortest_paths
+from apf_physics.world.search import shortest_paths
 
 MAP_FEATURES = 2
-"""Node features of a :class:`~apf_physics.observation.MapView`: clearance margin, target."""
+"""Node features of a :class:`~apf_physics.sensing.observation.MapView`: clearance margin, target."""
 MOVE_FEATURES = 5
 """Per-move features of the head: ΔV, length, room, ΔU, stay."""
 UNREACHED = -1e6
@@ -60,7 +60,7 @@ class MapNetwork(nn.Module):
         channels: Hidden channels of the cost map's first convolution.
         hidden: Widths of the head's hidden layers.
         negative_slope: Leaky ReLU slope.
-        moves: Name of the move set (:data:`~apf_physics.actions.MOVE_SETS`).
+        moves: Name of the move set (:data:`~apf_physics.control.shield.MOVE_SETS`).
     """
 
     def __init__(self, resolution: int = 2, channels: int = 8, hidden: Sequence[int] = (32, 32),
@@ -142,7 +142,7 @@ def fixed_point(edges: list, free: torch.Tensor, goal: torch.Tensor) -> torch.Te
     """The fixed point of :func:`_sweep`, without sweeping the whole grid again and again.
 
     ``−V`` is a shortest-path cost to the goal nodes with positive edge costs, so it is found
-    by :func:`~apf_physics.search.shortest_paths` (relaxing outward from the nodes whose value
+    by :func:`~apf_physics.world.search.shortest_paths` (relaxing outward from the nodes whose value
     just fell): each round costs what the wavefront holds, not the whole grid, and long paths
     (a maze's) are followed to their end. The values are the sweeps' own, to the bit: each is
     ``V(x + n) − cost``, in float32.

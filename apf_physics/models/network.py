@@ -17,7 +17,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from apf_physics.transforms import signed_log
+from apf_physics.common.transforms import signed_log
 
 OBS_TRANSFORMS = ("raw", "relative-log", "relative-log-memory", "relative-log-previous")
 """Names accepted by :class:`QNetwork`'s ``obs_transform``."""

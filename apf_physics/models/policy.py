@@ -10,13 +10,13 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import torch
 
-from apf_physics.actions import MOVE_SETS, SAFETY, move_clearance
+from apf_physics.control.shield import MOVE_SETS, SAFETY, move_clearance
 from apf_physics.models.files import SavedModel, load_model, observer_of
 from apf_physics.models.mapnet import MapNetwork, move_features, sample_values
 from apf_physics.models.network import QNetwork
-from apf_physics.observation import MapView, ObserverConfig
-from apf_physics.transforms import signed_log
-from apf_physics.world import Moment, World
+from apf_physics.sensing.observation import MapView, ObserverConfig
+from apf_physics.common.transforms import signed_log
+from apf_physics.world.core import Moment, World
 
 
 SMALL_BATCH = 256
@@ -144,7 +144,7 @@ class MapValues:
 class MapPolicy:
     """Action values of a :class:`~apf_physics.models.mapnet.MapNetwork` for robots in a world.
 
-    The network's values over the world's :class:`~apf_physics.observation.MapView` depend
+    The network's values over the world's :class:`~apf_physics.sensing.observation.MapView` depend
     only on the world's static obstacles and targets, so they are computed once per world
     (kept with the world, :class:`MapValues`) and every step only samples them at the
     robots' moves.
@@ -198,7 +198,7 @@ def move_inputs(where: Moment | World, positions: np.ndarray, moves: np.ndarray)
     its static obstacles, U at step 0 (as training labels them).
 
     Returns:
-        ``room`` (N, M): the clearance along each move (:func:`~apf_physics.actions.move_clearance`)
+        ``room`` (N, M): the clearance along each move (:func:`~apf_physics.control.shield.move_clearance`)
         beyond the robot's radius and the safety margin (negative: the move is unsafe), which the
         shield judges moves by too; and ``du`` (N, M): the signed-log change of U over each move
         (:func:`potential_change`).

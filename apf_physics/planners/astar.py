@@ -1,19 +1,19 @@
-"""The A* planner: executes the shortest grid path of :mod:`apf_physics.search` through the physics."""
+"""The A* planner: executes the shortest grid path of :mod:`apf_physics.world.search` through the physics."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from apf_physics.planners.base import Planner
-from apf_physics.search import LOS_MARGIN, LOS_SPACING, SearchGrid, timed_path
-from apf_physics.world import Moment, World
+from apf_physics.world.search import LOS_MARGIN, LOS_SPACING, SearchGrid, timed_path
+from apf_physics.world.core import Moment, World
 
 HORIZON = 4.0
 """How far ahead (along the path, in units) a replanning robot checks its path against the moving obstacles."""
 
 
 class AStarPlanner(Planner):
-    """Executes the shortest grid path (:class:`~apf_physics.search.SearchGrid`) through the physics.
+    """Executes the shortest grid path (:class:`~apf_physics.world.search.SearchGrid`) through the physics.
 
     Each control step a robot moves straight toward its current waypoint, at most one unit
     along each axis (the direction kept, the length scaled down). A waypoint is passed once the
@@ -107,7 +107,7 @@ class AStarPlanner(Planner):
 class SIPPPlanner(Planner):
     """The oracle that knows the future: a plan in space and time on the known motion, executed through the physics.
 
-    At the start of each episode, one search per robot (:func:`~apf_physics.search.timed_path`: A*
+    At the start of each episode, one search per robot (:func:`~apf_physics.world.search.timed_path`: A*
     over the time-expanded graph of the nine unit moves, waiting included, every moving obstacle
     where the physics will have it at each moment of each step, with a margin of
     :data:`MARGIN` beyond the robot's radius). Each control step the robot makes its plan's next

@@ -1,9 +1,9 @@
 """The planner interface: a policy that turns robot positions into velocity commands.
 
-Planners know nothing of the physics. :func:`apf_physics.rollout.rollout` asks a planner
+Planners know nothing of the physics. :func:`apf_physics.experiments.rollout.rollout` asks a planner
 for one displacement per robot each control step, giving it the world at that step (a
 :class:`~apf_physics.world.Moment`, built once per step), and hands the displacements to the
-engine (:class:`~apf_physics.engine.Stepper`) as velocity commands; the engine decides when
+engine (:class:`~apf_physics.sim.engine.Stepper`) as velocity commands; the engine decides when
 an episode ends.
 """
 
@@ -13,8 +13,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from apf_physics.engine import TrapRule
-from apf_physics.world import Moment, World
+from apf_physics.sim.engine import TrapRule
+from apf_physics.world.core import Moment, World
 
 
 class Planner:
@@ -27,7 +27,7 @@ class Planner:
             descent). ``"oscillation"``: only when the robot stays within a small region
             over a window (planners that may climb the potential on purpose).
         trap_window: Control steps the trap rule looks back over; None: the rollout's
-            detector's own (:class:`~apf_physics.engine.TrapDetector`, 10). A planner that
+            detector's own (:class:`~apf_physics.sim.engine.TrapDetector`, 10). A planner that
             remembers where it has been sets a longer one: for it, circling one spot for a
             while is part of getting out, not proof of being stuck.
     """

@@ -12,13 +12,13 @@ from pathlib import Path
 
 import numpy as np
 
-from apf_physics.actions import (ACTIONS, HORIZON, PREDICTIONS, SAFETY, move_clearance, shield_over_time,
+from apf_physics.control.shield import (ACTIONS, HORIZON, PREDICTIONS, SAFETY, move_clearance, shield_over_time,
                                  shielded_argmax)
 from apf_physics.models import DQNPolicy, MapPolicy, load_policy, resolve_model, shipped_model_for
 from apf_physics.models.policy import move_inputs
-from apf_physics.observation import Observer
+from apf_physics.sensing.observation import Observer
 from apf_physics.planners.base import Planner
-from apf_physics.world import Moment, World
+from apf_physics.world.core import Moment, World
 
 
 class DQNPlanner(Planner):
@@ -27,24 +27,24 @@ class DQNPlanner(Planner):
     Args:
         model: A model file, or a shipped model's name (``general``, ``moving``, ...); by
             default the shipped model trained for the world's field.
-        shield: Choose only among the moves that keep the robot :data:`~apf_physics.actions.SAFETY`
+        shield: Choose only among the moves that keep the robot :data:`~apf_physics.control.shield.SAFETY`
             clear of every obstacle and the map's edge all along the move, the moving obstacles
             where they are predicted at each moment of it, and that some continuation keeps
-            clear for :data:`~apf_physics.actions.HORIZON` steps
-            (:func:`~apf_physics.actions.shield_over_time`); when no move is, the one that puts
+            clear for :data:`~apf_physics.control.shield.HORIZON` steps
+            (:func:`~apf_physics.control.shield.shield_over_time`); when no move is, the one that puts
             contact off longest. Among static obstacles alone it is the shield of one step
-            (:func:`~apf_physics.actions.move_clearance`). False: the network's choice as it is
+            (:func:`~apf_physics.control.shield.move_clearance`). False: the network's choice as it is
             (planner name ``dqn-unshielded``).
-        prediction: How the shield predicts the moving obstacles (:data:`~apf_physics.actions.PREDICTIONS`):
+        prediction: How the shield predicts the moving obstacles (:data:`~apf_physics.control.shield.PREDICTIONS`):
             ``velocity`` (default: constant velocity from the last two steps, within
-            :data:`~apf_physics.actions.SENSING_RADIUS`) or ``known`` (the world file's motion:
+            :data:`~apf_physics.control.shield.SENSING_RADIUS`) or ``known`` (the world file's motion:
             planner name ``dqn-known``).
         horizon: Steps the shield looks ahead; 0: the shield of one step (each move against the
             obstacles where they are along it, no look-ahead; ``dqn-one-step``, for comparison).
         policy: An in-memory policy to use instead of a model file (e.g. a network while it
             trains); its field is not checked against the world's.
 
-    Observations are built by an :class:`~apf_physics.observation.Observer` with the model's
+    Observations are built by an :class:`~apf_physics.sensing.observation.Observer` with the model's
     own configuration, exactly as the environment built them in training (a model with the
     visit-memory channel gets each robot's memory, kept over the rollout and cleared in
     :meth:`reset`). A planner with a memory is declared trapped only after

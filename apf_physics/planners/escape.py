@@ -34,7 +34,7 @@ import numpy as np
 
 from apf_physics.planners.base import Planner
 from apf_physics.planners.gradient import GradientPlanner
-from apf_physics.world import Moment, World
+from apf_physics.world.core import Moment, World
 
 _DESCEND, _FOLLOW = 0, 1
 

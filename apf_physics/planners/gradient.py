@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from apf_physics.planners.base import Planner
-from apf_physics.world import Moment
+from apf_physics.world.core import Moment
 
 
 class GradientPlanner(Planner):

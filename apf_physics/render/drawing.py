@@ -28,9 +28,9 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from apf_physics import field as apf
-from apf_physics.obstacles import GridObstacle, obstacle_at
-from apf_physics.world import World
+from apf_physics.world import field as apf
+from apf_physics.world.obstacles import GridObstacle, obstacle_at
+from apf_physics.world.core import World
 
 RGB = tuple[int, int, int]
 

@@ -31,7 +31,7 @@ from apf_physics.render.drawing import (
 from apf_physics.render.video import write_png
 
 if TYPE_CHECKING:
-    from apf_physics.world import World
+    from apf_physics.world.core import World
 
 INK = (20, 20, 20)
 PAPER = (255, 255, 255)

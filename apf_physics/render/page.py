@@ -21,7 +21,7 @@ from apf_physics.errors import UserError
 from apf_physics.render.drawing import FieldImage
 from apf_physics.render.episodes import is_formation, write_episode_video
 from apf_physics.render.field_plot import field_figure
-from apf_physics.safefile import check_writable, write_text
+from apf_physics.common.safefile import check_writable, write_text
 from apf_physics.render.video import progress_bar, write_png
 
 PAGE = "index.html"
@@ -110,7 +110,7 @@ def write_results(folder: str | Path, evaluations: Sequence, worlds: Sequence, *
 
     Args:
         folder: Output folder (created if missing).
-        evaluations: :class:`~apf_physics.evaluate.Evaluation` objects (``planner``, ``episodes``).
+        evaluations: :class:`~apf_physics.experiments.evaluate.Evaluation` objects (``planner``, ``episodes``).
         worlds: The worlds they ran in (episodes name their world).
         title: The page's title.
         video: Write the videos (else figures only).

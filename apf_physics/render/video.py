@@ -15,7 +15,7 @@ Codecs (see :data:`CODECS`); the file's extension picks the default:
   desktop players such as VLC play it, web browsers do not.
 
 Every file is written to a temporary file beside it and renamed over it at the end (see
-:mod:`~apf_physics.safefile`). FFmpeg's log stays off (PyAV's default), so encoding
+:mod:`~apf_physics.common.safefile`). FFmpeg's log stays off (PyAV's default), so encoding
 prints nothing.
 """
 
@@ -33,10 +33,10 @@ from tqdm import tqdm
 
 from apf_physics.errors import UserError
 from apf_physics.render.drawing import FieldImage, Snapshot, TrailLayer, draw_frame, field_image
-from apf_physics.safefile import Replacement, check_writable, write_bytes
+from apf_physics.common.safefile import Replacement, check_writable, write_bytes
 
 if TYPE_CHECKING:
-    from apf_physics.world import World
+    from apf_physics.world.core import World
 
 try:
     import av

@@ -1,0 +1,142 @@
+"""``FormationsParallelEnv``: several formations in one world, as a PettingZoo ``ParallelEnv``.
+
+PettingZoo is an optional extra (``pip install "apf-physics[pettingzoo]"``); this module
+needs it only to subclass ``ParallelEnv`` when it is installed.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+
+from apf_physics.control.shield import ACTIONS
+from apf_physics.envs.options import observer_config, resolve_worlds
+from apf_physics.envs.reward import TERMS, reward_weights
+from apf_physics.envs.task import CrowdTask, TrapOption
+from apf_physics.sensing.observation import ObserverConfig
+from apf_physics.render.drawing import Snapshot, draw_frame, field_image, formation_roles
+
+try:
+    from pettingzoo import ParallelEnv
+except ImportError:  # the extra is not installed: the class can still be built, not registered
+    ParallelEnv = object
+
+
+class FormationsParallelEnv(ParallelEnv):
+    """Every formation of a world with ``formations:`` moving at once, each to its own target.
+
+    ## Agents
+
+    ``agents="leaders"`` (default): one agent per formation, ``leader_<f>``; its followers
+    follow by their own rule and every move gets the right of way
+    (:class:`~apf_physics.control.formation.FormationCrowd`), so robots never touch one another.
+    ``agents="all"``: every robot is an agent, ``robot_<f>_<r>`` (r = 0 the leader), moved
+    exactly as told (collisions are then the agents' to avoid).
+
+    ## Action Space
+
+    ``Discrete(9)`` per agent, Model Table 1 order (see ``Navigate-v0``).
+
+    ## Observation Space
+
+    ``Navigate-v0``'s, around the agent, in its formation's field (its own target): the
+    robots of the other formations (with ``"all"``: every other robot) are discs of the
+    robot radius that repel and read as walls where they stand.
+
+    ## Rewards
+
+    ``Navigate-v0``'s terms per agent (``infos[agent]["reward_terms"]``): W1 when its formation
+    (with ``"all"``: the robot itself) touches anything, W2 when its formation's leader
+    reaches the target, W3 every step, W4 on the change of U at the agent.
+
+    ## Episode End
+
+    An agent terminates when its formation reaches its target (also at its start: see
+    ``Navigate-v0``) or collides; it is truncated after ``max_episode_steps``, and, with a
+    ``trap`` detector, when it finds the formation's leader stuck (``infos[agent]["trapped"]``;
+    see ``Navigate-v0``). Its formation's robots then stay where they are.
+
+    ## Arguments
+
+    ``world`` (a world file with ``formations:``, a bundled name, or a World), ``agents``,
+    ``obs_size``, ``reward``, ``resolution``, ``memory``, ``obs_scale``, ``observer``,
+    ``max_episode_steps`` (100), ``trap`` (default None), ``render_mode``.
+    """
+
+    metadata = {"name": "apf_physics_formations_v0", "render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(self, world: Any = None, agents: str = "leaders", obs_size: int = 11, reward: Any = "thesis-fixed",
+                 resolution: int = 4, memory: bool = False, previous: bool = False, obs_scale: str = "raw",
+                 observer: ObserverConfig | dict | None = None, max_episode_steps: int = 100,
+                 render_mode: str | None = None, trap: TrapOption = None):
+        (self.world,) = resolve_worlds(world)
+        self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer, previous)
+        self._task = CrowdTask(self.world, self.observer, reward_weights(reward), agents, max_episode_steps, trap)
+        low, high = self._task.observer.value_bounds()  # finite: from the worlds' U
+        self._observation_space = spaces.Box(low, high, self.observer.shape, np.float32)
+        self.possible_agents = list(self._task.names)
+        self.agents: list[str] = []
+        self.render_mode = render_mode
+        self._action_space = spaces.Discrete(len(ACTIONS))
+        self._index = {name: a for a, name in enumerate(self.possible_agents)}
+        self.np_random, _ = seeding.np_random(None)
+
+    def observation_space(self, agent: str) -> spaces.Space:
+        return self._observation_space
+
+    def action_space(self, agent: str) -> spaces.Space:
+        return self._action_space
+
+    def reset(self, seed: int | None = None, options: dict | None = None):
+        if seed is not None:
+            self.np_random, _ = seeding.np_random(seed)
+        self._task.start()
+        self.agents = list(self.possible_agents)
+        obs = self._task._obs
+        return {a: obs[self._index[a]] for a in self.agents}, {a: self._info(a) for a in self.agents}
+
+    def step(self, actions: dict):
+        chosen = np.full(len(self.possible_agents), 8, np.intp)   # agents no longer playing: stay
+        for agent, action in actions.items():
+            chosen[self._index[agent]] = int(action)
+        result = self._task.step(chosen)
+        live = list(self.agents)
+        observations = {a: result.observation[self._index[a]] for a in live}
+        rewards = {a: float(result.reward[self._index[a]]) for a in live}
+        terminations = {a: bool(result.terminated[self._index[a]]) for a in live}
+        truncations = {a: bool(result.truncated[self._index[a]]) for a in live}
+        infos = {}
+        for a in live:
+            i = self._index[a]
+            infos[a] = {**self._info(a), "reward_terms": dict(zip(TERMS, result.terms[:, i].tolist())),
+                        "success": bool(result.reached[i]), "collision": bool(result.collided[i]),
+                        "robot_robot_contact": bool(result.robot_contact[i])}
+            if self._task.stepper.trap is not None:
+                infos[a]["trapped"] = bool(result.trapped[i])
+        self.agents = [a for a in live if not (terminations[a] or truncations[a])]
+        return observations, rewards, terminations, truncations, infos
+
+    def _info(self, agent: str) -> dict:
+        a = self._index[agent]
+        f, r = self._task.members[a]
+        position = self._task.stepper.positions[f, r]
+        world = self._task.crowd.worlds[f]
+        return {"position": position.copy(), "formation": f, "world": self.world.name,
+                "distance": float(world.distance_to_target(position[None])[0])}
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        crowd = self._task.crowd
+        positions = np.concatenate([self._task.stepper.positions[f, :size] for f, size in enumerate(crowd.sizes)])
+        roles = tuple(role for size in crowd.sizes for role in formation_roles(size))
+        families = tuple(f for f, size in enumerate(crowd.sizes) for _ in range(size))
+        snapshot = Snapshot(positions, roles, (), (f"{self.world.name}  step {self._task.step_count}",),
+                            self._task.step_count, families)
+        return draw_frame(field_image(self.world), snapshot)
+
+    def close(self) -> None:
+        pass

@@ -1,0 +1,264 @@
+"""Deep Q-learning (Model §2, thesis §4) as a :class:`~apf_physics.learning.learner.Learner`.
+
+Each step acts ε-greedily (Model eq. 34) in every training environment, stores the transitions
+in the experience pool and makes the configured updates, whose TD target is eq. 32. A segment
+starts with fresh environments seeded from ``(seed, transitions so far)``: with the pool saved
+in the checkpoint (``save_buffer``) a resumed run continues exactly as the uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import collections
+import copy
+from typing import Any, Callable, Optional, Sequence
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from apf_physics.envs import NavigateVectorEnv
+from apf_physics.models.network import QNetwork
+from apf_physics.models.policy import DQNPolicy
+from apf_physics.planners.dqn import DQNPlanner
+from apf_physics.learning.buffer import ReplayBuffer
+from apf_physics.learning.config import N_ACTIONS, TrainConfig, epsilon_schedule
+from apf_physics.learning.learner import Counters, Learner
+from apf_physics.learning.phases import Phase
+from apf_physics.world.core import World
+
+
+def q_network(config: TrainConfig) -> QNetwork:
+    """A freshly initialised Q-network for this configuration."""
+    n = config.network
+    return QNetwork(obs_shape=config.observer.shape, filters=n.filters, hidden=n.hidden, n_actions=N_ACTIONS,
+                    negative_slope=n.negative_slope, obs_transform=n.obs_transform)
+
+
+def epsilon_greedy(q_network: torch.nn.Module, obs: np.ndarray, epsilon: float,
+                   rng: np.random.Generator) -> np.ndarray:
+    """ε-greedy actions for a batch: a random action with probability ε, else the greedy one."""
+    with torch.inference_mode():
+        actions = q_network(torch.from_numpy(obs)).argmax(1).numpy()
+    explore = rng.random(len(actions)) < epsilon
+    if explore.any():
+        actions = np.where(explore, rng.integers(0, N_ACTIONS, len(actions)), actions)
+    return actions
+
+
+class QLearning:
+    """The Q-network, its target network, optimiser and experience pool, and the TD update (Model eq. 32)."""
+
+    def __init__(self, config: TrainConfig):
+        self.config = config.dqn
+        self.q_network = q_network(config)
+        self.target_network = (copy.deepcopy(self.q_network) if self.config.target_update != "none"
+                               else self.q_network)
+        if self.target_network is not self.q_network:
+            self.target_network.requires_grad_(False)
+        self.max_grad_norm = config.network.max_grad_norm
+        self.optimizer = torch.optim.Adam(self.q_network.parameters(), lr=config.network.learning_rate, fused=True)
+        self.buffer = ReplayBuffer(self.config.buffer_size, config.observer.shape, self.config.batch_size)
+        self.updates = 0
+        self._online = list(self.q_network.parameters())
+        self._target = list(self.target_network.parameters())
+        self._loss_sum, self._loss_count = torch.zeros(()), 0
+
+    @property
+    def ready(self) -> bool:
+        """Whether the pool holds enough transitions to learn from."""
+        return len(self.buffer) >= max(self.config.learning_starts, self.config.batch_size)
+
+    def update(self, rng: np.random.Generator) -> None:
+        """One gradient step on a minibatch drawn with ``rng``, then the target network's update."""
+        c = self.config
+        batch = self.buffer.sample(rng)
+        with torch.no_grad():
+            if c.double_dqn:  # choose with the online network, value with the target network
+                next_actions = self.q_network(batch.next_observations).argmax(1, keepdim=True)
+                next_q = self.target_network(batch.next_observations).gather(1, next_actions).squeeze(1)
+            else:
+                next_q = self.target_network(batch.next_observations).amax(1)
+            # TD target (eq. 32): R + γ·max Q(O_{n+1}), nothing beyond a terminal step
+            td_target = batch.rewards + c.gamma * (1.0 - batch.dones) * next_q
+        q_taken = self.q_network(batch.observations).gather(1, batch.actions).squeeze(1)
+        if c.loss == "huber":  # Huber loss: less sensitive to outliers than the thesis's MSE
+            loss = F.smooth_l1_loss(q_taken, td_target)
+        else:
+            loss = F.mse_loss(q_taken, td_target)
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        if self.max_grad_norm is not None:
+            torch.nn.utils.clip_grad_norm_(self._online, self.max_grad_norm, foreach=True)
+        self.optimizer.step()
+        self.updates += 1
+        if c.target_update == "soft":
+            with torch.no_grad():
+                torch._foreach_lerp_(self._target, self._online, c.tau)
+        elif c.target_update == "hard" and self.updates % c.target_update_every == 0:
+            self.target_network.load_state_dict(self.q_network.state_dict())
+        self._loss_sum += loss.detach()  # summed as a tensor: no per-update synchronisation
+        self._loss_count += 1
+
+    def mean_loss(self) -> Optional[float]:
+        """Mean loss of the updates since the last call (None: there were none)."""
+        mean = float(self._loss_sum) / self._loss_count if self._loss_count else None
+        self._loss_sum, self._loss_count = torch.zeros(()), 0
+        return mean
+
+
+class Collector:
+    """Acts ε-greedily, stores the transitions in the pool and keeps recent episodes' returns.
+
+    Args:
+        learning: Whose network acts and whose pool fills.
+        reward_scale: Rewards are stored multiplied by it (returns are kept unscaled).
+        window: Recent episodes kept for :meth:`means`.
+    """
+
+    def __init__(self, learning: QLearning, reward_scale: float = 1.0, window: int = 100):
+        self.learning = learning
+        self.reward_scale = reward_scale
+        self.recent_returns: collections.deque = collections.deque(maxlen=window)
+        self.recent_success: collections.deque = collections.deque(maxlen=window)
+
+    def begin(self, obs: np.ndarray) -> None:
+        """Start from freshly reset environments' observations."""
+        self.obs = obs
+        self.prev_done = np.zeros(len(obs), bool)
+        self.ep_return = np.zeros(len(obs))
+
+    def step(self, step: Callable[[np.ndarray], tuple], epsilon: float, rng: np.random.Generator) -> tuple[int, int]:
+        """One vector step; ``step(actions)`` returns ``(obs, rewards, terminated, truncated, success)``.
+
+        With NEXT_STEP autoreset the step right after an episode ends only returns the reset
+        observation: that transition is not stored.
+
+        Returns:
+            Transitions stored and episodes that ended.
+        """
+        actions = epsilon_greedy(self.learning.q_network, self.obs, epsilon, rng)
+        next_obs, rewards, terminated, truncated, success = step(actions)
+        valid = ~self.prev_done
+        self.learning.buffer.add(self.obs[valid], next_obs[valid], actions[valid],
+                                 rewards[valid] * self.reward_scale, terminated[valid])
+        done = (terminated | truncated) & valid
+        self.ep_return += np.where(valid, rewards, 0.0)
+        if done.any():
+            self.recent_returns.extend(self.ep_return[done].tolist())
+            self.recent_success.extend(np.asarray(success, bool)[done].tolist())
+            self.ep_return[done] = 0.0
+        self.prev_done = terminated | truncated
+        self.obs = next_obs
+        return int(valid.sum()), int(done.sum())
+
+    def means(self) -> tuple[str | float, str | float]:
+        """Mean return and success rate of the recent episodes, rounded for ``train.csv`` (``""``: none yet)."""
+        if not self.recent_returns:
+            return "", ""
+        return round(float(np.mean(self.recent_returns)), 4), round(float(np.mean(self.recent_success)), 4)
+
+
+class TrainingEnvs:
+    """The environments of a segment: one or two :class:`~apf_physics.envs.NavigateVectorEnv` stepped as one.
+
+    The first starts its searches as the phase says, the second (a ``world_start_fraction``
+    share of ``num_envs``) at the worlds' own starts. Env ``i`` is seeded with the ``i``-th
+    value of ``SeedSequence(seed)``.
+    """
+
+    def __init__(self, worlds: Sequence[World], starts: Any, config: TrainConfig, seed: Sequence[int]):
+        env = config.env
+        n_world = int(round(env.world_start_fraction * env.num_envs))
+        parts = [(starts, env.num_envs - n_world), ("world", n_world)]
+        self.envs = [NavigateVectorEnv(world=list(worlds), num_envs=n, starts=s, observer=env.observer,
+                                       reward=env.reward_weights, max_episode_steps=env.max_episode_steps)
+                     for s, n in parts if n > 0]
+        self.seeds = [int(s) for s in np.random.SeedSequence(list(seed)).generate_state(env.num_envs)]
+
+    def reset(self) -> np.ndarray:
+        obs, offset = [], 0
+        for env in self.envs:
+            obs.append(env.reset(seed=self.seeds[offset:offset + env.num_envs])[0])
+            offset += env.num_envs
+        return obs[0] if len(obs) == 1 else np.concatenate(obs)
+
+    def step(self, actions: np.ndarray) -> tuple:
+        """``(obs, rewards, terminated, truncated, success)`` of all envs."""
+        out, offset = [], 0
+        for env in self.envs:
+            obs, reward, terminated, truncated, info = env.step(actions[offset:offset + env.num_envs])
+            out.append((obs, reward, terminated, truncated, info["success"]))
+            offset += env.num_envs
+        return out[0] if len(out) == 1 else tuple(np.concatenate(parts) for parts in zip(*out))
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()
+
+
+class DQNLearner(Learner):
+    """Deep Q-learning of the window network in :class:`TrainingEnvs`; a step is one vector step."""
+
+    def __init__(self, config: TrainConfig):
+        self.config = config
+        self.learning = QLearning(config)
+        self.network = self.learning.q_network
+        self.observer = config.observer
+        self.collector = Collector(self.learning, config.dqn.reward_scale)
+        self.envs: Optional[TrainingEnvs] = None
+        self.epsilon = config.dqn.epsilon_initial
+
+    def begin(self, worlds: Sequence[World], phase: Phase, seed: tuple[int, int]) -> None:
+        self.envs = TrainingEnvs(worlds, phase.starts, self.config, seed=seed)
+        self.collector.begin(self.envs.reset())
+
+    def collect(self, c: Counters, rng: np.random.Generator) -> tuple[int, int]:
+        dqn = self.config.dqn
+        self.epsilon = epsilon_schedule(dqn, c.phase_episodes if dqn.restart_exploration else c.episodes)
+        return self.collector.step(self.envs.step, self.epsilon, rng)
+
+    def update(self, c: Counters, rng: np.random.Generator) -> None:
+        if self.learning.ready and c.vector_steps % self.config.dqn.train_frequency == 0:
+            for _ in range(self.config.dqn.gradient_steps):
+                self.learning.update(rng)
+
+    def end(self) -> None:
+        self.envs.close()
+        self.envs = None
+
+    def planner(self, shield: bool) -> DQNPlanner:
+        return DQNPlanner(policy=DQNPolicy(self.network, self.observer), shield=shield)
+
+    def log_values(self, c: Counters) -> dict[str, Any]:
+        mean_return, success_rate = self.collector.means()
+        return {"epsilon": round(self.epsilon, 5), "mean_return": mean_return, "success_rate": success_rate,
+                "loss": self.learning.mean_loss()}
+
+    def state(self, with_buffer: bool) -> tuple[dict[str, Any], dict[str, Any]]:
+        learning, collector = self.learning, self.collector
+        state = {"updates": learning.updates, "loss_count": learning._loss_count,
+                 "collector": {"returns": list(collector.recent_returns), "success": list(collector.recent_success)}}
+        tensors = {"q_network": self.network.state_dict(), "optimizer": learning.optimizer.state_dict(),
+                   "loss_sum": learning._loss_sum.clone()}
+        if learning.target_network is not self.network:
+            tensors["target_network"] = learning.target_network.state_dict()
+        if with_buffer:
+            tensors["buffer"] = learning.buffer.state_dict()
+        return state, tensors
+
+    def load(self, state: dict[str, Any], tensors: dict[str, Any]) -> None:
+        learning = self.learning
+        self.network.load_state_dict(tensors["q_network"])
+        if learning.target_network is not self.network:
+            learning.target_network.load_state_dict(tensors["target_network"])
+        learning.optimizer.load_state_dict(tensors["optimizer"])
+        if "buffer" in tensors:
+            learning.buffer.load_state_dict(tensors["buffer"])
+        learning.updates = int(state["updates"])
+        learning._loss_sum, learning._loss_count = tensors["loss_sum"].clone(), int(state["loss_count"])
+        self.collector.recent_returns.extend(state["collector"]["returns"])
+        self.collector.recent_success.extend(state["collector"]["success"])
+
+    @property
+    def updates(self) -> int:
+        return self.learning.updates

@@ -1,0 +1,92 @@
+"""What a training run shows while it runs: a bar on a terminal, plain lines anywhere else.
+
+On a terminal, a tqdm bar on stderr measures the stop rule that applies (steps, searches,
+the stages' searches or seconds) with ε, the recent training success and the latest
+evaluation in its postfix. When stderr is not a terminal (``nohup``, CI, a notebook cell, a
+pipe) there is no bar and no carriage return: one plain line per row of ``train.csv``,
+as Stable-Baselines3's logger prints, with the step, the latest evaluation, the loss and the
+elapsed time.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Any, Optional, Sequence, TextIO
+
+from tqdm import tqdm
+
+from apf_physics.learning.config import TrainConfig
+from apf_physics.learning.learner import Counters
+from apf_physics.learning.phases import Phase
+
+
+class Progress:
+    """A run's progress display (``stream``: default stderr; a bar only if it is a terminal)."""
+
+    def __init__(self, config: TrainConfig, phases: Sequence[Phase], c: Counters, stream: Optional[TextIO] = None):
+        self.stream = sys.stderr if stream is None else stream
+        self.budgets = [p.episodes for p in phases]
+        s = config.schedule
+        if s.total_steps is not None:
+            self.measure, total, unit = "steps", s.total_steps, "step"
+        elif s.total_episodes is not None:
+            self.measure, total, unit = "episodes", s.total_episodes, "search"
+        elif s.time_limit is not None:
+            self.measure, total, unit = "seconds", s.time_limit, "s"
+        elif all(b is not None for b in self.budgets):
+            self.measure, total, unit = "stage_episodes", sum(self.budgets), "search"
+        else:
+            self.measure, total, unit = "steps", None, "step"
+        self.total, self.unit = total, unit
+        self.multi = len(phases) > 1
+        self._desc = "" if s.target_success is None else f"until {s.target_success:.0%} of the validation starts"
+        self.bar = None
+        if self.stream.isatty():
+            self.bar = tqdm(total=total, initial=self._value(c), unit=unit, desc=self._desc or None,
+                            dynamic_ncols=True, smoothing=0.05, file=self.stream)
+
+    def _value(self, c: Counters) -> float:
+        if self.measure == "steps":
+            return c.global_step
+        if self.measure == "episodes":
+            return c.episodes
+        if self.measure == "seconds":
+            return round(c.wall_time, 1)
+        return sum(b for b in self.budgets[:c.phase]) + c.phase_episodes
+
+    def update(self, c: Counters, phase: Phase, epsilon: Any, latest: Optional[dict]) -> None:
+        """After every step: move the bar (a terminal only)."""
+        if self.bar is None:
+            return
+        if self.multi:
+            desc = f"{phase.name}" + (f", {self._desc}" if self._desc else "")
+            if desc != self.bar.desc:
+                self.bar.set_description_str(desc, refresh=False)
+        eps = f"ε {epsilon:.2f}, " if isinstance(epsilon, float) else ""
+        self.bar.set_postfix_str(f"{eps}eval {'-' if latest is None else format(latest['success'], '.0%')}",
+                                 refresh=False)
+        value = self._value(c) if self.bar.total is None else min(self._value(c), self.bar.total)
+        self.bar.update(value - self.bar.n)
+
+    def line(self, row: dict[str, Any], latest: Optional[dict]) -> None:
+        """After every row of ``train.csv``: one plain line, when there is no bar."""
+        if self.bar is not None:
+            return
+        of = "" if self.total is None or self.measure != "steps" else f"/{self.total:,}"
+        parts = [f"step {row['global_step']:,}{of}", f"phase {row['phase']}", f"episodes {row['episodes']:,}"]
+        if row["eval_success"] != "":
+            parts.append(f"eval success {row['eval_success']:.1%}")
+            if row["eval_random_success"] != "":
+                parts.append(f"held-out starts {row['eval_random_success']:.1%}")
+        elif latest is not None:
+            parts.append(f"last eval success {latest['success']:.1%}")
+        if row["epsilon"] != "":
+            parts.append(f"ε {row['epsilon']:.3f}")
+        if row["loss"] != "":
+            parts.append(f"loss {row['loss']:.4g}")
+        parts.append(f"{row['wall_time']:.0f} s")
+        print("train: " + ", ".join(parts), file=self.stream, flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
