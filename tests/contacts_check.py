@@ -1,5 +1,6 @@
 """What the contact tests assert after every control step: how far robots overlap obstacles, the
-map's edge and each other, and whether a robot's centre passed through another robot."""
+map's edge and each other, whether a robot's centre passed through another robot, and whether
+one passed through a thin bar."""
 
 import numpy as np
 
@@ -58,3 +59,24 @@ def assert_contacts_hold(physics, before, t_end=None):
     assert obstacle.max(initial=0) <= OBSTACLE_OVERLAP, f"a robot {obstacle.max():.4f} inside an obstacle or the edge"
     assert robot.max(initial=0) <= ROBOT_OVERLAP, f"robots overlap by {robot.max():.4f}"
     assert not crossed.any(), "a robot passed through another"
+
+
+def _crosses(p, q, a, b):
+    """(N,) whether the segments ``p → q`` cross the segment ``a → b`` (properly)."""
+    def side(o, s, t):
+        return (s[..., 0] - o[..., 0]) * (t[..., 1] - o[..., 1]) - (s[..., 1] - o[..., 1]) * (t[..., 0] - o[..., 0])
+    return (side(a, b, p) * side(a, b, q) < 0) & (side(p, q, a) * side(p, q, b) < 0)
+
+
+def tunnelled(lines, before, after, reach):
+    """(N,) robots whose move from ``before`` to ``after`` crossed a bar's centre line ``(a, b)`` of
+    ``lines`` where the way round either end is longer than ``reach`` (the farthest a centre moves
+    in a step): the shortest path that crosses the line beyond an end passes through the end, so
+    such a robot went through the bar."""
+    out = np.zeros(len(before), bool)
+    for a, b in lines:
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        around = np.minimum(np.hypot(*(before - a).T) + np.hypot(*(after - a).T),
+                            np.hypot(*(before - b).T) + np.hypot(*(after - b).T))
+        out |= _crosses(before, after, a[None], b[None]) & (around > reach)
+    return out

@@ -1,8 +1,10 @@
 """Contacts that hold: at the end of every control step no robot is more than 0.01 inside an
 obstacle or past the map's edge, no two robots overlap by more than 0.02, and no robot's
-centre passes through another robot (issue 25, item 2). Crowds are pushed at random into thin
+centre passes through another robot or through a wall. Crowds are pushed at random into thin
 walls and into each other: robots alone in their slots, formations (several robots per slot),
-crowds of slots, and every robot of the multi-agent environment."""
+crowds of slots, and every robot of the multi-agent environment; and unicycles, alone, in
+formations and in crowds, at the highest speed a world file accepts, among bars down to 0.001
+thick (the physics probe's worlds, ``tools/probe_contacts.py``)."""
 
 import math
 import os
@@ -14,8 +16,9 @@ from hypothesis import strategies as st
 
 from apf_physics import world_from_dict
 from apf_physics.sim.physics import Physics
+from apf_physics.world.kinematics import MAX_UNICYCLE_SPEED, UnicycleLimits, substep_velocities, wrap_angle
 from conftest import WORLDS, simple_world_dict
-from contacts_check import assert_contacts_hold, overlaps
+from contacts_check import assert_contacts_hold, overlaps, tunnelled
 
 EXAMPLES = int(os.environ.get("APF_CONTACT_EXAMPLES", 4))
 
@@ -156,3 +159,94 @@ def test_the_check_sees_a_pass_through():
     physics._positions[:] = [[0.1, 10.0], [6.0, 10.0]]
     obstacle, _, _ = overlaps(physics, before)
     assert obstacle[0] == pytest.approx(0.15)
+
+
+# -- unicycles at the highest speed a world file accepts ------------------------------------------
+
+def thin_bars(rng: np.random.Generator, count: int = 12):
+    """A 20 × 20 world of ``count`` bars 0.001–0.1 thick at random angles, and each bar's centre line."""
+    obstacles, lines = [], []
+    for _ in range(count):
+        c = rng.uniform(3, 17, 2)
+        angle, length, width = rng.uniform(0, math.pi), rng.uniform(2, 6), rng.uniform(0.001, 0.1)
+        u = np.array([math.cos(angle), math.sin(angle)])
+        n = np.array([-u[1], u[0]])
+        a, b = np.clip(c - u * length / 2, 0.5, 19.5), np.clip(c + u * length / 2, 0.5, 19.5)
+        obstacles.append({"polygon": [(a - n * width / 2).tolist(), (b - n * width / 2).tolist(),
+                                      (b + n * width / 2).tolist(), (a + n * width / 2).tolist()]})
+        lines.append((a, b))
+    world = world_from_dict({"size": [20, 20], "field": "thesis-fixed", "targets": [[19.5, 19.5]],
+                             "obstacles": obstacles})
+    return world, lines
+
+
+def drive_unicycles(rng, physics, worlds, lines, world_of, speed, steps, robots_meet):
+    """Random full-speed commands (forward or back, any turn within π per step) for ``steps`` steps,
+    never reset; after each, contacts hold and no robot went through a bar."""
+    n = physics.num_robots
+    limits = UnicycleLimits(max_speed=speed, max_reverse=speed, max_turn_rate=math.pi, max_accel=2 * speed,
+                            max_turn_accel=2 * math.pi)
+    state = np.zeros((n, 5))
+    state[:, 2] = rng.uniform(-math.pi, math.pi, n)
+    reach = speed * (2 if robots_meet else 1) + worlds[0].robot_radius
+    for _ in range(steps):
+        before = physics.positions
+        v, w = limits.clamp(rng.choice([-1.0, 1.0], n) * speed, rng.uniform(-math.pi, math.pi, n),
+                            state[:, 3], state[:, 4])
+        state[:, :2] = before
+        physics.step(substep_velocities(state, v, w, physics.substeps))
+        state[:, 2], state[:, 3], state[:, 4] = wrap_angle(state[:, 2] + w), v, w
+        obstacle, robot, _ = overlaps(physics, before)   # (straight paths say nothing of arcs: see the probe)
+        assert obstacle.max() <= 0.01 and robot.max(initial=0) <= 0.02, (obstacle.max(), robot.max(initial=0))
+        for i, world in enumerate(worlds):
+            mine = world_of == i
+            assert not tunnelled(lines[i], before[mine], physics.positions[mine], reach).any(), "through a bar"
+
+
+@settings(max_examples=EXAMPLES, deadline=None)
+@given(st.integers(0, 10_000), st.sampled_from([3.0, MAX_UNICYCLE_SPEED]))
+def test_unicycles_alone_at_full_speed_neither_sink_into_nor_pass_through_bars(seed, speed):
+    rng = np.random.default_rng(seed)
+    made = [thin_bars(rng) for _ in range(2)]
+    worlds, lines = [w for w, _ in made], [b for _, b in made]
+    world_of = np.arange(32) % 2
+    physics = Physics([worlds[i] for i in world_of], max_speed=speed)
+    for s in range(32):
+        physics.place([s], worlds[world_of[s]].random_free_positions(rng, 1))
+    drive_unicycles(rng, physics, worlds, lines, world_of, speed, 60, robots_meet=False)
+
+
+@settings(max_examples=EXAMPLES, deadline=None)
+@given(st.integers(0, 10_000), st.booleans())
+def test_unicycles_in_formations_and_crowds_at_full_speed_hold(seed, crowd):
+    rng = np.random.default_rng(seed)
+    world, lines = thin_bars(rng)
+    slots, m = 6, 4
+    physics = Physics([world] * slots, robots_per_slot=m, max_speed=MAX_UNICYCLE_SPEED,
+                      crowds=[0] * slots if crowd else None)
+    if crowd:
+        physics.place(np.arange(slots * m), world.random_free_positions(rng, slots * m))
+    else:
+        for s in range(slots):
+            physics.place(np.arange(s * m, (s + 1) * m), world.random_free_positions(rng, m))
+    drive_unicycles(rng, physics, [world], [lines], np.zeros(slots * m, np.intp), MAX_UNICYCLE_SPEED, 40,
+                    robots_meet=True)
+
+
+def test_a_unicycle_that_hits_a_bar_and_turns_away_is_no_faster_than_its_top_speed():
+    # The probe's tunnel: a contact took the part of the command heading into the bar, and the
+    # arc's later turn, added on top, left the body faster than the speed its substeps were sized
+    # for (up to 3.65 units in a step at a top speed of 3); a second bar then let its centre through.
+    world = world_from_dict({"size": [20, 20], "field": "thesis-fixed", "targets": [[19.5, 19.5]],
+                             "obstacles": [{"polygon": [[10, 2], [10.001, 2], [10.001, 18], [10, 18]]}]})
+    rng = np.random.default_rng(0)
+    n = 400
+    x0 = rng.uniform(9.0, 9.74, n)                          # from touching the bar to a step and a half away
+    state = np.column_stack([x0, np.full(n, 10.0), rng.uniform(-math.pi / 2, math.pi / 2, n), np.zeros((n, 2))])
+    omega = rng.choice([-1, 1], n) * rng.uniform(1.5, math.pi, n)
+    physics = Physics([world] * n, max_speed=3.0)
+    physics.place(np.arange(n), state[:, :2])
+    physics.step(substep_velocities(state, np.full(n, 3.0), omega, physics.substeps))
+    moved = np.hypot(*(physics.positions - state[:, :2]).T)
+    assert moved.max() <= 3.0 + 1e-9
+    assert np.all(physics.positions[:, 0] < 10.0 - world.robot_radius + 0.01)   # all still on their side

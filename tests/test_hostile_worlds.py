@@ -25,7 +25,7 @@ from hypothesis import strategies as st
 from apf_physics import WorldError, load_world, world_from_dict
 from apf_physics.world.bundled import bundled_dir, list_bundled
 from apf_physics.world.generate import generate_world
-from apf_physics.sim.physics import substeps_for
+from apf_physics.world.kinematics import MAX_SUBSTEPS, physics_substeps
 from apf_physics.world.io.worldfile import MAX_PROBLEMS, MAX_SIDE, MIN_ROBOT_RADIUS, dump_world_yaml, memory_budget, raster_memory
 
 EXAMPLES = int(os.environ.get("APF_FUZZ_EXAMPLES", 150))
@@ -60,7 +60,11 @@ def check_outcome(load) -> str:
         return "refused"
     w, h = world.size
     assert 1 <= w <= MAX_SIDE and 1 <= h <= MAX_SIDE
-    assert world.robot_radius >= MIN_ROBOT_RADIUS and substeps_for(world.robot_radius) <= 256
+    top = max(math.sqrt(2), world.unicycle.top_speed) if world.unicycle is not None else math.sqrt(2)
+    meet = bool(world.formations) or (world.formation is not None and world.formation.followers > 0)
+    obstacle_speed = max((world.obstacles[i].motion.speed for i in world.moving), default=0.0)
+    assert world.robot_radius >= MIN_ROBOT_RADIUS
+    assert physics_substeps(world.robot_radius, top, obstacle_speed, meet) <= MAX_SUBSTEPS
     assert raster_memory(world.size, len(world.targets)) <= memory_budget()
     assert world.goal_tolerance < math.hypot(w, h) / 2
     corners = np.array([[0, 0], [w, 0], [0, h], [w, h], *world.targets.tolist(), *world.starts.tolist()], float)

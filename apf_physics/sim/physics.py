@@ -27,9 +27,12 @@ another slot's.
 
 **Tunnelling.** Chipmunk detects overlaps, not swept contacts, so a disc moving ``δ`` per
 substep can sink at most ``δ`` into an obstacle before the solver pushes it out. The
-substep count is chosen so that ``δ ≤ 0.9 · robot_radius`` at the fastest allowed speed: a
-robot's centre therefore never enters an obstacle, however thin (a zero-radius point
-obstacle or a zero-thickness wall included).
+substep count (:func:`~apf_physics.world.kinematics.physics_substeps`) is chosen so that
+``δ ≤ 0.9 · robot_radius`` at the fastest a robot can move, and no body is let go faster: a
+unicycle's velocity, changed at every substep to follow its arc, is capped at the top speed
+(:meth:`Physics._add_velocities`), since a contact that took part of the command would
+otherwise leave it up to twice as fast. A robot's centre therefore never enters an obstacle,
+however thin (a zero-radius point obstacle or a zero-thickness wall included).
 
 Only public pymunk API is used; ``pymunk.batch`` (reading and writing every body's
 position and velocity in one call) is marked experimental by pymunk, hence ``pymunk<8``.
@@ -54,8 +57,10 @@ from apf_physics.sim.swept import Sweeps
 from apf_physics.sim.tiles import Tiles, obstacle_shapes
 from apf_physics.sim.tiles import CHUNK, TILE_GAP, WALL_THICKNESS  # noqa: F401 (public here too)
 from apf_physics.world.core import World
+from apf_physics.world.kinematics import HOLONOMIC_SPEED, MAX_SUBSTEPS, physics_substeps
+from apf_physics.world.kinematics import substeps_for  # noqa: F401 (public here too)
 
-MAX_SPEED = math.sqrt(2.0)  # a diagonal unit move (±1, ±1) per control step [units per control step]
+MAX_SPEED = HOLONOMIC_SPEED  # a diagonal unit move (±1, ±1) per control step [units per control step]
 CONTACT_MARGIN = 0.01  # a move that keeps this much more than touching distance needs no physics [units]
 _FEW = 4  # up to this many proxies, per-body attribute access beats pymunk.batch's fixed cost
 _COUNT_AT_MOST = 8  # up to this many robots in pymunk, count touching pairs by callbacks; more: read every substep
@@ -65,11 +70,6 @@ SETTLE_OBSTACLE = 0.005  # a robot ending a step farther than this inside an obs
 SETTLE_ROUNDS = 6  # rounds of pushes and queries before a robot still overlapping is put back (Physics._settle)
 SETTLE_ROBOT = 0.01  # two robots ending a step overlapping more than this are pushed apart [units]
 _BODY_FIELDS = pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.VELOCITY   # (or-ing pymunk's flags costs µs)
-
-
-def substeps_for(radius: float, max_speed: float = MAX_SPEED) -> int:
-    """The fewest substeps (a power of two) that keep a robot's centre out of every obstacle."""
-    return 2 ** math.ceil(math.log2(max(1.0, max_speed / (0.9 * radius))))
 
 
 class Physics:
@@ -118,10 +118,14 @@ class Physics:
         every = list(worlds) + list(other_worlds)
         self._min_radius = min(w.robot_radius for w in every)
         obstacle_speed = max((w.obstacles[i].motion.speed for w in every for i in w.moving), default=0.0)
-        relative = self.max_speed + obstacle_speed / self.control_dt
-        if self.robots_per_slot > 1 or self._crowd_robots:
-            relative = max(relative, 2 * self.max_speed)   # robots that meet close in on each other at twice the speed
-        self.substeps = int(substeps) if substeps is not None else substeps_for(self._min_radius, relative)
+        if substeps is None:
+            substeps = physics_substeps(self._min_radius, self.max_speed, obstacle_speed / self.control_dt,
+                                        robots_meet=self.robots_per_slot > 1 or bool(self._crowd_robots))
+            if substeps > MAX_SUBSTEPS:
+                raise UserError(f"a robot of radius {self._min_radius:g} at up to {self.max_speed:g} units per step "
+                                f"needs {substeps:,} physics substeps per step, over the limit of {MAX_SUBSTEPS}: "
+                                f"a larger robot or a lower top speed")
+        self.substeps = int(substeps)
         self.dt = self.control_dt / self.substeps
         # how far pymunk may take a robot in one step, its own move and pushes by others included (a
         # generous bound: twice the fastest move), for the free-move test of robots that meet others
@@ -652,6 +656,23 @@ class Physics:
             anchor = np.concatenate([anchor, self._positions[more_robot]])
             static_normal = np.concatenate([static_normal, more_normal])
             static_depth = np.concatenate([static_depth, more_depth])
+        self._undo_pile_up(still, simulated, before)
+
+    def _undo_pile_up(self, still: np.ndarray, simulated: np.ndarray, before: np.ndarray) -> None:
+        """Put back where the step began every robot that pymunk moved among those that meet the
+        robots ``still`` overlapping after every round of :meth:`_settle`.
+
+        A robot that others press into a narrow V leaves it only along the V, a little at each
+        round of pushes, and its mates press it back in after it is put back alone; where the
+        step began, the pile-up stands as the step before settled it. (Robots that meet others
+        only; the few steps a crowd jams.)
+        """
+        back = self._with_mates(still)
+        back = back[np.isin(back, simulated)]
+        self._positions[back] = before[np.searchsorted(simulated, back)]
+        proxies = self._robot_proxy[back]
+        self._proxy_target[proxies] = self._positions[back] + self._tiles.offset[self._slot_tile[back // self.robots_per_slot]]
+        self._proxy_moved[proxies] = True
 
     def _settle_alone(self, robots: np.ndarray, first: np.ndarray, planes: np.ndarray, simulated: np.ndarray,
                       before: np.ndarray) -> None:
@@ -905,19 +926,29 @@ class Physics:
     def _add_velocities(self, proxies: np.ndarray, change: np.ndarray) -> None:
         """Add ``change`` to the velocities of the bodies of ``proxies`` (between substeps), leaving
         everything else as it is. A free body then moves at its new command; one that a contact
-        slowed keeps what the contact took (as a holonomic robot keeps it for the whole step)."""
+        slowed keeps what the contact took (as a holonomic robot keeps it for the whole step).
+
+        A contact that took the part of a command heading into a wall leaves the body's velocity
+        off the command; adding the command's later changes on top can then give the body more
+        than the top speed (a unicycle turning away from the wall it hit is pushed off it at up
+        to twice its speed), which the substeps are not sized for. The sum is therefore capped
+        at the top speed (:func:`_cap_speed`); a free body, which moves at its command, is never
+        above it.
+        """
+        cap = self.max_speed / self.control_dt
         if len(proxies) <= _FEW:
             for k, (dx, dy) in zip(proxies.tolist(), change.tolist()):
                 body = self._proxy_body[k]
                 vx, vy = body.velocity
-                body.velocity = (vx + dx, vy + dy)
+                body.velocity = _cap_speed_one(vx + dx, vy + dy, cap)
             return
         fields = _BODY_FIELDS
         buf = self._buffer
         buf.clear()
         pymunk.batch.get_space_bodies(self.space, fields, buf)
         rows = np.frombuffer(buf.float_buf(), dtype=np.float64).reshape(-1, 4).copy()
-        rows[self._row_of_proxy[proxies], 2:] += change
+        at = self._row_of_proxy[proxies]
+        rows[at, 2:] = _cap_speed(rows[at, 2:] + change, cap)
         write = pymunk.batch.Buffer()
         write.set_float_buf(rows.reshape(-1))
         pymunk.batch.set_space_bodies(self.space, fields, write)
@@ -934,6 +965,28 @@ class Physics:
     def _contact_rows(self, pairs: np.ndarray) -> np.ndarray:
         """(K, 3) sorted distinct rows ``(robot, kind, other)`` of the touching body-id pairs."""
         return contact_rows(pairs, self._labels, self._proxy_ids, self._proxy_order, self._proxy_robot)
+
+
+SPEED_CAP_SLACK = 1e-9
+"""A body is slowed to the top speed only when it exceeds it by more than this share: a free
+body's velocity, the command's chord added up substep by substep, may round a hair above it."""
+
+
+def _cap_speed(velocity: np.ndarray, cap: float) -> np.ndarray:
+    """(K, 2) velocities, those faster than ``cap`` (by more than :data:`SPEED_CAP_SLACK`) scaled down to it."""
+    speed = np.hypot(velocity[:, 0], velocity[:, 1])
+    over = speed > cap * (1.0 + SPEED_CAP_SLACK)
+    if over.any():
+        velocity[over] *= (cap / speed[over])[:, None]
+    return velocity
+
+
+def _cap_speed_one(vx: float, vy: float, cap: float) -> tuple[float, float]:
+    """:func:`_cap_speed` of one velocity, in Python floats."""
+    speed = math.hypot(vx, vy)
+    if speed > cap * (1.0 + SPEED_CAP_SLACK):
+        return vx * (cap / speed), vy * (cap / speed)
+    return vx, vy
 
 
 @kernel

@@ -31,6 +31,7 @@ Everything is vectorised over robots: arrays of shape ``(N,)`` or ``(N, 2)``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -55,6 +56,56 @@ KINEMATICS = ("holonomic", "unicycle")
 """The robot kinds: ``holonomic`` (the thesis's robot: any velocity, no heading) and ``unicycle``."""
 LIMIT_KEYS = ("max_speed", "max_reverse", "max_turn_rate", "max_accel", "max_turn_accel")
 """The fields of :class:`UnicycleLimits`, as a world file's ``robot:`` and the env options name them."""
+
+HOLONOMIC_SPEED = math.sqrt(2.0)
+"""The holonomic robot's top speed [units/step]: a diagonal unit move (±1, ±1)."""
+MAX_UNICYCLE_SPEED = 4.0
+"""Highest ``max_speed`` and ``max_reverse`` [units/step]: four times the holonomic robot's unit
+move (a faster robot crosses the planners' observation window in a step or two)."""
+MAX_UNICYCLE_ACCEL = 2 * MAX_UNICYCLE_SPEED
+"""Highest ``max_accel`` [units/step²]: from full reverse to full speed in one step."""
+MAX_TURN_RATE = 2 * math.pi
+"""Highest ``max_turn_rate`` [rad/step]: a whole turn in one step."""
+MAX_TURN_ACCEL = 2 * MAX_TURN_RATE
+"""Highest ``max_turn_accel`` [rad/step²]: from a whole turn one way to a whole turn the other."""
+LIMIT_BOUNDS = {"max_speed": MAX_UNICYCLE_SPEED, "max_reverse": MAX_UNICYCLE_SPEED, "max_accel": MAX_UNICYCLE_ACCEL,
+                "max_turn_rate": MAX_TURN_RATE, "max_turn_accel": MAX_TURN_ACCEL}
+"""The upper bound of each of :data:`LIMIT_KEYS` (lengths in units, so in steps once a world file's
+units are converted)."""
+
+MAX_SUBSTEPS = 256
+"""Most physics substeps per control step a world may need (:func:`physics_substeps`): the cost
+of a step grows with them, and the arrays of a unicycle's arc with them."""
+SUBSTEP_TRAVEL = 0.9
+"""How far a robot's centre may move in one substep, as a share of its radius: a disc that
+sinks at most this deep into an obstacle before the solver pushes it out never has its centre
+inside it, however thin the obstacle."""
+
+
+def substeps_for(radius: float, max_speed: float = math.sqrt(2.0)) -> int:
+    """The fewest substeps (a power of two) that keep the centre of a robot of ``radius`` moving
+    at up to ``max_speed`` [units per control step] out of every obstacle: at most
+    :data:`SUBSTEP_TRAVEL` radii per substep."""
+    return 2 ** math.ceil(math.log2(max(1.0, max_speed / (SUBSTEP_TRAVEL * radius))))
+
+
+def physics_substeps(radius: float, top_speed: float, obstacle_speed: float = 0.0, robots_meet: bool = False) -> int:
+    """The physics' substeps per control step: :func:`substeps_for` the fastest a robot's disc
+    closes in on anything.
+
+    Args:
+        radius: The smallest robot's radius [units].
+        top_speed: The fastest a robot moves [units per control step]. Contacts never make a
+            robot faster: the physics caps a body pushed above it.
+        obstacle_speed: The fastest moving obstacle [units per control step].
+        robots_meet: Robots meet each other (formations, crowds): two close in on each other at
+            twice the top speed.
+    """
+    relative = top_speed + obstacle_speed
+    if robots_meet:
+        relative = max(relative, 2 * top_speed)
+    return substeps_for(radius, relative)
+
 
 SMALL_TURN = 1e-6
 """Below this ``|ω·dt|`` [rad] the arc is computed from its Taylor series (exact to rounding)."""
@@ -103,11 +154,22 @@ class UnicycleLimits:
     max_turn_accel: float = np.pi
 
     def __post_init__(self):
-        for name in ("max_speed", "max_turn_rate", "max_accel", "max_turn_accel"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"unicycle limit {name} must be positive, got {getattr(self, name)}")
-        if not self.max_reverse >= 0:
-            raise ValueError(f"unicycle limit max_reverse must be >= 0, got {self.max_reverse}")
+        for name in LIMIT_KEYS:
+            value = getattr(self, name)
+            if not math.isfinite(value) or not (value >= 0 if name == "max_reverse" else value > 0):
+                raise ValueError(f"unicycle limit {name} must be {'>= 0' if name == 'max_reverse' else 'positive'} "
+                                 f"and finite, got {value}")
+
+    def out_of_bounds(self, unit: float = 1.0) -> list[tuple[str, float, float]]:
+        """``(name, value, bound)`` of each limit above its :data:`LIMIT_BOUNDS` (lengths read in
+        ``unit`` per unit: a world file's limits with ``unit`` its ``robot.step``)."""
+        out = []
+        for name, bound in LIMIT_BOUNDS.items():
+            value = getattr(self, name)
+            scale = unit if name in ("max_speed", "max_reverse", "max_accel") else 1.0
+            if value > bound * scale:
+                out.append((name, value, bound * scale))
+        return out
 
     def scaled(self, unit: float) -> UnicycleLimits:
         """These limits with lengths divided by ``unit`` (a world file's units to steps; rates of turn unchanged)."""
