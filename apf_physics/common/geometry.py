@@ -381,6 +381,19 @@ def grid_boundary(occupied: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.vstack(ends_a).astype(float), np.vstack(ends_b).astype(float)
 
 
+def grid_boundary_size(occupied: np.ndarray) -> tuple[int, int]:
+    """``(segments, sides)``: how many segments :func:`grid_boundary` would return, and how many
+    cell sides they cover (their total length in cells), counted without building them."""
+    padded = np.pad(np.asarray(occupied, bool), 1, constant_values=False)
+    segments = sides = 0
+    for axis in (0, 1):
+        crossing = np.diff(padded.view(np.int8), axis=axis) != 0
+        lines = (crossing if axis == 0 else crossing.T)[:, 1:-1]
+        sides += int(np.count_nonzero(lines))
+        segments += int(np.count_nonzero(lines[:, 0])) + int(np.count_nonzero(lines[:, 1:] & ~lines[:, :-1]))
+    return segments, sides
+
+
 # -- rectangles --------------------------------------------------------------------------
 
 def occupancy_rectangles(occupied: np.ndarray) -> np.ndarray:

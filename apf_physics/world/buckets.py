@@ -51,9 +51,8 @@ class SegmentIndex:
         self.reach = reach
         self.origin = lo.min(axis=0) - reach
         extent = hi.max(axis=0) + reach - self.origin
-        # small buckets (fewer candidates per point), but at most reach/√2 (so that ``interior`` can mark them)
         if side is None:
-            side = min(reach / math.sqrt(2.0), max(0.5, reach / 6.0))
+            side = self.bucket_side(reach)
         if np.prod(np.ceil(extent / side) + 1) > MAX_BUCKETS:
             side = min(reach / math.sqrt(2.0), float(np.sqrt(np.prod(extent) / MAX_BUCKETS)) * 1.01)
         self.side = side
@@ -98,6 +97,21 @@ class SegmentIndex:
         counts = np.bincount(bucket, minlength=int(self.shape[0] * self.shape[1]))
         self.start = np.concatenate([[0], np.cumsum(counts)])
         self._pruned: SegmentIndex | None = self if nearest else None
+
+    @staticmethod
+    def bucket_side(reach: float) -> float:
+        """The buckets' side for distances within ``reach``: small (fewer candidates per point), but at
+        most ``reach / √2`` (so that ``interior`` can mark them)."""
+        return min(reach / math.sqrt(2.0), max(0.5, reach / 6.0))
+
+    @classmethod
+    def registrations(cls, reach: float, segments: int, length: float) -> float:
+        """About how many (bucket, primitive) registrations an index of ``segments`` segments of
+        total ``length`` takes for ``reach``: each is listed in the buckets within ``reach`` of it
+        (what building it costs, about 3 million a second)."""
+        side = cls.bucket_side(reach)
+        across = 2.0 * reach / side + 2.0
+        return length / side * across + segments * across * across
 
     def _register(self, a: np.ndarray, b: np.ndarray, radius: np.ndarray,
                   first: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

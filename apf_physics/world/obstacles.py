@@ -166,6 +166,11 @@ class CircleObstacle:
         return data
 
 
+INDEX_BUDGET = 20_000_000
+"""Most (bucket, segment) registrations a grid's boundary index may take (about 6 s to build); a
+grid whose boundary would take more (millions of runs) is searched row by row instead."""
+
+
 @dataclass(frozen=True, eq=False)
 class GridObstacle:
     """The occupied cells of an occupancy grid, as **one** obstacle (README, "Real maps").
@@ -221,9 +226,11 @@ class GridObstacle:
 
         Exact wherever ``|d| ≤ reach``; farther points get ``±reach`` (and themselves as the
         nearest point). Within a finite reach the boundary of the occupied cells, cut into
-        maximal straight runs, is looked up in a bucket index (built once per reach); without
-        one, rows are searched outward from each point's own. Either way the cost grows with
-        what is near a point, not with the size of the grid.
+        maximal straight runs, is looked up in a bucket index (built once per reach), when
+        building it costs at most :data:`INDEX_BUDGET` registrations; otherwise (a boundary of
+        millions of runs: noise, or cells far smaller than the reach), and without a reach, rows
+        are searched outward from each point's own, as far as the reach. Either way the cost of
+        a query grows with what is near a point, not with the size of the grid.
         """
         points = np.asarray(points, float).reshape(-1, 2)
         u = (points - np.asarray(self.origin, float)) / self.cell           # cell units
@@ -234,7 +241,7 @@ class GridObstacle:
         inside = np.zeros(len(points), bool)
         inside[within] = self.occupied[row[within], col[within]]
         limit = reach / self.cell
-        if np.isfinite(limit):
+        if np.isfinite(limit) and self._indexed(limit):
             distance, near = self._boundary_distance(u, limit)
         else:
             distance, near = np.empty(len(points)), np.empty((len(points), 2))
@@ -246,6 +253,17 @@ class GridObstacle:
                     near[mine] -= 1.0
         d = np.where(inside, -distance, distance) * self.cell
         return d, near * self.cell + np.asarray(self.origin, float)
+
+    def _indexed(self, limit: float) -> bool:
+        """Whether distances within ``limit`` [cells] go through a bucket index of the boundary: when
+        building it takes at most :data:`INDEX_BUDGET` registrations (counted, not built)."""
+        key = ("indexed", float(limit))
+        if key not in self._tables:
+            if "boundary size" not in self._tables:
+                self._tables["boundary size"] = geometry.grid_boundary_size(self.occupied)
+            segments, sides = self._tables["boundary size"]
+            self._tables[key] = SegmentIndex.registrations(limit, segments, sides) <= INDEX_BUDGET
+        return self._tables[key]
 
     def _boundary_distance(self, u: np.ndarray, limit: float) -> tuple[np.ndarray, np.ndarray]:
         """Distance (cell units) from points to the boundary of the occupied cells, up to ``limit``."""
