@@ -140,10 +140,11 @@ def test_every_report_takes_its_figures_from_figures():
     class Trial:
         def __init__(self, optimal):
             self.scenario = Scenario(optimal)
+            self.optimal = optimal
 
     scenarios = [Trial(0.0 if v is None else v) for v in OPTIMAL]
     every = bucket_summary(Evaluation("p", EPISODES), scenarios)[-1]
-    assert every == {"bucket": "all", "episodes": 6, "successes": 3, "collisions": 1,
+    assert every == {"bucket": "all", "episodes": 6, "successes": 3, "collisions": 1, "trapped": 1, "timeouts": 1,
                      "path_over_optimal": round(f.path_over_optimal, 4)}
 
 

@@ -88,9 +88,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--max-steps", type=int, help="step limit per episode (default: 4 x (width + height))")
     p.add_argument("--scen", metavar="FILE.scen",
                    help="MovingAI scenarios: WORLD is the .map, each line of FILE is a start and a goal; the table "
-                        "gives success, collisions and path length against the optimal length per bucket")
+                        "gives success, collisions, trapped, timeouts and path length against the optimal length "
+                        "(both in steps) per bucket")
     p.add_argument("--buckets", metavar="A-B", help="with --scen: only the buckets A to B")
-    p.add_argument("--limit", type=int, metavar="N", help="with --scen: at most N scenarios, taken evenly through the file (all lengths represented)")
+    p.add_argument("--limit", type=int, metavar="N", help="with --scen: at most N scenarios, taken evenly through the "
+                                                          "file (all lengths represented); needed beyond 100,000")
     p.add_argument("--cell", type=float, default=1.0,
                    help="with --scen: world units (robot steps) per map cell (default 1)")
     p.add_argument("--json", metavar="OUT", help="write the episodes and summary as JSON")
@@ -203,7 +205,8 @@ def run_scenarios(args: argparse.Namespace) -> int:
         raise UserError(f"--cell: must be positive, got {args.cell:g}")
     if args.json:
         check_writable(args.json, create_parent=True)
-    trials = scenario_trials(args.worlds[0], args.scen, parse_buckets(args.buckets), args.limit, cell=args.cell)
+    trials = scenario_trials(args.worlds[0], args.scen, parse_buckets(args.buckets), args.limit, cell=args.cell,
+                             warn=lambda message: print(f"apf-physics: warning: {message}", file=sys.stderr))
     names = [n.strip() for n in args.planner.split(",") if n.strip()]
     evaluations = []
     for name in names:

@@ -19,6 +19,7 @@ the permissions of a plain ``open`` (``0o666`` less the umask), and is removed o
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import re
 import secrets
@@ -90,6 +91,65 @@ def read_text_file(path: str | Path, kind: str, error: type[UserError] = UserErr
         return data.decode("utf-8")
     except UnicodeDecodeError as e:
         raise error(f"{path}: the {kind} file is not UTF-8 text (byte {e.start})") from None
+
+
+# -- files that files name ---------------------------------------------------------------------
+CONFINE_VARIABLE = "APF_PHYSICS_CONFINE_PATHS"
+"""Set to 1 (or true, yes, on), every file a world file names (a map YAML, an image, a MovingAI
+map, and the image a map YAML names) must be inside the world file's folder, symbolic links
+followed: what a service that evaluates users' world files wants."""
+_ON, _OFF = ("1", "true", "yes", "on"), ("", "0", "false", "no", "off")
+
+
+def paths_confined() -> bool:
+    """Whether :data:`CONFINE_VARIABLE` confines the files that world files name to their folder.
+
+    Raises:
+        UserError: the variable holds something other than a yes or a no.
+    """
+    text = os.environ.get(CONFINE_VARIABLE, "").strip().lower()
+    if text in _ON or text in _OFF:
+        return text in _ON
+    raise UserError(f"{CONFINE_VARIABLE}: expected 1 or 0 (true or false), got {text[:20]!r}")
+
+
+class NamedFileError(UserError):
+    """A file name in a file that names no readable file (the message says why, without the naming file)."""
+
+
+def named_file(name: object, folder: str | Path, within: str | Path | None = None) -> Path:
+    """The file that a file names: ``name`` relative to ``folder`` (an absolute name as it is).
+
+    Every way a name can fail is one :class:`NamedFileError`, never an exception of the OS
+    layer: not a string, empty, a NUL character, no such file, a symbolic link loop, a name too
+    long, a folder that cannot be searched. With ``within``, the file (symbolic links followed)
+    must be inside that folder.
+
+    Returns:
+        The path, not resolved (messages show it as the user wrote it, after the folder).
+    """
+    if not isinstance(name, str) or not name.strip():
+        what = "nothing" if name is None else "an empty name" if isinstance(name, str) else type(name).__name__
+        raise NamedFileError(f"expected a file name, got {what}")
+    if "\0" in name:
+        raise NamedFileError("the file name holds a NUL character")
+    path = Path(folder) / name
+    try:
+        os.stat(path)
+    except FileNotFoundError:
+        raise NamedFileError(f"no such file {path}") from None
+    except OSError as exc:
+        reason = "a symbolic link loop" if exc.errno == errno.ELOOP else (exc.strerror or str(exc))
+        raise NamedFileError(f"cannot read {path} ({reason})") from None
+    except ValueError:   # a name the OS cannot take at all
+        raise NamedFileError("not a file name the system can open") from None
+    if within is not None:
+        root = os.path.realpath(within)
+        real = os.path.realpath(path)
+        if os.path.commonpath([root, real]) != root:
+            raise NamedFileError(f"{path} is outside the folder {root} ({CONFINE_VARIABLE} confines files to the "
+                                 "world file's folder)")
+    return path
 
 
 # -- writing ---------------------------------------------------------------------------------

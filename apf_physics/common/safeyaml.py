@@ -23,7 +23,7 @@ from typing import Any
 import yaml
 
 from apf_physics.errors import UserError
-from apf_physics.common.safefile import read_regular_file
+from apf_physics.common.safefile import MAX_FILE_BYTES, read_regular_file
 
 # -- limits (README "World files"): what any YAML file (world or curriculum) may hold ---------
 MAX_DEPTH = 32
@@ -90,7 +90,15 @@ _MAPPING_TAGS = (None, "!", "tag:yaml.org,2002:map")
 
 
 class _YamlLimit(Exception):
-    """The text breaks a limit; the message says where and which."""
+    """The text breaks a limit; the message says where and which.
+
+    ``plain``: the message without anything the file holds (a key, a tag, an anchor's name),
+    for files whose contents messages must not show; by default the message itself.
+    """
+
+    def __init__(self, message: str, plain: str | None = None):
+        super().__init__(message)
+        self.plain = message if plain is None else plain
 
 
 @dataclass
@@ -112,7 +120,8 @@ def _scalar(event: yaml.ScalarEvent) -> Any:
         return _MERGE
     construct = _CONSTRUCTOR.yaml_constructors.get(tag) if tag in _SCALAR_TAGS else None
     if construct is None:
-        raise _YamlLimit(f"line {event.start_mark.line + 1}: unsupported tag {shortened(tag)}")
+        where = f"line {event.start_mark.line + 1}"
+        raise _YamlLimit(f"{where}: unsupported tag {shortened(tag)}", f"{where}: an unsupported tag")
     return construct(_CONSTRUCTOR, yaml.ScalarNode(tag, event.value, event.start_mark, event.end_mark, event.style))
 
 
@@ -147,7 +156,7 @@ def _load_yaml(text: str) -> Any:
                 raise _YamlLimit(f"{where}: nested deeper than {MAX_DEPTH} levels")
             mapping = isinstance(event, yaml.MappingStartEvent)
             if event.tag not in (_MAPPING_TAGS if mapping else _SEQUENCE_TAGS):
-                raise _YamlLimit(f"{where}: unsupported tag {shortened(event.tag)}")
+                raise _YamlLimit(f"{where}: unsupported tag {shortened(event.tag)}", f"{where}: an unsupported tag")
             stack.append(_Open({} if mapping else [], event.anchor))
             if event.anchor:
                 unfinished.add(event.anchor)
@@ -175,9 +184,11 @@ def _load_yaml(text: str) -> Any:
         elif isinstance(event, yaml.AliasEvent):
             name = key_text(event.anchor)
             if event.anchor in unfinished:
-                raise _YamlLimit(f"{where}: alias *{name} is inside the collection it names")
+                raise _YamlLimit(f"{where}: alias *{name} is inside the collection it names",
+                                 f"{where}: an alias inside the collection it names")
             if event.anchor not in anchors:
-                raise _YamlLimit(f"{where}: alias *{name} has no anchor &{name} before it")
+                raise _YamlLimit(f"{where}: alias *{name} has no anchor &{name} before it",
+                                 f"{where}: an alias with no anchor before it")
             value, size = anchors[event.anchor]
             count = size
         else:  # stream and document ends
@@ -205,7 +216,8 @@ def _load_yaml(text: str) -> Any:
                 except TypeError:
                     raise _YamlLimit(f"{where}: a {type(value).__name__} as a mapping key") from None
                 if value in parent.value:
-                    raise _YamlLimit(f"{where}: key {shortened(value)} appears twice in one mapping")
+                    raise _YamlLimit(f"{where}: key {shortened(value)} appears twice in one mapping",
+                                     f"{where}: a key appears twice in one mapping")
             parent.key, parent.has_key = value, True
         else:
             if parent.key is _MERGE:
@@ -219,28 +231,39 @@ def _load_yaml(text: str) -> Any:
     return document
 
 
-def read_yaml_file(path: str | Path, kind: str, error: type[UserError] = UserError) -> Any:
+def read_yaml_file(path: str | Path, kind: str, error: type[UserError] = UserError, limit: int = MAX_FILE_BYTES,
+                   quote: bool = True) -> Any:
     """Read a YAML file within the limits, turning every failure into one ``error`` naming the file.
 
     Args:
-        path: The file: a regular file of at most :data:`MAX_FILE_BYTES`.
+        path: The file: a regular file of at most ``limit`` bytes (default :data:`MAX_FILE_BYTES`).
         kind: What the file is, for messages (``"world"``, ``"curriculum"``).
         error: The exception class to raise.
+        quote: Messages may show short pieces of the file (a key written twice, a byte that is
+            not UTF-8, the parser's description of a syntax error). False for a file that
+            another file names: messages then say where and what is wrong, never what it holds.
     """
     source = str(path)
-    data = read_regular_file(path, kind, error)
+    data = read_regular_file(path, kind, error, limit)
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise error(f"{source}: cannot read the {kind} file (not UTF-8 text: byte {exc.start:,} "
-                    f"is {data[exc.start]:#04x})") from None
+        byte = f" is {data[exc.start]:#04x}" if quote else ""
+        raise error(f"{source}: cannot read the {kind} file (not UTF-8 text: byte {exc.start:,}{byte})") from None
     try:
         return _load_yaml(text)
     except _YamlLimit as exc:
-        raise error(f"{source}: {exc}") from None
+        raise error(f"{source}: {exc if quote else exc.plain}") from None
+    except yaml.reader.ReaderError as exc:   # a control character, which YAML does not allow in its text
+        code = exc.character if isinstance(exc.character, int) else ord(exc.character or "\0")
+        what = f" ({code:#04x})" if quote else ""
+        raise error(f"{source}: not valid YAML: a character YAML does not allow{what} at character {exc.position:,} "
+                    f"(line {text.count(chr(10), 0, exc.position) + 1})") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        raise error(f"{source}: not valid YAML{where}: {shortened(getattr(exc, 'problem', None) or exc, 200)}") from None
+        problem = f": {shortened(getattr(exc, 'problem', None) or exc, 200)}" if quote else ""
+        raise error(f"{source}: not valid YAML{where}{problem}") from None
     except (ValueError, OverflowError, TypeError) as exc:  # a value YAML's constructors reject (a date like 2024-13-45)
-        raise error(f"{source}: not valid YAML: {shortened(str(exc), 200)}") from None
+        reason = shortened(str(exc), 200) if quote else "a value its type cannot hold (a date, a number)"
+        raise error(f"{source}: not valid YAML: {reason}") from None

@@ -87,7 +87,7 @@ def phases_for_world(world: World, config: TrainConfig) -> list[Phase]:
     if config.evaluation.eval_random_starts:
         points = validation_starts(world, config.evaluation.eval_random_starts, config.run.seed)
         extra = EvalSet.of([world_from_dict({**world.to_dict(), "name": f"{world.name}-random",
-                                             "starts": points.tolist()}, source=world.label)])
+                                             "starts": points.tolist()}, source=world.label, confine=False)])
     return [Phase(world.name, (world,), training_starts(world, config.env.train_starts, config.run.seed), None, None,
                   EvalSet.of([world]), random_validation=extra)]
 

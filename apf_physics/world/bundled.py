@@ -38,7 +38,7 @@ def list_bundled() -> list[str]:
 def resolve_world(spec: str | Path) -> Path:
     """The world file or folder that ``spec`` names.
 
-    An existing path is returned as it is. Otherwise ``spec`` is read as the name of a bundled
+    An existing path (or a symbolic link, even one that leads nowhere) is returned as it is. Otherwise ``spec`` is read as the name of a bundled
     world or folder, relative to :func:`bundled_dir`: ``fixed20``, ``fixed20.yaml``,
     ``thesis/test1``, ``thesis`` (the folder), ``curricula/thesis``. A leading ``worlds/``
     is dropped, so the README's ``worlds/fixed20.yaml`` works outside a checkout too.
@@ -48,7 +48,7 @@ def resolve_world(spec: str | Path) -> Path:
             and lists some.
     """
     path = Path(spec)
-    if path.exists():
+    if path.exists() or path.is_symlink():   # (a broken link or a loop: reading it says so)
         return path
     name = path.as_posix()
     if name.startswith("worlds/"):

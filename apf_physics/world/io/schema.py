@@ -25,8 +25,9 @@ from apf_physics.common import geometry
 from apf_physics.world.io import mapfiles
 from apf_physics.errors import WorldError, closest_match
 from apf_physics.world.field import FIELD_PRESETS, FieldParams
-from apf_physics.world.kinematics import KINEMATICS, LIMIT_KEYS, UnicycleLimits
+from apf_physics.world.kinematics import KINEMATICS, LIMIT_BOUNDS, LIMIT_KEYS, UnicycleLimits
 from apf_physics.world.obstacles import CircleObstacle, Motion, Obstacle, PolygonObstacle
+from apf_physics.common.safefile import NamedFileError, named_file
 from apf_physics.common.safeyaml import key_text, shortened
 from apf_physics.world.core import FormationSpec, FormationTask, Frame
 
@@ -59,8 +60,8 @@ MAX_POTENTIAL = 1e12
 """Largest magnitude of U and of its slope anywhere the package evaluates them."""
 MAX_NAME_CHARS = 200
 """Longest world name [characters]."""
-MAX_PROBLEMS = 20
-"""Problems listed from one file; the rest are counted."""
+MAX_PROBLEMS = mapfiles.MAX_PROBLEMS
+"""Problems listed from one file (20); the rest are counted."""
 MAX_COUNTED = 1000
 """Problems counted in one file before the check stops (a file of a million bad entries is
 not read to its end)."""
@@ -447,20 +448,34 @@ def _parse_robot(check: Checker, data: Mapping[str, Any]) -> tuple[float | None,
             limits[k] = value
     if len(limits) < len(given):
         return radius, step, None
-    defaults = UnicycleLimits().scaled(1.0 / (step or 1.0))   # the default limits are in steps
-    return radius, step, replace(defaults, **limits)
+    unit = step or 1.0
+    defaults = UnicycleLimits().scaled(1.0 / unit)   # the default limits are in steps
+    unicycle = replace(defaults, **limits)
+    for name, value, bound in unicycle.out_of_bounds(unit):
+        steps = f"{LIMIT_BOUNDS[name]:g} steps of {unit:g}" if unit != 1.0 else f"{LIMIT_BOUNDS[name]:g} steps"
+        why = {"max_speed": f"{steps} per control step", "max_reverse": f"{steps} per control step",
+               "max_accel": f"{steps} per control step, from one step to the next",
+               "max_turn_rate": "a whole turn per control step [rad]",
+               "max_turn_accel": "from a whole turn one way to a whole turn the other in one step [rad]"}[name]
+        check.bad(f"robot.{name}", f"at most {bound:.6g} ({why}), got {value:g}")
+    return radius, step, unicycle
 
 
-def _parse_grid(check: Checker, value: Any, source: str) -> mapfiles.OccupancyMap:
-    """The ``grid:`` layer: a ROS map (its YAML with ``map:``, or its keys inline) or a MovingAI map."""
+def _parse_grid(check: Checker, value: Any, source: str, confine: bool = False) -> mapfiles.OccupancyMap:
+    """The ``grid:`` layer: a ROS map (its YAML with ``map:``, or its keys inline) or a MovingAI map.
+
+    Every file name goes through :func:`~apf_physics.common.safefile.named_file` (relative to the world
+    file's folder; with ``confine``, it must stay inside that folder, the image a map YAML names too).
+    """
     body = check.mapping(value, "grid", _GRID_KEYS)
     folder = Path(source).parent if source != "<dict>" else Path.cwd()
+    within = folder if confine else None
 
     def path_of(key: str) -> Path:
-        name = body[key]
-        if not isinstance(name, str) or not name:
-            raise check.bad(f"grid.{key}", f"expected a file name, got {_kind(name)}")
-        return (folder / name).resolve()
+        try:
+            return named_file(body[key], folder, within)
+        except NamedFileError as exc:
+            raise check.bad(f"grid.{key}", str(exc)) from None
 
     try:
         if "movingai" in body:
@@ -472,11 +487,11 @@ def _parse_grid(check: Checker, value: Any, source: str) -> mapfiles.OccupancyMa
         if "map" in body:
             if set(body) != {"map"}:
                 raise check.bad("grid", "'map: FILE.yaml' names a ROS map YAML, which holds the other keys")
-            return mapfiles.read_ros_map(path_of("map"))
+            return mapfiles.read_ros_map(path_of("map"), within=within)
         if "image" not in body:
             raise check.bad("grid", "give 'movingai: FILE.map', 'map: FILE.yaml' (a ROS map) or the ROS map keys "
                                     "inline (image, resolution, origin, ...)")
-        return mapfiles.ros_map_from_dict({k: v for k, v in body.items()}, str(source), folder)
+        return mapfiles.ros_map_from_dict({k: v for k, v in body.items()}, str(source), folder, within=within)
     except WorldError as exc:   # the map file's own problems, each naming that file
         for line in str(exc).splitlines():
             check.bad("grid", line.removeprefix(f"{source}: "))
@@ -520,8 +535,10 @@ class FileWorld:
     unicycle: UnicycleLimits | None = None
 
 
-def parse_world(check: Checker, data: Any, source: str) -> FileWorld | None:
+def parse_world(check: Checker, data: Any, source: str, confine: bool = False) -> FileWorld | None:
     """Check the world-file mapping ``data`` (read from ``source``) key by key.
+
+    ``confine``: the files the world names (its grid's) must be inside the folder of ``source``.
 
     Returns:
         Its values in the file's units (:class:`FileWorld`, each None where it has a problem,
@@ -541,7 +558,7 @@ def parse_world(check: Checker, data: Any, source: str) -> FileWorld | None:
         check.bad("formation", "'formation' and 'formations' together: give one formation, or a list of them")
     if has_grid and "size" in data:
         check.bad("size", "a world with a grid takes its size from the grid: leave size out")
-    grid = check.attempt(_parse_grid, check, data["grid"], source) if has_grid else None
+    grid = check.attempt(_parse_grid, check, data["grid"], source, confine) if has_grid else None
     size = grid.size if grid is not None else (check.attempt(_parse_size, check, data["size"]) if "size" in data else None)
     offset = np.asarray(grid.origin if grid is not None else (0.0, 0.0), float)
     box = (offset, offset + np.asarray(size, float)) if size is not None else None
@@ -549,6 +566,11 @@ def parse_world(check: Checker, data: Any, source: str) -> FileWorld | None:
     name = check.attempt(_parse_name, check, data.get("name", default_name))
     robot_radius, step, unicycle = _parse_robot(check, data)
     frame = Frame((float(offset[0]), float(offset[1])), float(step if step is not None else 1.0))
+    if grid is not None and step is not None and not all(MIN_SIDE <= side / step <= MAX_SIDE for side in grid.size):
+        rows, cols = grid.occupied.shape
+        check.bad("grid", f"the map is {size[0] / step:.6g} x {size[1] / step:.6g} steps of {step:g} ({cols:,} x {rows:,} "
+                          f"cells of {grid.cell:g}); each side must be between {MIN_SIDE:g} and {MAX_SIDE:,.0f} steps")
+        size = None
     goal_tolerance = check.attempt(check.number, data.get("goal_tolerance", 0.75 * frame.unit), "goal_tolerance",
                                    positive=True)
     params = check.attempt(_parse_field, check, data["field"], frame) if "field" in data else None

@@ -34,13 +34,14 @@ from apf_physics.errors import UserError, WorldError
 from apf_physics.world.field import FieldParams
 from apf_physics.world.obstacles import CircleObstacle, GridObstacle, Motion, Obstacle, PolygonObstacle
 from apf_physics.common.safefile import MAX_FILE_BYTES, open_regular_file, read_regular_file  # noqa: F401 (public here too)
-from apf_physics.common.safefile import write_text
+from apf_physics.common.safefile import paths_confined, write_text
 from apf_physics.common.safeyaml import MAX_DEPTH, MAX_NODES, MAX_SCALAR_CHARS  # noqa: F401 (public here too)
 from apf_physics.common.safeyaml import read_yaml_file, shortened
 from apf_physics.world.core import FormationSpec, FormationTask, World
 from apf_physics.world.io.schema import (MAX_FOLLOWERS, MAX_FORMATIONS, MAX_NAME_CHARS,  # noqa: F401 (public here too)
                                      MAX_OBSTACLES, MAX_POLYGON_VERTICES, MAX_PROBLEMS, MAX_ROUTE_POINTS, MAX_SIDE,
                                      MAX_STARTS, MAX_TARGETS, MAX_VERTICES, MIN_SIDE)
+from apf_physics.world.kinematics import HOLONOMIC_SPEED, MAX_SUBSTEPS, physics_substeps
 from apf_physics.world.io.schema import (MAX_POTENTIAL, MIN_GOAL_TOLERANCE, MIN_ROBOT_RADIUS, Checker, TooMany,
                                      parse_world)
 
@@ -104,6 +105,8 @@ def raster_memory_problem(size: Sequence[float], targets: int) -> str | None:
     need, budget = raster_memory(size, targets), memory_budget()
     if need <= budget:
         return None
+    if not math.isfinite(need):
+        return f"a {size[0]:g} x {size[1]:g} map is too large for any memory budget"
     return (f"a {size[0]:g} x {size[1]:g} map with {targets} target(s) needs about {_gib(need)} of rasters "
             f"(the planners' at 4 nodes per unit), over the budget of {_gib(budget)}; "
             f"use a smaller map, or set {MEMORY_BUDGET_VARIABLE} (e.g. {math.ceil(need / 2**30)}G) on a machine "
@@ -173,7 +176,11 @@ def _check_placement(check: Checker, world: World, index: Mapping[str, Sequence[
     ``index``: for a world built of the entries that parsed, each list's indices in the file
     (``starts``, ``targets``, ``obstacles``), so the problems name the file's entries.
     """
-    index = index or {}
+    with np.errstate(over="ignore", invalid="ignore"):   # (points converted to infinity: far outside the map)
+        _place(check, world, index or {})
+
+
+def _place(check: Checker, world: World, index: Mapping[str, Sequence[int]]) -> None:
     size, radius = world.size, world.robot_radius
     for key, pts, margin in (("targets", world.targets, 0.0), ("starts", world.starts, radius)):
         if not len(pts):
@@ -181,14 +188,17 @@ def _check_placement(check: Checker, world: World, index: Mapping[str, Sequence[
         edge = world.edge_distance(pts)
         inside = np.full(len(pts), np.inf)
         in_map = np.flatnonzero(edge >= margin)
-        inside[in_map] = world.obstacle_distance(pts[in_map])
+        inside[in_map] = world.obstacle_distance(pts[in_map], near=True)   # (exact beyond the robot's radius)
         # (a formation's start is checked against its own target: _check_formations)
         reached = (world.distance_to_target(pts) <= world.goal_tolerance if key == "starts" and not world.formations
                    else np.zeros(len(pts), bool))
         for i in np.flatnonzero((edge < margin) | (inside < margin) | (inside <= 0) | reached).tolist():
             where = f"{key}[{index[key][i] if key in index else i}]"
             at = [round(v, 9) for v in world.frame.to_file(pts[i]).tolist()]
-            if edge[i] < 0:
+            if not np.all(np.isfinite(pts[i])):
+                lo, hi = world.frame.to_file([0.0, 0.0]), world.frame.to_file(size)
+                check.bad(where, f"the point is far outside the map [{lo[0]:g}, {hi[0]:g}] x [{lo[1]:g}, {hi[1]:g}]")
+            elif edge[i] < 0:
                 lo, hi = world.frame.to_file([0.0, 0.0]), world.frame.to_file(size)
                 check.bad(where, f"{at} is outside the map [{lo[0]:g}, {hi[0]:g}] x [{lo[1]:g}, {hi[1]:g}]")
             elif edge[i] < margin:
@@ -252,15 +262,18 @@ def _check_routes(check: Checker, world: World) -> None:
                 check.bad(f"obstacles[{i}].motion", f"the obstacle sweeps over targets[{k}] {target.tolist()}")
 
 
-def _build(check: Checker, data: Any, source: str) -> World | None:
+def _build(check: Checker, data: Any, source: str, confine: bool = False) -> World | None:
     """The world of the world-file mapping ``data``, or None when it has problems (recorded)."""
-    parts = parse_world(check, data, source)
+    parts = parse_world(check, data, source, confine)
     if parts is None:
         return None
     # everything in steps, from the map's lower-left corner (README, "Real maps": units)
     frame, grid = parts.frame, parts.grid
     offset, u = np.asarray(frame.offset, float), frame.unit
-    to_world = (lambda pts: (np.asarray(pts, float) - offset) / u)
+
+    def to_world(pts: Any) -> np.ndarray:
+        with np.errstate(over="ignore"):   # a point ~1e308 away in a file of small steps: outside the map (reported)
+            return (np.asarray(pts, float) - offset) / u
     size = None if parts.size is None else (parts.size[0] / u, parts.size[1] / u)
     robot_radius = None if parts.robot_radius is None else parts.robot_radius / u
     goal_tolerance = None if parts.goal_tolerance is None else parts.goal_tolerance / u
@@ -282,10 +295,28 @@ def _build(check: Checker, data: Any, source: str) -> World | None:
     unicycle = None if parts.unicycle is None else parts.unicycle.scaled(u)
     world = World(parts.name, size, robot_radius, goal_tolerance, parts.params, obstacles, targets, starts, formation,
                   source, formations, frame=frame, unicycle=unicycle)
+    _check_substeps(check, world)
     _check_placement(check, world)
     _check_routes(check, world)
     _check_formations(check, world)
     return world
+
+
+def _check_substeps(check: Checker, world: World) -> None:
+    """The physics' substeps per control step (:func:`~apf_physics.world.kinematics.physics_substeps`)
+    within :data:`~apf_physics.world.kinematics.MAX_SUBSTEPS`: the robot's top speed against its radius."""
+    top = max(HOLONOMIC_SPEED, world.unicycle.top_speed) if world.unicycle is not None else HOLONOMIC_SPEED
+    obstacle_speed = max((world.obstacles[i].motion.speed for i in world.moving), default=0.0)
+    meet = bool(world.formations) or (world.formation is not None and world.formation.followers > 0)
+    substeps = physics_substeps(world.robot_radius, top, obstacle_speed, meet)
+    if substeps <= MAX_SUBSTEPS:
+        return
+    u = world.frame.unit
+    why = " (robots of a formation close in on each other at twice that)" if meet else ""
+    why += f" (obstacles move at up to {obstacle_speed * u:g})" if obstacle_speed else ""
+    check.bad("robot", f"a robot of radius {world.robot_radius * u:g} moving at up to {top * u:g} per control step"
+                       f"{why} needs {substeps:,} physics substeps per step, over the limit of {MAX_SUBSTEPS}: "
+                       "a larger radius or a lower max_speed/max_reverse")
 
 
 def _check_what_parsed(check: Checker, parts: Any, size, robot_radius, goal_tolerance, obstacles, targets, starts,
@@ -326,7 +357,7 @@ def _check_what_parsed(check: Checker, parts: Any, size, robot_radius, goal_tole
 def _grid_spec(value: Mapping[str, Any], source: str) -> dict[str, Any]:
     """The ``grid:`` mapping with its file names made absolute (so a world saved elsewhere still finds them)."""
     folder = Path(source).parent if source != "<dict>" else Path.cwd()
-    return {k: (str((folder / v).resolve()) if k in ("image", "map", "movingai") else v) for k, v in value.items()}
+    return {k: (os.path.realpath(folder / v) if k in ("image", "map", "movingai") else v) for k, v in value.items()}
 
 
 def _obstacle_to_world(obstacle: Obstacle, offset: np.ndarray, unit: float) -> Obstacle:
@@ -347,16 +378,24 @@ def _formation_to_world(spec: FormationSpec, unit: float) -> FormationSpec:
                    offsets=tuple((a / unit, b / unit) for a, b in spec.offsets))
 
 
-def world_from_dict(data: Any, source: str = "<dict>") -> World:
+def world_from_dict(data: Any, source: str = "<dict>", confine: bool | None = None) -> World:
     """Validate a world-file mapping and build the :class:`World`.
+
+    Args:
+        data: The mapping.
+        source: The file it was read from (file names in it are relative to its folder), for messages.
+        confine: The files the world names (its grid's map, image) must be inside the folder of
+            ``source``, symbolic links followed; None: as ``APF_PHYSICS_CONFINE_PATHS`` says
+            (:func:`~apf_physics.common.safefile.paths_confined`).
 
     Raises:
         WorldError: one line per problem (the first :data:`MAX_PROBLEMS`, then how many
             more), each naming ``source``, the key and what is wrong.
     """
     check = Checker(source)
+    confine = paths_confined() if confine is None else confine
     try:
-        world = _build(check, data, source)
+        world = _build(check, data, source, confine)
     except TooMany:
         world = None
     if check.problems or world is None:
@@ -364,8 +403,10 @@ def world_from_dict(data: Any, source: str = "<dict>") -> World:
     return world
 
 
-def load_world(path: str | Path) -> World:
+def load_world(path: str | Path, confine: bool | None = None) -> World:
     """Read and validate a world file (YAML, or JSON being YAML).
+
+    ``confine``: the files the world names must be inside its folder (see :func:`world_from_dict`).
 
     Raises:
         WorldError: the file is missing, not a regular file, too large, not YAML, or breaks
@@ -380,7 +421,7 @@ def load_world(path: str | Path) -> World:
     if isinstance(data, Mapping) and "image" in data and "resolution" in data:
         raise WorldError(f"{path}: a ROS map alone has no target: write a world file with "
                          f"'grid: {{map: {Path(path).name}}}', robot: {{radius, step}}, a field and targets")
-    return world_from_dict(data, str(path))
+    return world_from_dict(data, str(path), confine)
 
 
 class _WorldDumper(yaml.SafeDumper):
