@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import warnings
 from datetime import timedelta
 
@@ -571,3 +572,15 @@ def test_limits_in_the_api_are_finite(tmp_path):
     for bad in (math.inf, math.nan, -1.0):
         with pytest.raises(ValueError, match="max_speed must be positive and finite"):
             UnicycleLimits(max_speed=bad)
+
+
+@pytest.mark.parametrize("limits, message", [({"max_turn_rate": 1e9}, "max_turn_rate at most 6.28319 [rad per control step]"),
+                                             ({"max_speed": 1e9}, "max_speed at most 4 [steps per control step]")])
+def test_the_environments_take_the_same_bounds(limits, message):
+    import gymnasium as gym
+    import apf_physics.envs  # noqa: F401  (registers the ids)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(UserError, match=rf"^limits: {re.escape(message)}, got 1e\+09$"):
+            gym.make("apf_physics/Navigate-v0", world="fixed20", kinematics="unicycle", limits=limits)

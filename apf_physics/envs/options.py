@@ -137,6 +137,11 @@ def robot_options(worlds: Sequence[World], action: str = "discrete", kinematics:
                 unicycle = replace(unicycle, **{k: float(v) for k, v in limits.items()})
             except (TypeError, ValueError) as e:
                 raise UserError(f"limits: {e}") from None
+    if unicycle is not None:
+        for name, value, bound in unicycle.out_of_bounds():
+            unit = "rad" if "turn" in name else "steps"
+            per = " per control step, per step" if "accel" in name else " per control step"
+            raise UserError(f"limits: {name} at most {bound:.6g} [{unit}{per}], got {value:g}")
     if lidar is None:
         config = LidarConfig()
     elif isinstance(lidar, LidarConfig):
