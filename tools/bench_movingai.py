@@ -74,7 +74,7 @@ def main() -> None:
             rows.append(f"{family:<10} {name:<24} {size:>9} {planner:<15} {every['successes']:>4}/{n:<4} "
                         f"{every['collisions']:>8} {ratio:>9} {seconds:>6.0f}")
             print(rows[-1], flush=True)
-            totals[planner] += [(e, t.scenario.optimal) for e, t in zip(ev.episodes, trials)]
+            totals[planner] += [(e, t.optimal) for e, t in zip(ev.episodes, trials)]
         out.append({"family": family, "map": name, "results": trials_json(evaluations, trials)})
     rows.append("-" * len(header))
     summary = {}
