@@ -194,10 +194,10 @@ def test_one_robot_steps_in_floats_as_the_array_path_does(worlds_dir):
             physics.place([0], start)
         for _ in range(25):
             v = rng.uniform(-1, 1, (1, 2)) * rng.choice([1.0, 1.5])   # some beyond the top speed
-            held = scalar._proxy_held
+            held = bool(scalar.in_pymunk[0])
             log_s, log_a = scalar.step(v), array.step(v)
-            alone += not held and not scalar._proxy_held
-            through += scalar._proxy_held
+            alone += not held and not scalar.in_pymunk[0]
+            through += bool(scalar.in_pymunk[0])
             np.testing.assert_array_equal(scalar.positions, array.positions)
             np.testing.assert_array_equal(log_s.pairs, log_a.pairs)
             if log_s.touched:

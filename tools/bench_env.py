@@ -100,7 +100,7 @@ class OursVector:
         simulated = 0
         for a in self.actions[:50]:
             self.env.step(a)
-            simulated += int((physics._robot_proxy >= 0).sum())
+            simulated += int(physics.in_pymunk.sum())
         return simulated / (50 * self.env.num_envs)
 
 

@@ -131,7 +131,7 @@ def breakdown(steps: int) -> None:
     def sorting(*args, **kwargs):   # physics steps with and without pymunk, apart
         t = time.perf_counter()
         out = step(*args, **kwargs)
-        (simulated if physics._proxy_held else free).append(time.perf_counter() - t)
+        (simulated if physics.in_pymunk[0] else free).append(time.perf_counter() - t)
         return out
     reset = env.reset
 
@@ -144,7 +144,7 @@ def breakdown(steps: int) -> None:
         return out
     physics.step, env.reset = sorting, resetting
     try:
-        with timed(physics, "needs_physics", test), timed(physics._sweeps, "near_one", test), \
+        with timed(physics, "needs_physics", test), timed(physics.free.sweeps, "near_one", test), \
                 timed(observer, "observe", obs), timed(task, "start", starts):
             total, _ = run(env, actions)
     finally:
