@@ -135,7 +135,7 @@ def test_python_source_is_the_compiled_rule(monkeypatch):
         compiled = values.copy()
         add_compiled(observer, compiled, *args, lattice)
         with monkeypatch.context() as patch:
-            for name in ("_window_span", "_repulsive_term", "_polygon_points", "_add_terms"):
+            for name in ("_window_span", "repulsive_term_at", "_polygon_points", "_add_terms"):
                 patch.setattr(observation, name, getattr(observation, name).py_func)
             python = values.copy()
             add_compiled(observer, python, *args, lattice)

@@ -117,8 +117,7 @@ def random_starts(world, count: int, seed: int) -> np.ndarray:
     out = np.empty((0, 2))
     while len(out) < count:
         cand = world.random_free_positions(rng, count)
-        far = np.min(np.linalg.norm(cand[:, None] - world.targets[None], axis=2), axis=1) > world.goal_tolerance
-        out = np.vstack([out, cand[far]])
+        out = np.vstack([out, cand[~world.reached(cand)]])
     return out[:count]
 
 

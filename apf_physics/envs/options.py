@@ -162,8 +162,7 @@ def observer_config(obs_size: int, resolution: int, memory: bool, obs_scale: str
     """
     if observer is not None:
         return observer if isinstance(observer, ObserverConfig) else ObserverConfig.from_dict(observer)
-    channels = ("potential",) + (("previous",) if previous else ()) + (("memory",) if memory else ())
-    return ObserverConfig(size=int(obs_size), resolution=int(resolution), channels=channels, scale=obs_scale)
+    return ObserverConfig.of(obs_size, resolution, previous=previous, memory=memory, scale=obs_scale)
 
 
 class StartChooser:

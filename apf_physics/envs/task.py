@@ -26,7 +26,7 @@ from apf_physics.errors import UserError
 from apf_physics.envs.reward import RewardWeights, reward_terms, reward_terms_one
 from apf_physics.control.formation import FormationCrowd, FormationTeam
 from apf_physics.sensing.observation import Observer, ObserverConfig, RangeObserver
-from apf_physics.control.tracking import UnicycleFollowers
+from apf_physics.control.tracking import UnicycleFollowers, leader_caps, team_drive
 from apf_physics.world.core import FormationSpec, World
 
 
@@ -300,14 +300,12 @@ class NavigationTask:
         (which stops a leader about to meet one of its followers)."""
         limits = self.robot.unicycle
         states = self.stepper.states()
+        running = self.stepper.running
         v, omega = limits.clamp(leader[:, 0], leader[:, 1], states[:, 0, 3], states[:, 0, 4])
-        out = np.zeros((self.num, self.stepper.robots_per_slot, 2))
-        for slot in np.flatnonzero(self.stepper.running).tolist():
-            followers = self.unicycle_followers[slot]
-            cap = followers.leader_cap(states[slot])
-            lv, lw = limits.clamp(min(float(v[slot]), cap), float(omega[slot]), states[slot, 0, 3], states[slot, 0, 4])
-            out[slot, :, 0], out[slot, :, 1] = followers.drive(states[slot], float(lv), float(lw))
-        return out
+        v, omega = limits.clamp(np.minimum(v, leader_caps(states, running, self.unicycle_followers, limits)), omega,
+                                states[:, 0, 3], states[:, 0, 4])
+        return team_drive(states, np.where(running, v, 0.0), np.where(running, omega, 0.0), running,
+                          self.unicycle_followers)
 
     def _step_one(self, action: int) -> TaskStep:
         """:meth:`step` of a batch of one running robot alone (``Navigate-v0``): the same

@@ -30,7 +30,8 @@ from apf_physics.errors import UserError
 from apf_physics.control.formation import FormationCrowd, FormationTeam, formation_spec, formation_success, links_in_range
 from apf_physics.world.kinematics import KINEMATICS, UnicycleLimits, arc_points
 from apf_physics.planners.base import Planner
-from apf_physics.control.tracking import CHECK_SAMPLES, UnicycleFollowers, detour_arcs, give_way, track_safely
+from apf_physics.control.tracking import (CHECK_SAMPLES, UnicycleFollowers, detour_arcs, give_way, leader_caps, team_drive,
+                                          track_safely)
 from apf_physics.world.core import World
 
 UNICYCLE_TRAP_FACTOR = 2
@@ -277,7 +278,7 @@ def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | 
         if team is not None:
             moved = report.moved
             robot_steps += moved & touched.robot.reshape(n, m).any(axis=1)
-            obstacle_steps += moved & (touched.obstacle | touched.wall).reshape(n, m).any(axis=1)
+            obstacle_steps += moved & touched.obstacle_or_edge.reshape(n, m).any(axis=1)
             in_range += moved[:, None] & links_in_range(report.positions, team.followed, team.spec.comm_range)
 
     trajectory = np.stack(history)                                     # (T, n, m, 2)
@@ -314,18 +315,10 @@ def unicycle_commands(states: np.ndarray, leader_moves: np.ndarray, moving: np.n
         limits: The robots' limits.
         followers: One :class:`~apf_physics.control.tracking.UnicycleFollowers` per slot (formations), or none.
     """
-    n, m = states.shape[:2]
     moves = np.where(moving[:, None], leader_moves, 0.0)
-    cap = None
-    if followers:
-        cap = np.array([followers[s].leader_cap(states[s]) if moving[s] else limits.max_speed for s in range(n)])
+    cap = leader_caps(states, moving, followers, limits) if followers else None
     v, omega = track_safely(states[:, 0], moves, moment, limits, speed_cap=cap)
-    commands = np.zeros((n, m, 2))
-    commands[:, 0, 0], commands[:, 0, 1] = v, omega
-    if followers:
-        for s in np.flatnonzero(moving).tolist():
-            commands[s, :, 0], commands[s, :, 1] = followers[s].drive(states[s], v[s], omega[s])
-    return commands
+    return team_drive(states, v, omega, moving, followers)
 
 
 CROWD_TRAP_WINDOW = 40
@@ -412,7 +405,7 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
             within[f] += bool(np.any(others == f))
             between[f] += bool(np.any(others != f))
             robots = slice(f * m, f * m + crowd.sizes[f])
-            obstacle_steps[f] += bool((touched.obstacle[robots] | touched.wall[robots] | touched.moving[robots]).any())
+            obstacle_steps[f] += bool(touched.obstacle_or_edge[robots].any())
             in_range[f] += links_in_range(report.positions[f, :crowd.sizes[f]], crowd.followed[f],
                                           crowd.tasks[f].spec.comm_range)
         for f in np.flatnonzero(report.collided).tolist():

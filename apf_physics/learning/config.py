@@ -153,9 +153,8 @@ class EnvConfig:
     @property
     def observer(self) -> ObserverConfig:
         """How observations are built (saved in every model file)."""
-        channels = ("potential",) + (("previous",) if self.previous else ()) + (("memory",) if self.memory else ())
-        return ObserverConfig(size=self.obs_size, resolution=self.obs_resolution, channels=channels,
-                              memory_cap=self.memory_cap, scale=self.obs_scale)
+        return ObserverConfig.of(self.obs_size, self.obs_resolution, previous=self.previous, memory=self.memory,
+                                 memory_cap=self.memory_cap, scale=self.obs_scale)
 
     @property
     def reward_weights(self) -> RewardWeights:

@@ -33,7 +33,7 @@ import numpy as np
 
 from apf_physics.world import field as apf
 from apf_physics.common.compiled import kernel
-from apf_physics.world.field import Atlas, Grid, Raster
+from apf_physics.world.field import Atlas, Grid, Raster, repulsive_term_at
 from apf_physics.world.kinematics import UnicycleLimits, distance_bearing
 from apf_physics.sensing.lidar import Lidar, LidarConfig
 from apf_physics.common.transforms import signed_log
@@ -97,6 +97,15 @@ class ObserverConfig:
         """Lowest and highest value of any observation element, whatever the world (infinite for the
         raw potential; :meth:`Observer.value_bounds` gives the finite ones of an observer's worlds)."""
         return (-1.0, 1.0) if self.scale == "log" else (-np.inf, np.inf)
+
+    @classmethod
+    def of(cls, size: int = 11, resolution: int = 4, previous: bool = False, memory: bool = False,
+           memory_cap: int = 4, scale: str = "raw") -> "ObserverConfig":
+        """The configuration with the potential and the optional channels asked for, stacked in
+        :data:`CHANNELS`' order (the one place that order is decided)."""
+        wanted = {"potential": True, "previous": previous, "memory": memory}
+        return cls(size=int(size), resolution=int(resolution), channels=tuple(c for c in CHANNELS if wanted[c]),
+                   memory_cap=int(memory_cap), scale=scale)
 
     def to_dict(self) -> dict[str, Any]:
         return {"size": self.size, "resolution": self.resolution, "channels": list(self.channels),
@@ -364,17 +373,6 @@ def _window_span(x, lo, hi, p0, half):
 
 
 @kernel
-def _repulsive_term(d, krep, p0, u_max):
-    """One shape's term at signed distance ``d``, as :func:`~apf_physics.world.field.repulsive_term`
-    gives it: ``min(krep/2 · (1/d − 1/p0)², u_max)`` within ``p0``, 0 beyond, ``u_max`` inside."""
-    if d <= 0.0:
-        return u_max
-    if d <= p0:
-        return min(0.5 * krep * (1.0 / d - 1.0 / p0) ** 2, u_max)
-    return 0.0
-
-
-@kernel
 def _near_window(where, table, steps, lo, hi, p0, half, r, s):
     """Robot ``r`` in shape ``s``'s frame, ``(x, y) = where[r] − table[steps[r], s]``, and the
     window offsets near the shape's box: ``(x, y, x0, x1, y0, y1)`` (:func:`_window_span` of each axis)."""
@@ -420,7 +418,7 @@ def _add_terms(values, rows, where, table, steps, lo, hi, centre, radius, polygo
     points within ``p0`` of the shape's box ``[lo[s], hi[s]]`` are measured: their signed
     distance ``d`` to the disc ``centre[s]``, ``radius[s]``, or, for a polygon (NaN radius), the
     next of ``polygon_d`` (its points in the order met here: robots, shapes, ``dx``, ``dy``, as
-    :func:`_polygon_points` lists them). A window point's terms (:func:`_repulsive_term`) are
+    :func:`_polygon_points` lists them). A window point's terms (:func:`~apf_physics.world.field.repulsive_term_at`) are
     summed in shape order, from 0, then added to its value, which stays at most ``u_wall``; a
     point inside a shape reads ``u_wall``. A disc's ``d`` is not measured where the squared
     distance from its centre settles the term (surely beyond ``p0``: 0; surely inside: ``u_max``).
@@ -459,7 +457,7 @@ def _add_terms(values, rows, where, table, steps, lo, hi, centre, radius, polygo
                         else:
                             d = np.hypot(ex, ey) - radius[s]
                     c = (half - dy) * k + (half + dx)
-                    term = _repulsive_term(d, krep, p0, u_max)
+                    term = repulsive_term_at(d, krep, p0, u_max)
                     if mark[c] == 0:    # the first term here: 0 + term is term
                         added[c] = term
                         mark[c] = 1
@@ -662,14 +660,12 @@ class RangeObserver:
         ranges = self.lidar.scan_worlds(worlds, world_of, poses, t, others)
         if self.config.noise > 0:
             rows = range(self.num) if robots is None else np.asarray(robots, np.intp).reshape(-1).tolist()
-            noise = np.stack([self.rngs[i].normal(0.0, self.config.noise, k) for i in rows])
-            ranges = np.clip(ranges + noise, 0.0, self.config.max_range)
+            ranges = np.stack([self.config.noisy(ranges[n], self.rngs[i]) for n, i in enumerate(rows)])
         out[:, :k] = ranges / self.config.max_range
         target = np.empty((len(poses), 2))
         for w in np.unique(world_of).tolist():
             mine = world_of == w
-            d = worlds[w].targets[None, :, :] - poses[mine, None, :2]
-            target[mine] = worlds[w].targets[np.argmin(np.hypot(d[..., 0], d[..., 1]), axis=1)]
+            target[mine] = worlds[w].nearest_target(poses[mine, :2])
         distance, bearing = distance_bearing(poses, target)
         out[:, k] = np.tanh(distance / self.config.max_range)
         out[:, k + 1] = np.sin(bearing)

@@ -354,6 +354,17 @@ class World:
             d = np.minimum(d, np.hypot(points[:, 0] - tx, points[:, 1] - ty))
         return d
 
+    def reached(self, points: np.ndarray) -> np.ndarray:
+        """(N,) bool: a robot centred at each point has reached a target (within :attr:`goal_tolerance`
+        of the nearest, Model §2's episode rule)."""
+        return self.distance_to_target(points) <= self.goal_tolerance
+
+    def nearest_target(self, points: np.ndarray) -> np.ndarray:
+        """(N, 2) the target nearest each point."""
+        points = np.asarray(points, dtype=float).reshape(-1, 2)
+        d = points[:, None, :] - self.targets[None]
+        return self.targets[np.argmin(np.hypot(d[..., 0], d[..., 1]), axis=1)]
+
     # -- geometry ----------------------------------------------------------------------
     def obstacle_distance(self, points: np.ndarray, t: np.ndarray | float = 0.0, static: bool = False,
                           near: bool = False) -> np.ndarray:
