@@ -13,7 +13,7 @@ from apf_physics.errors import ModelError
 from apf_physics.experiments.evaluate import evaluate
 from apf_physics.models import MapNetwork, MapPolicy, load_policy, model_meta, save_model
 from apf_physics.models.mapnet import UNREACHED
-from apf_physics.sensing.observation import MapView
+from apf_physics.sensing.mapview import MapView
 from apf_physics.planners.dqn import DQNPlanner
 from apf_physics.learning.config import preset
 from apf_physics.learning import train
@@ -134,7 +134,7 @@ def test_fixed_point_equals_the_sweeps_to_the_bit(world_name):
     """The label-correcting search finds exactly what sweeping the whole grid to a fixed point does."""
     from apf_physics.models.mapnet import UNREACHED, _neighbours, _shift, _sweep, fixed_point
     from apf_physics.models import resolve_model
-    from apf_physics.sensing.observation import MapView
+    from apf_physics.sensing.mapview import MapView
     from apf_physics import load_world
     world = load_world(world_name)
     policy = load_policy(resolve_model("map"))

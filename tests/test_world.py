@@ -245,7 +245,8 @@ RASTER_PEAK = """
 import sys
 import numpy as np
 from apf_physics.world.io.mapfiles import write_pgm
-from apf_physics.sensing.observation import MapView, observation_raster
+from apf_physics.sensing.mapview import MapView
+from apf_physics.sensing.observation import observation_raster
 from apf_physics.world.search import SearchGrid
 from apf_physics.sim.swept import Sweeps
 from apf_physics.world.io.worldfile import raster_memory, world_from_dict

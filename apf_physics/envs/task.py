@@ -3,9 +3,8 @@
 One step: actions → the stepper's commands (unit moves, Model Table 1; or a continuous
 velocity, or a unicycle's ``(v, ω)``: :class:`~apf_physics.envs.options.RobotOptions`) →
 followers' moves (formations) → one :class:`~apf_physics.sim.engine.Stepper` step for the whole
-batch → observations (one :class:`~apf_physics.sensing.observation.Observer` call for the windows,
-one :class:`~apf_physics.sensing.observation.RangeObserver` call for the ranges) and the reward's
-named terms. ``Navigate-v0``
+batch → observations (one call of the task's observation kind, whichever it is:
+:mod:`apf_physics.sensing.kinds`) and the reward's named terms. ``Navigate-v0``
 is a batch of one, :class:`~apf_physics.envs.vector.NavigateVectorEnv` a batch of N, and
 ``Formation-v0`` a batch of one formation.
 """
@@ -25,7 +24,9 @@ from apf_physics.envs.options import RobotOptions
 from apf_physics.errors import UserError
 from apf_physics.envs.reward import RewardWeights, reward_terms, reward_terms_one
 from apf_physics.control.formation import FormationCrowd, FormationTeam
-from apf_physics.sensing.observation import Observer, ObserverConfig, RangeObserver
+from apf_physics.sensing.kinds import Robots, make_observation
+from apf_physics.sensing.lidar import LidarConfig
+from apf_physics.sensing.observation import Observer, ObserverConfig
 from apf_physics.control.tracking import UnicycleFollowers, leader_caps, team_drive
 from apf_physics.world.core import FormationSpec, World
 
@@ -79,6 +80,22 @@ def trap_detector(trap: TrapOption) -> TrapDetector | None:
     raise UserError(f"trap must be None, one of {', '.join(TRAP_RULES)} or a TrapDetector, got {trap!r}")
 
 
+def _zeros(space: spaces.Space, num: int) -> np.ndarray | dict:
+    """``num`` rows of zeros of a ``Box`` (or of each ``Box`` of a ``Dict``)."""
+    if isinstance(space, spaces.Dict):
+        return {name: _zeros(part, num) for name, part in space.spaces.items()}
+    return np.zeros((num, *space.shape), space.dtype)
+
+
+def _with_rows(observation: np.ndarray | dict, slots: np.ndarray, rows: np.ndarray | dict) -> np.ndarray | dict:
+    """A copy of ``observation`` with ``rows`` in ``slots`` (an array handed out is never changed)."""
+    if isinstance(observation, dict):
+        return {name: _with_rows(part, slots, rows[name]) for name, part in observation.items()}
+    out = observation.copy()
+    out[slots] = rows
+    return out
+
+
 def _ends(ended: np.ndarray, outcome: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(terminated, truncated, trapped)`` of the episodes that ``ended``, from their outcome:
     reached or collided terminate; the step limit and the trap detector truncate."""
@@ -123,11 +140,10 @@ class NavigationTask:
         robots = 1 if self.team is None else self.team.robots
         self.stepper = Stepper(self.worlds, self.num, robots, max_steps=max_steps, trap=trap_detector(trap),
                                unicycle=robot.unicycle)
+        # the potential at the robots (the reward's W4) and their visits: the window observer, whatever they see
         self.observer = Observer(observer, self.num, self.worlds, track_visits=bool(weights.revisit))
-        self.ranges = RangeObserver(robot.lidar, self.num, robot.unicycle) if robot.ranges else None
-        self._centre = observer.size // 2
-        self._obs = np.zeros((self.num, *observer.shape), np.float32) if robot.window else None
-        self._scan = np.zeros((self.num, self.ranges.size), np.float32) if self.ranges is not None else None
+        self.sensor = make_observation(robot.observation, self.observer, robot.lidar, robot.unicycle, self.worlds)
+        self._observation = _zeros(self.sensor.space(), self.num)
         self._u = np.zeros(self.num)     # the potential at each leader (its window's centre)
         self._moved = np.zeros((self.num, 2))   # each leader's last displacement (a holonomic robot's velocity)
         self._thesis_one = self.team is None and robot.thesis   # with the stepper's scalar path: stepped by _step_one
@@ -142,23 +158,12 @@ class NavigationTask:
         return self.stepper.world_of
 
     def observation_space(self) -> spaces.Space:
-        """One slot's observation space: the window's ``Box``, the ranges' ``Box``, or a ``Dict`` of both."""
-        window = ranges = None
-        if self.robot.window:
-            low, high = self.observer.value_bounds()  # finite: from the worlds' U
-            window = spaces.Box(low, high, self.observer.config.shape, np.float32)
-        if self.ranges is not None:
-            low, high = self.ranges.bounds()
-            ranges = spaces.Box(low, high, low.shape, np.float32)
-        if window is not None and ranges is not None:
-            return spaces.Dict({"window": window, "lidar": ranges})
-        return window if window is not None else ranges
+        """One slot's observation space (:meth:`~apf_physics.sensing.kinds.ObservationKind.space`)."""
+        return self.sensor.space()
 
     def seed(self, seeds: Sequence[int | None]) -> None:
-        """Restart the range sensor's noise, slot ``i`` from ``seeds[i]`` (the environments call it
-        at a seeded reset)."""
-        if self.ranges is not None:
-            self.ranges.seed(seeds)
+        """Restart the sensors' noise, slot ``i`` from ``seeds[i]`` (the environments call it at a seeded reset)."""
+        self.sensor.seed(seeds)
 
     def start(self, slots: np.ndarray, world_ids: np.ndarray, leaders: np.ndarray,
               headings: np.ndarray | None = None, observe: bool = True) -> None:
@@ -191,52 +196,43 @@ class NavigationTask:
                 followers.reset(states[slot])
                 self.unicycle_followers[slot] = followers
         self.observer.reset(slots, leaders, worlds)
+        self.sensor.reset(slots, leaders, worlds)
         self._moved[slots] = 0.0
         if observe:
             self._observe(None if self.num == 1 else slots)   # (a batch of one: its one slot)
 
+    def _robots(self, slots: np.ndarray | None) -> Robots:
+        """What the sensors know of the leaders of ``slots`` (None: all)."""
+        rows = slice(None) if slots is None else slots
+        stepper = self.stepper
+        unicycle = self.robot.unicycle is not None
+        return Robots(stepper.positions[rows, 0], slots, stepper.steps[rows],   # the steps: where moving obstacles are
+                      headings=stepper.headings[rows, 0] if unicycle else None,
+                      velocity=stepper.drive[rows, 0] if unicycle else self._moved[rows],
+                      others=stepper.positions[rows, 1:] if stepper.robots_per_slot > 1 else None)
+
     def _observe(self, slots: np.ndarray | None) -> None:
         """Refresh the observations (and the potential at the leader) of ``slots`` (None: all)."""
-        leaders = self.stepper.positions[:, 0] if slots is None else self.stepper.positions[slots, 0]
-        steps = self.stepper.steps if slots is None else self.stepper.steps[slots]   # moving obstacles' time
-        obs = self.observer.observe(leaders, slots, steps) if self.robot.window else None
-        if obs is not None and self.observer.config.scale == "raw":
-            u = obs[:, 0, self._centre, self._centre]
-        else:  # no window, or a scaled one that reads 0 at the robot: take U from an unscaled sample
-            u = self.observer.potential_at(leaders, slots, steps)
-        scan = self._scan_of(slots, steps) if self.ranges is not None else None
+        robots = self._robots(slots)
+        obs = self.sensor.observe(robots)
+        u = self.sensor.centre_potential(obs)   # what the observation already read, else an unscaled sample
+        if u is None:
+            u = self.observer.potential_at(robots.positions, slots, robots.steps)
         if slots is None:
             self._u = u.astype(float)
-            if obs is not None:
-                self._obs = obs
-            if scan is not None:
-                self._scan = scan
+            self._observation = obs
         else:  # copy on write: an array handed out by step() is never changed afterwards
             self._u[slots] = u
-            if obs is not None:
-                self._obs = self._obs.copy()
-                self._obs[slots] = obs
-            if scan is not None:
-                self._scan = self._scan.copy()
-                self._scan[slots] = scan
-
-    def _scan_of(self, slots: np.ndarray | None, steps: np.ndarray) -> np.ndarray:
-        """The range observations of the leaders of ``slots`` (None: all)."""
-        rows = slice(None) if slots is None else slots
-        poses = self.stepper.poses()[rows, 0]
-        velocity = self.stepper.drive[rows, 0] if self.robot.unicycle is not None else self._moved[rows]
-        others = self.stepper.positions[rows, 1:] if self.stepper.robots_per_slot > 1 else None
-        return self.ranges.observe(self.worlds, self.stepper.world_of[rows], poses, velocity, steps, others, slots)
+            self._observation = _with_rows(self._observation, slots, obs)
 
     def observation(self, slots: np.ndarray | int | None = None) -> np.ndarray | dict:
         """The current observations (or those of ``slots``; an int: that slot's alone): (N, C, k, k)
         windows, (N, K + 5) ranges, or ``{"window": ..., "lidar": ...}``; never changed afterwards."""
-        rows = slice(None) if slots is None else slots
-        if self._scan is None:
-            return self._obs[rows]
-        if self._obs is None:
-            return self._scan[rows]
-        return {"window": self._obs[rows], "lidar": self._scan[rows]}
+        if slots is None:
+            return self._observation
+        if isinstance(self._observation, dict):
+            return {name: part[slots] for name, part in self._observation.items()}
+        return self._observation[slots]
 
     def step(self, actions: np.ndarray | int, restart: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
              ) -> TaskStep:
@@ -265,7 +261,7 @@ class NavigationTask:
         everyone = bool(moved.all())
         slots = None if everyone else np.flatnonzero(moved)
         leaders = report.positions[:, 0]
-        if self.ranges is not None and self.robot.unicycle is None:
+        if self.robot.unicycle is None:   # a holonomic robot's velocity, as the range sensor reads it
             self._moved = np.where(moved[:, None], leaders - before, self._moved)
         revisits = None
         if self.observer.memory is not None:
@@ -332,7 +328,7 @@ class NavigationTask:
         robot_contact = bool(report.contacts.touched and report.contacts.robot[0])
         # fresh arrays for what the vector env hands out (a caller may change its own), read-only
         # shared flags for the rest
-        return TaskStep(self._obs, np.array([sum(terms)]), np.array([ended and not truncated]), np.array([truncated]),
+        return TaskStep(self._observation, np.array([sum(terms)]), np.array([ended and not truncated]), np.array([truncated]),
                         np.array(terms)[:, None], report.reached, report.collided, report.moved,
                         _FLAGS[robot_contact], _FLAGS[trapped])
 
@@ -358,10 +354,14 @@ class CrowdTask:
         max_steps: Truncate after this many steps (None: never).
         trap: Truncate a formation whose leader the trap detector finds stuck (:func:`trap_detector`;
             default None: no trap rule).
+        observation: What each agent observes (:data:`~apf_physics.sensing.kinds.OBSERVATIONS`); its
+            range sensor sees every other robot.
+        lidar: The range sensor's beams.
     """
 
     def __init__(self, world: World, observer: ObserverConfig, weights: RewardWeights, agents: str = "leaders",
-                 max_steps: int | None = None, trap: TrapOption = None):
+                 max_steps: int | None = None, trap: TrapOption = None, observation: str = "window",
+                 lidar: LidarConfig = LidarConfig()):
         if agents not in ("leaders", "all"):
             raise ValueError(f"agents must be 'leaders' or 'all', got {agents!r}")
         if not world.formations:
@@ -381,7 +381,13 @@ class CrowdTask:
         self._formation = np.array([f for f, _ in self.members], np.intp)
         self._robot = np.array([f * m + r for f, r in self.members], np.intp)
         self.observer = Observer(observer, len(self.members), self.crowd.worlds, track_visits=bool(weights.revisit))
-        self._centre = observer.size // 2
+        self.sensor = make_observation(observation, self.observer, lidar, None, self.crowd.worlds)
+        # which robots each agent has in its field: the other formations' (and, when every robot is an
+        # agent, its own formation's too)
+        m = self.crowd.robots
+        mine = self._formation[:, None] == np.arange(count * m)[None, :] // m
+        self._in_field = ~mine if agents == "leaders" else np.ones_like(mine)
+        self._in_field[np.arange(len(self.members)), self._robot] = False
 
     def start(self) -> None:
         """Every formation at its start (followers behind their leaders)."""
@@ -391,28 +397,29 @@ class CrowdTask:
         self.crowd.reset(initial)
         self.step_count = 0
         positions = self._agent_positions()
-        self.observer.reset(np.arange(len(self.members)), positions,
-                            [self.crowd.worlds[f] for f in self._formation])
+        agents = np.arange(len(self.members))
+        worlds = [self.crowd.worlds[f] for f in self._formation]
+        self.observer.reset(agents, positions, worlds)
+        self.sensor.reset(agents, positions, worlds)
         self._obs, self._u = self._observe()
 
     def _agent_positions(self) -> np.ndarray:
         return self.stepper.positions.reshape(-1, 2)[self._robot]
 
-    def _observe(self) -> tuple[np.ndarray, np.ndarray]:
+    def _observe(self) -> tuple[np.ndarray | dict, np.ndarray]:
         """Every agent's observation, and U at it (in its formation's field, with the others' discs)."""
         robots = self.stepper.positions.reshape(-1, 2)
         present = self.stepper.physics.present
-        obs = np.empty((len(self.members), *self.observer.config.shape), np.float32)
-        u = np.empty(len(self.members))
-        for a, (f, r) in enumerate(self.members):
-            others = present.copy()
-            others[f * self.crowd.robots:(f + 1) * self.crowd.robots] = self.mode == "all"
-            others[self._robot[a]] = False
-            discs = robots[others]
-            row = np.array([a])
-            obs[a] = self.observer.observe(robots[self._robot[a]][None], row, self.step_count, discs)[0]
-            u[a] = self.observer.potential_at(robots[self._robot[a]][None], row, self.step_count, discs)[0]
-        return obs, u
+        seen = present[None, :] & (np.arange(len(robots))[None, :] != self._robot[:, None])
+        shown = np.where(seen[..., None], robots[None], np.nan)                       # (A, N, 2)
+        discs = np.where((self._in_field & present[None, :])[..., None], robots[None], np.nan)
+        agents = Robots(robots[self._robot], None, self.step_count, others=shown, discs=discs)
+        obs = self.sensor.observe(agents)
+        u = self.sensor.centre_potential(obs)
+        if u is None:
+            u = np.array([self.observer.potential_at(agents.positions[a:a + 1], np.array([a]), self.step_count,
+                                                     d[~np.isnan(d[:, 0])])[0] for a, d in enumerate(discs)])
+        return obs, np.asarray(u, float)
 
     def step(self, actions: np.ndarray) -> TaskStep:
         """Every agent's move (agents of ended formations: ignored)."""

@@ -1,7 +1,7 @@
 """A Q-network that plans: a learned cost map, value iteration over it, and a per-move head.
 
 The thesis's second direction of future work is an observation that is an image map of the
-world. This network takes one (:class:`~apf_physics.sensing.observation.MapView`): every node of a
+world. This network takes one (:class:`~apf_physics.sensing.mapview.MapView`): every node of a
 grid over the map (``resolution`` per unit) carries the robot's clearance there and whether a
 target is within reach. It has three parts, all learned:
 
@@ -39,7 +39,7 @@ from torch import nn
 from apf_physics.world.search import shortest_paths
 
 MAP_FEATURES = 2
-"""Node features of a :class:`~apf_physics.sensing.observation.MapView`: clearance margin, target."""
+"""Node features of a :class:`~apf_physics.sensing.mapview.MapView`: clearance margin, target."""
 MOVE_FEATURES = 5
 """Per-move features of the head: ΔV, length, room, ΔU, stay."""
 UNREACHED = -1e6
