@@ -248,7 +248,7 @@ from apf_physics.world.io.mapfiles import write_pgm
 from apf_physics.sensing.mapview import MapView
 from apf_physics.sensing.observation import observation_raster
 from apf_physics.world.search import SearchGrid
-from apf_physics.sim.swept import Sweeps
+from apf_physics.sim.swept import SweptDistances
 from apf_physics.world.io.worldfile import raster_memory, world_from_dict
 if sys.argv[1] == "grid":   # a random occupancy grid of 150 x 150 cells, one unit each
     occupied = np.random.default_rng(0).random((150, 150)) < 0.2
@@ -265,7 +265,7 @@ try:   # reset the peak, so that what imports used does not count
 except OSError:
     pass
 before = status("VmRSS")
-Sweeps().add(world)                                            # the physics' index of static shapes
+SweptDistances().add(world)                                            # the physics' index of static shapes
 observation_raster(world, 7, 4)                                # the DQN planner's (and u_wall's potential raster)
 world.start_cells()                                            # --random-starts
 SearchGrid.of(world).cost_to_go                                # the A* planner's

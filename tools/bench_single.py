@@ -14,7 +14,7 @@ and after in one run. A fourth steps it with ``Physics.step`` and ``Observer.obs
 (nobody moves, nothing touches): the step's own part, the env, task, stepper and wrappers.
 
 Then where a Navigate step goes: the same steps again with the physics call
-(``Physics.step``, its free-move test apart (``needs_physics``, or ``Sweeps.near_one`` for one robot), and steps with and without pymunk apart), the
+(``Physics.step``, its free-move test apart (``needs_physics``, or ``SweptDistances.near_one`` for one robot), and steps with and without pymunk apart), the
 observation of the steps (``Observer.observe``) and the resets (``env.reset`` through the
 wrappers, their observation included; ``NavigationTask.start`` apart) timed apart (per call,
 with ``time.perf_counter``). ``--profile`` adds a cProfile of the Navigate steps (top 25 by own time).
@@ -144,7 +144,7 @@ def breakdown(steps: int) -> None:
         return out
     physics.step, env.reset = sorting, resetting
     try:
-        with timed(physics, "needs_physics", test), timed(physics.free.sweeps, "near_one", test), \
+        with timed(physics, "needs_physics", test), timed(physics.free.swept, "near_one", test), \
                 timed(observer, "observe", obs), timed(task, "start", starts):
             total, _ = run(env, actions)
     finally:

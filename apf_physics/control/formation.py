@@ -341,7 +341,7 @@ def right_of_way(world: World, positions: np.ndarray, moves: np.ndarray, order: 
     return out
 
 
-class FormationCrowd:
+class Formations:
     """Several formations in one world, each to its own target, as one crowd of stepper slots.
 
     Formation ``f`` is slot ``f``; its robots are the first ``1 + followers`` of the slot's

@@ -15,7 +15,7 @@ from gymnasium.utils import seeding
 from apf_physics.control.shield import ACTIONS
 from apf_physics.envs.options import observer_config, resolve_worlds
 from apf_physics.envs.reward import TERMS, reward_weights
-from apf_physics.envs.task import CrowdTask, TrapOption
+from apf_physics.envs.task import FormationsTask, TrapOption
 from apf_physics.sensing.observation import ObserverConfig
 from apf_physics.render.drawing import Snapshot, draw_frame, field_image, formation_roles
 
@@ -32,7 +32,7 @@ class FormationsParallelEnv(ParallelEnv):
 
     ``agents="leaders"`` (default): one agent per formation, ``leader_<f>``; its followers
     follow by their own rule and every move gets the right of way
-    (:class:`~apf_physics.control.formation.FormationCrowd`), so robots never touch one another.
+    (:class:`~apf_physics.control.formation.Formations`), so robots never touch one another.
     ``agents="all"``: every robot is an agent, ``robot_<f>_<r>`` (r = 0 the leader), moved
     exactly as told (collisions are then the agents' to avoid).
 
@@ -74,7 +74,7 @@ class FormationsParallelEnv(ParallelEnv):
                  render_mode: str | None = None, trap: TrapOption = None):
         (self.world,) = resolve_worlds(world)
         self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer, previous)
-        self._task = CrowdTask(self.world, self.observer, reward_weights(reward), agents, max_episode_steps, trap)
+        self._task = FormationsTask(self.world, self.observer, reward_weights(reward), agents, max_episode_steps, trap)
         low, high = self._task.observer.value_bounds()  # finite: from the worlds' U
         self._observation_space = spaces.Box(low, high, self.observer.shape, np.float32)
         self.possible_agents = list(self._task.names)
@@ -123,17 +123,17 @@ class FormationsParallelEnv(ParallelEnv):
         a = self._index[agent]
         f, r = self._task.members[a]
         position = self._task.stepper.positions[f, r]
-        world = self._task.crowd.worlds[f]
+        world = self._task.formations.worlds[f]
         return {"position": position.copy(), "formation": f, "world": self.world.name,
                 "distance": float(world.distance_to_target(position[None])[0])}
 
     def render(self):
         if self.render_mode != "rgb_array":
             return None
-        crowd = self._task.crowd
-        positions = np.concatenate([self._task.stepper.positions[f, :size] for f, size in enumerate(crowd.sizes)])
-        roles = tuple(role for size in crowd.sizes for role in formation_roles(size))
-        families = tuple(f for f, size in enumerate(crowd.sizes) for _ in range(size))
+        formations = self._task.formations
+        positions = np.concatenate([self._task.stepper.positions[f, :size] for f, size in enumerate(formations.sizes)])
+        roles = tuple(role for size in formations.sizes for role in formation_roles(size))
+        families = tuple(f for f, size in enumerate(formations.sizes) for _ in range(size))
         snapshot = Snapshot(positions, roles, (), (f"{self.world.name}  step {self._task.step_count}",),
                             self._task.step_count, families)
         return draw_frame(field_image(self.world), snapshot)

@@ -23,7 +23,7 @@ from apf_physics.sim.engine import RUNNING, TIMEOUT, TRAPPED, Stepper, TrapDetec
 from apf_physics.envs.options import RobotOptions
 from apf_physics.errors import UserError
 from apf_physics.envs.reward import RewardWeights, reward_terms, reward_terms_one
-from apf_physics.control.formation import FormationCrowd, FormationTeam
+from apf_physics.control.formation import Formations, FormationTeam
 from apf_physics.sensing.kinds import Robots, make_observation
 from apf_physics.sensing.lidar import LidarConfig
 from apf_physics.sensing.observation import Observer, ObserverConfig
@@ -337,12 +337,12 @@ class NavigationTask:
         return self.stepper.last_distance
 
 
-class CrowdTask:
+class FormationsTask:
     """Several formations of one world at once (its ``formations:``), each to its own target.
 
     What the PettingZoo environment steps: one :class:`~apf_physics.sim.engine.Stepper` slot per
     formation, all in one crowd (their robots meet), the followers' rule and the right of way
-    of :class:`~apf_physics.control.formation.FormationCrowd`, one observer row per agent.
+    of :class:`~apf_physics.control.formation.Formations`, one observer row per agent.
 
     Args:
         world: A world with ``formations``.
@@ -367,38 +367,38 @@ class CrowdTask:
         if not world.formations:
             raise ValueError(f"{world.label}: the world has no 'formations'")
         self.world = world
-        self.crowd = FormationCrowd(world)
+        self.formations = Formations(world)
         self.weights = weights
         self.mode = agents
-        count, m = self.crowd.count, self.crowd.robots
-        self.stepper = Stepper(self.crowd.worlds, count, m, max_steps=max_steps, trap=trap_detector(trap),
+        count, m = self.formations.count, self.formations.robots
+        self.stepper = Stepper(self.formations.worlds, count, m, max_steps=max_steps, trap=trap_detector(trap),
                                crowds=[0] * count)
         if agents == "leaders":
             self.members = [(f, 0) for f in range(count)]
         else:
-            self.members = [(f, r) for f in range(count) for r in range(self.crowd.sizes[f])]
+            self.members = [(f, r) for f in range(count) for r in range(self.formations.sizes[f])]
         self.names = [f"leader_{f}" if agents == "leaders" else f"robot_{f}_{r}" for f, r in self.members]
         self._formation = np.array([f for f, _ in self.members], np.intp)
         self._robot = np.array([f * m + r for f, r in self.members], np.intp)
-        self.observer = Observer(observer, len(self.members), self.crowd.worlds, track_visits=bool(weights.revisit))
-        self.sensor = make_observation(observation, self.observer, lidar, None, self.crowd.worlds)
+        self.observer = Observer(observer, len(self.members), self.formations.worlds, track_visits=bool(weights.revisit))
+        self.sensor = make_observation(observation, self.observer, lidar, None, self.formations.worlds)
         # which robots each agent has in its field: the other formations' (and, when every robot is an
         # agent, its own formation's too)
-        m = self.crowd.robots
+        m = self.formations.robots
         mine = self._formation[:, None] == np.arange(count * m)[None, :] // m
         self._in_field = ~mine if agents == "leaders" else np.ones_like(mine)
         self._in_field[np.arange(len(self.members)), self._robot] = False
 
     def start(self) -> None:
         """Every formation at its start (followers behind their leaders)."""
-        initial = self.crowd.starts()
-        slots = np.arange(self.crowd.count)
-        self.stepper.start(slots, initial, world_ids=slots, present=self.crowd.present)
-        self.crowd.reset(initial)
+        initial = self.formations.starts()
+        slots = np.arange(self.formations.count)
+        self.stepper.start(slots, initial, world_ids=slots, present=self.formations.present)
+        self.formations.reset(initial)
         self.step_count = 0
         positions = self._agent_positions()
         agents = np.arange(len(self.members))
-        worlds = [self.crowd.worlds[f] for f in self._formation]
+        worlds = [self.formations.worlds[f] for f in self._formation]
         self.observer.reset(agents, positions, worlds)
         self.sensor.reset(agents, positions, worlds)
         self._obs, self._u = self._observe()
@@ -428,13 +428,13 @@ class CrowdTask:
         running = self.stepper.running
         before = self._agent_positions()
         if self.mode == "leaders":
-            commands = self.crowd.commands(positions, moves, running, self.step_count)
+            commands = self.formations.commands(positions, moves, running, self.step_count)
         else:
             commands = np.zeros(positions.shape)
             commands.reshape(-1, 2)[self._robot] = moves
         report = self.stepper.step(commands)
         self.step_count += 1
-        self.crowd.watch(report.positions, report.moved, self.step_count)
+        self.formations.watch(report.positions, report.moved, self.step_count)
         for a in range(len(self.members)):
             if report.moved[self._formation[a]]:
                 self.observer.visit(self._agent_positions()[a:a + 1], np.array([a]))

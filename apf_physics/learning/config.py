@@ -249,7 +249,7 @@ class ImitationConfig:
     map_moves: MoveSet = "fine"
     """The network's move set (:data:`~apf_physics.control.shield.MOVE_SETS`)."""
     grad_iterations: int = 24
-    """Value-iteration sweeps back-propagated through, after the fixed point."""
+    """Value-iteration (Bellman) updates back-propagated through, after the fixed point."""
     demo_positions: int = 256
     """Robot positions labelled by the teacher per world and update."""
     label_temperature: float = 0.1

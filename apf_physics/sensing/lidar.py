@@ -563,8 +563,8 @@ def _cast(world: World, poses: np.ndarray, config: LidarConfig, t: np.ndarray,
             robot, shape, fx, fy = _near_discs(pos, mov.centre[None] + shift[:, mov.disc_owner], mov.radius, reach)
             _cast_discs(beams, out, robot, fx, fy, mov.radius[shape])
     discs = []
-    if len(world.crowd):
-        discs.append(np.broadcast_to(world.crowd[None], (n,) + world.crowd.shape))
+    if len(world.others):
+        discs.append(np.broadcast_to(world.others[None], (n,) + world.others.shape))
     if others is not None:
         discs.append(others)
     if discs:

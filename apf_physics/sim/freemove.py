@@ -7,7 +7,7 @@ than :data:`CONTACT_MARGIN` from every obstacle, the map's edge and the robots i
 the whole move.
 
 - Static obstacles and the map's edge: the exact least distance between the segment the
-  robot's centre sweeps and its world's static shapes (:class:`~apf_physics.sim.swept.Sweeps`,
+  robot's centre sweeps and its world's static shapes (:class:`~apf_physics.sim.swept.SweptDistances`,
   compiled), lowered by how far a unicycle's arc strays from the straight move.
 - Robots that meet (formations, crowds): judged against what the others can do, not what they
   were told. The robots that go to pymunk are closed under "may touch one that goes to pymunk"
@@ -23,7 +23,7 @@ import numpy as np
 from apf_physics.common.compiled import kernel
 from apf_physics.common.geometry import swept_distance
 from apf_physics.sim.slots import Slots
-from apf_physics.sim.swept import Sweeps
+from apf_physics.sim.swept import SweptDistances
 from apf_physics.world.core import World
 
 CONTACT_MARGIN = 0.01
@@ -39,8 +39,8 @@ class FreeMoveTest:
             included (a generous bound), for robots that meet others.
 
     Attributes:
-        sweeps: The static geometry of the worlds in use (also the settling's exact look-ups).
-        sweep_world: (N,) each robot's world among ``sweeps``.
+        swept: The static geometry of the worlds in use (also the settling's exact look-ups).
+        map_of: (N,) each robot's map among ``swept``.
         keep_off: (N,) the distance each robot's move must keep from static shapes to need no physics.
         movers_needed: After :meth:`needs`: ``(world, index, slots, near)`` for each moving obstacle
             that robots come near (what the mover pool lends).
@@ -49,8 +49,8 @@ class FreeMoveTest:
     def __init__(self, slots: Slots, reach: float):
         self.slots = slots
         self.reach = float(reach)
-        self.sweeps = Sweeps()
-        self.sweep_world = np.zeros(slots.num_robots, np.intp)
+        self.swept = SweptDistances()
+        self.map_of = np.zeros(slots.num_robots, np.intp)
         self.keep_off = np.zeros(slots.num_robots)
         self.movers_needed: list = []
         self._moving_slots: list | None = None
@@ -58,7 +58,7 @@ class FreeMoveTest:
     def assign(self, slot: int, world: World) -> None:
         """``slot`` is now in ``world``."""
         robots = self.slots.robots(np.array([slot]))
-        self.sweep_world[robots] = self.sweeps.add(world)   # shared by worlds of one map
+        self.map_of[robots] = self.swept.add(world)   # shared by worlds of one map
         self.keep_off[robots] = world.robot_radius + CONTACT_MARGIN
         self._moving_slots = None
 
@@ -73,7 +73,7 @@ class FreeMoveTest:
         the slots' steps put them, :attr:`Slots.time`).
         """
         keep_off = self.keep_off if bend is None else self.keep_off + bend
-        needs = self.sweeps.near(self.sweep_world, positions, moves, keep_off)
+        needs = self.swept.near(self.map_of, positions, moves, keep_off)
         slots = self.slots
         m = slots.robots_per_slot
         if m > 1:   # robots of one slot: closed under "may touch a robot that goes to pymunk"

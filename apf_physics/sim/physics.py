@@ -212,7 +212,7 @@ class Physics:
             if self.proxies.of_robot[0] >= 0:
                 self.proxies.release(self._alone)
             self._positions[0] = (x, y)
-            if self.present[0] and self.free.sweeps.near_one(int(self.free.sweep_world[0]), x, y, x, y,
+            if self.present[0] and self.free.swept.near_one(int(self.free.map_of[0]), x, y, x, y,
                                                              float(self.slots.radius[0]) + 1e-6):
                 self._separate(0, self._alone)
             return
@@ -223,7 +223,7 @@ class Physics:
         # One exact look-up for all: a robot clear of the static obstacles and the map's edge by
         # more than its radius in a world without moving ones needs no more checks.
         slots = robots // m
-        doubtful = self.free.sweeps.near(self.free.sweep_world[robots], self._positions[robots],
+        doubtful = self.free.swept.near(self.free.map_of[robots], self._positions[robots],
                                          np.zeros((len(robots), 2)), self.slots.radius[slots] + 1e-6)
         doubtful |= self.slots.moving[slots]
         crowds = set(self.crowd[slots[doubtful]].tolist())
@@ -379,7 +379,7 @@ class Physics:
             return None
         x, y = self._positions[0].tolist()
         dt, control = self.dt, self.control_dt
-        if self.free.sweeps.near_one(int(self.free.sweep_world[0]), x, y, x + vx * control, y + vy * control,
+        if self.free.swept.near_one(int(self.free.map_of[0]), x, y, x + vx * control, y + vy * control,
                                      float(self.free.keep_off[0])):
             return self._simulate_alone(v.reshape(1, 2))
         if self.proxies.held:   # it went to pymunk last step: its proxy goes back to the parking

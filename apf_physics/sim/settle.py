@@ -137,7 +137,7 @@ class Settler:
     def _alone(self, robots: np.ndarray, first: np.ndarray, planes: np.ndarray, simulated: np.ndarray,
                before: np.ndarray) -> None:
         """:meth:`settle` for robots alone in their slots (a robot alone meets no robot, and there
-        are a few a step), by the rule of :meth:`~apf_physics.sim.swept.Sweeps.settle`, compiled: each
+        are a few a step), by the rule of :meth:`~apf_physics.sim.swept.SweptDistances.settle`, compiled: each
         is pushed out of the shape it overlaps most until none by more than
         :data:`SETTLE_OBSTACLE`, then the static shape nearest its centre is looked up (in the
         world's exact geometry, the shapes pymunk has); one overlapped is added, and so on; after
@@ -148,7 +148,7 @@ class Settler:
         each ``(way out x, y, depth)`` (:func:`~apf_physics.sim.contacts.deep_planes`).
         """
         slots = robots // self.slots.robots_per_slot
-        p = self.free.sweeps.settle(self.free.sweep_world[robots], self.positions[robots],
+        p = self.free.swept.settle(self.free.map_of[robots], self.positions[robots],
                                     before[np.searchsorted(simulated, robots)], self.slots.radius[slots], first,
                                     planes, SETTLE_OBSTACLE, SETTLE_ROUNDS)
         self.positions[robots] = p

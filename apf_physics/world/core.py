@@ -149,7 +149,7 @@ class World:
         source: The file the world came from, for messages.
         formations: Several formations, each to its own target (the world file's ``formations:``).
         frame: How the world file's coordinates map to the world's (its units and origin).
-        crowd: ``(K, 2)`` centres of other robots, discs of :attr:`robot_radius` that repel and
+        others: ``(K, 2)`` centres of other robots, discs of :attr:`robot_radius` that repel and
             block like obstacles: the robots of other formations, as one leader sees them
             (:meth:`among`). Empty for a world as read from its file.
         unicycle: The robots are unicycles with these limits (``robot: {kinematics: unicycle,
@@ -167,7 +167,7 @@ class World:
     formation: FormationSpec | None = None
     source: str | None = None
     formations: tuple[FormationTask, ...] = ()
-    crowd: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
+    others: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
     frame: Frame = Frame()
     unicycle: UnicycleLimits | None = None
     # Caches of what is built from the world (rasters, indexes). Not constructor arguments: a
@@ -186,9 +186,9 @@ class World:
         """This world with other robots at ``robots`` (K, 2) as discs in the field and in the way.
 
         A view: it shares this world's cache (rasters of the static field stay valid; the
-        crowd's discs are added where they are, like moving obstacles).
+        other robots' discs are added where they are, like moving obstacles).
         """
-        return self._sharing(replace(self, crowd=np.asarray(robots, float).reshape(-1, 2)), everything=True)
+        return self._sharing(replace(self, others=np.asarray(robots, float).reshape(-1, 2)), everything=True)
 
     def with_task(self, targets: np.ndarray, starts: np.ndarray, name: str | None = None) -> World:
         """This world with other targets and starts, sharing what is built from its static
@@ -297,7 +297,7 @@ class World:
         return moment
 
     def obstacles_at(self, t: float = 0.0) -> tuple[Obstacle, ...]:
-        """Every obstacle where it is at control step ``t`` (and the crowd's discs): ``at(t).obstacles``."""
+        """Every obstacle where it is at control step ``t`` (and the other robots' discs): ``at(t).obstacles``."""
         return self.at(t).obstacles
 
     # -- the field ---------------------------------------------------------------------
@@ -562,7 +562,7 @@ class Moment:
     :attr:`World.near_shapes`, rasters, caches). A world without moving obstacles has nothing
     to place: its moments cost an object each.
 
-    The crowd's discs (:meth:`World.among`) are in the field, the obstacle list and the
+    The other robots' discs (:meth:`World.among`) are in the field, the obstacle list and the
     clearance at points; like the static obstacles' they are not in :meth:`path_clearance` of
     a world without moving obstacles (robots keep clear of one another by the right of way).
 
@@ -593,16 +593,16 @@ class Moment:
 
     @property
     def movers(self) -> tuple[Obstacle, ...]:
-        """The moving obstacles where they are (in :attr:`World.moving` order), then the crowd's discs."""
+        """The moving obstacles where they are (in :attr:`World.moving` order), then the other robots' discs."""
         if self._movers is None:
             world = self.world
             self._movers = (tuple(world.obstacles[i].moved(shift) for i, shift in zip(world.moving, self.offsets))
-                            + tuple(CircleObstacle(c, world.robot_radius) for c in world.crowd))
+                            + tuple(CircleObstacle(c, world.robot_radius) for c in world.others))
         return self._movers
 
     @property
     def obstacles(self) -> tuple[Obstacle, ...]:
-        """Every obstacle where it is, in :attr:`World.obstacles` order, then the crowd's discs."""
+        """Every obstacle where it is, in :attr:`World.obstacles` order, then the other robots' discs."""
         if self._obstacles is None:
             world = self.world
             placed = list(world.obstacles)
@@ -638,7 +638,7 @@ class Moment:
     def obstacle_distance(self, points: np.ndarray, static: bool = False, near: bool = False) -> np.ndarray:
         """Signed distance to the nearest obstacle's boundary (negative inside); see :meth:`World.obstacle_distance`.
 
-        ``static``: leave the moving obstacles (and the crowd) out. ``near``: exact only up to
+        ``static``: leave the moving obstacles (and the other robots) out. ``near``: exact only up to
         :data:`MOVE_REACH` beyond the robot's radius.
         """
         points = np.asarray(points, dtype=float).reshape(-1, 2)
@@ -700,16 +700,16 @@ def _table_rows(t):
 
 def _with_moving(world: World, points: np.ndarray, best: np.ndarray, offsets) -> np.ndarray:
     """``best`` (N,) lowered to the signed distance to each moving obstacle, shifted by its offset in
-    ``offsets`` ((2,) or (N, 2) each, in :attr:`World.moving` order), and to the crowd's discs.
+    ``offsets`` ((2,) or (N, 2) each, in :attr:`World.moving` order), and to the other robots' discs.
 
     Measured in each obstacle's own frame: the points moved back by its offset.
     """
     for i, shift in zip(world.moving, offsets):
         d, _ = world.obstacles[i].signed_distance(points - shift)
         best = np.minimum(best, d)
-    if len(world.crowd):
-        crowd = world.crowd
-        gap = np.hypot(points[:, None, 0] - crowd[None, :, 0], points[:, None, 1] - crowd[None, :, 1])
+    if len(world.others):
+        others = world.others
+        gap = np.hypot(points[:, None, 0] - others[None, :, 0], points[:, None, 1] - others[None, :, 1])
         best = np.minimum(best, gap.min(axis=1) - world.robot_radius)
     return best
 
