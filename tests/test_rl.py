@@ -651,3 +651,30 @@ def test_the_target_is_measured_on_the_held_out_starts_when_there_are_some():
     c2 = Counters()
     evals.record({"success": 0.95}, c2, net, config)
     assert c2.top_success == 0.95
+
+
+def test_show_config_names_the_layer_each_value_comes_from():
+    """Every option of a preset is shown with its value as the preset has it, and the layer that set
+    it: a chained preset's option is credited to the preset that changed it, a --set to --set."""
+    from apf_physics.learning.config import LAYERS, PRESETS, explain
+
+    for name in PRESETS:
+        rows = {option.rpartition(".")[2]: (value, source) for option, value, source in explain(name)}
+        assert {k: v for k, (v, _) in rows.items()} == preset(name).options()
+        for option, (value, source) in rows.items():
+            if source == "default":
+                assert option not in PRESETS[name] or option in ("preset",)
+    moving = {option: source for option, _, source in explain("moving", {"learning_rate": 3e-4})}
+    assert moving["env.memory"] == "preset general-memory" and moving["env.previous"] == "preset moving"
+    assert moving["dqn.loss"].startswith("fast learner") and moving["network.learning_rate"] == "--set"
+    assert moving["dqn.gamma"] == "default" and "fast learner" in LAYERS
+
+
+def test_train_show_config_trains_nothing_and_needs_no_out(tmp_path, capsys):
+    from apf_physics.cli import main
+
+    assert main(["train", "--world", "worlds/fixed20.yaml", "--show-config", "--set", "batch_size=256"]) == 0
+    out = capsys.readouterr().out
+    assert any(line.split()[:2] == ["dqn.batch_size", "256"] and line.split()[-1] == "--set" for line in out.splitlines())
+    assert main(["train", "--world", "worlds/fixed20.yaml"]) == 2   # training needs --out
+    assert not list(tmp_path.iterdir())
