@@ -135,7 +135,7 @@ def test_every_robot_of_the_multi_agent_env_holds(seed):
     env = FormationsParallelEnv(world=WORLDS / "four_formations.yaml", agents="all")
     rng = np.random.default_rng(seed)
     env.reset(seed=seed)
-    physics = env._task.stepper.physics
+    physics = env.task.stepper.physics
     for _ in range(40):
         if not env.agents:
             env.reset()

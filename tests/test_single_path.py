@@ -30,9 +30,9 @@ CASES = [
 def test_single_env_gives_the_vector_env_episodes_exactly(worlds_dir, name, options):
     world = str(worlds_dir / name)
     vec = NavigateVectorEnv(world=world, num_envs=1, starts="random", max_episode_steps=100, **options)
-    vec._task.stepper.scalar = False   # the array path
+    vec.task.stepper.scalar = False   # the array path
     single = gym.make("apf_physics/Navigate-v0", world=world, starts="random", **options)
-    assert single.unwrapped._task.stepper.scalar
+    assert single.unwrapped.task.stepper.scalar
     obs, info = vec.reset(seed=5)
     o, inf = single.reset(seed=5)
     np.testing.assert_array_equal(obs[0], o)

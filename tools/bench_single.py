@@ -59,7 +59,7 @@ def stubbed(env):
     """``env`` with ``Physics.step`` and ``Observer.observe`` replaced by stubs (nothing touched,
     nobody moves; the window of the start): what is left of a step is the env's, the task's, the
     stepper's and the wrappers' own part (episodes run to the step limit, 100 steps)."""
-    task = env.unwrapped._task
+    task = env.unwrapped.task
     nothing = ContactLog.nothing(task.stepper.physics.num_robots)
     window = task.observer.observe(task.stepper.positions[:, 0], None, task.stepper.steps)
     task.stepper.physics.step = lambda velocities, active=None: nothing
@@ -73,7 +73,7 @@ def side_by_side(steps: int, blocks: int) -> dict[str, tuple[float, float]]:
     the scalar path), timed in alternating blocks; the two Navigate-v0 take the same actions."""
     envs = {"CartPole-v1": make("CartPole-v1"), "Navigate-v0": make("apf_physics/Navigate-v0"),
             "array path": make("apf_physics/Navigate-v0"), "own part": stubbed(make("apf_physics/Navigate-v0"))}
-    envs["array path"].unwrapped._task.stepper.scalar = False
+    envs["array path"].unwrapped.task.stepper.scalar = False
     rng = np.random.default_rng(0)
     per = max(1, steps // blocks)
     times: dict[str, list[tuple[float, float]]] = {name: [] for name in envs}
@@ -121,7 +121,7 @@ def timed(obj, name: str, into: list):
 
 def breakdown(steps: int) -> None:
     env = make("apf_physics/Navigate-v0")
-    task = env.unwrapped._task
+    task = env.unwrapped.task
     physics, observer = task.stepper.physics, task.observer
     actions = np.random.default_rng(1).integers(0, 9, steps)
     run(env, actions[:500])   # warm up

@@ -224,6 +224,22 @@ class World:
             cache[key] = build()
         return cache[key]
 
+    def peek(self, key: Hashable, static: bool = False) -> Any:
+        """What :meth:`cached` keeps under ``key``, or None if nothing is built yet (nothing is built)."""
+        return (self._static if static else self._cache).get(key)
+
+    @property
+    def cache_size(self) -> int:
+        """How many things this world keeps of its own (not counting those shared by :meth:`with_task`)."""
+        return len(self._cache)
+
+    def forget(self) -> None:
+        """Drop everything built from this world (it is rebuilt when next asked for): for benchmarks
+        that time a world's first use."""
+        self._cache.clear()
+        self._static.clear()
+        self._moments.clear()
+
     # -- obstacles in time -----------------------------------------------------------------
     @property
     def static_obstacles(self) -> tuple[Obstacle, ...]:
