@@ -166,6 +166,11 @@ def run(args: argparse.Namespace) -> int:
                                       formation=args.formation, address=args.ray or None,
                                       worlds_per_task=args.ray_batch, kinematics=args.kinematics)
         notes = []
+        for name in names:   # which network each learned planner ran (on the last world, as a local run says)
+            planner = make_planner(name, model=args.model)
+            if hasattr(planner, "describe"):
+                planner.reset(worlds[-1], np.zeros((1, 2)))
+                notes.append(planner.describe())
     else:
         evaluations, notes = [], []
         for name in names:

@@ -2,7 +2,7 @@
 
 A planner scores moves; the shield admits only those that keep the robot ``SAFETY`` clear of
 everything along the move (:func:`move_clearance`) and, near moving obstacles, over the steps
-after it (:func:`shield_over_time`, README "The shield over time").
+after it (:func:`shield_over_time`, docs/planners.md, "The shield over time").
 """
 
 from __future__ import annotations

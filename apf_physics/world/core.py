@@ -52,7 +52,7 @@ the size of its number."""
 
 @dataclass(frozen=True)
 class Frame:
-    """How a world file's coordinates become the world's (README, "Real maps": units).
+    """How a world file's coordinates become the world's (docs/real-maps.md: units).
 
     The world is laid out in **steps**: one unit is the robot's travel per control step, and
     the map's lower-left corner is the origin. A world file in metres with ``robot: {step:

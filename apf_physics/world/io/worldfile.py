@@ -1,4 +1,4 @@
-"""World files: reading, validating and writing the YAML world-file contract (README "World files").
+"""World files: reading, validating and writing the YAML world-file contract (docs/world-files.md).
 
 :func:`load_world` reads a file (YAML, or JSON being YAML) and :func:`world_from_dict`
 validates a mapping and builds the :class:`~apf_physics.world.World`: the schema
@@ -44,7 +44,7 @@ from apf_physics.world.io.schema import (MAX_FOLLOWERS, MAX_FORMATIONS, MAX_NAME
 from apf_physics.world.io.schema import (MAX_POTENTIAL, MIN_GOAL_TOLERANCE, MIN_ROBOT_RADIUS, Checker, TooMany,
                                      parse_world)
 
-# -- limits that depend on several values (README "World files") ---------------------------
+# -- limits that depend on several values (docs/world-files.md) ---------------------------
 
 
 MEMORY_BUDGET = 2 * 2**30
@@ -257,7 +257,7 @@ def _build(check: Checker, data: Any, source: str) -> World | None:
     parts = parse_world(check, data, source)
     if parts is None:
         return None
-    # everything in steps, from the map's lower-left corner (README, "Real maps": units)
+    # everything in steps, from the map's lower-left corner (docs/real-maps.md: units)
     frame, grid = parts.frame, parts.grid
     offset, u = np.asarray(frame.offset, float), frame.unit
     to_world = (lambda pts: (np.asarray(pts, float) - offset) / u)
