@@ -55,12 +55,10 @@ RASTER_MARGIN = 16.0
 """How far beyond the map rasters reach [units] (observation windows of up to 29 × 29)."""
 RASTER_BYTES_PER_UNIT2 = 4_000
 """Peak bytes per square unit of rasters (map plus margin) an evaluation builds, computed in
-chunks: measured 2,400–2,600 beyond the process's own (a 300 × 300 world of boxes with the
-window and map networks and A*; a 512 × 512 MovingAI map with the map network and A*), rounded
-up, when the physics still had a clearance raster at 8 nodes per unit. The physics now keeps an
-index of the static shapes instead (:mod:`apf_physics.sim.swept`), and the A* grid and the potential
-and observation rasters at 4 nodes per unit dominate: 1,100–1,600 bytes per square unit on
-150 × 150 maps (``tests/test_world.py``), so the figure is generous."""
+chunks. The A* grid and the potential and observation rasters at 4 nodes per unit dominate:
+1,100–1,600 bytes per square unit on 150 × 150 maps (``tests/test_world.py``). The budget keeps
+more than twice that, so that a world it admits never fails in an allocation whichever planners
+run on it (the physics indexes static shapes, :mod:`apf_physics.sim.swept`, and needs no raster)."""
 RASTER_BYTES_PER_TARGET = 1_500
 """Further peak bytes per square unit per target: U is computed from a column per target
 (measured 370 at the default 4 nodes per unit; 1,500 covers a model's observer at 8)."""
