@@ -11,7 +11,6 @@ is a batch of one, :class:`~apf_physics.envs.vector.NavigateVectorEnv` a batch o
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Sequence, Union
 
@@ -19,10 +18,10 @@ import numpy as np
 from gymnasium import spaces
 
 from apf_physics.control.shield import ACTIONS
-from apf_physics.sim.engine import RUNNING, TIMEOUT, TRAPPED, Stepper, TrapDetector
+from apf_physics.sim.engine import TIMEOUT, TRAPPED, Stepper, TrapDetector
 from apf_physics.envs.options import RobotOptions
 from apf_physics.errors import UserError
-from apf_physics.envs.reward import RewardWeights, reward_terms, reward_terms_one
+from apf_physics.envs.reward import RewardWeights, rewards
 from apf_physics.control.formation import Formations, FormationTeam
 from apf_physics.sensing.kinds import Robots, make_observation
 from apf_physics.sensing.lidar import LidarConfig
@@ -31,11 +30,6 @@ from apf_physics.control.tracking import UnicycleFollowers, leader_caps, team_dr
 from apf_physics.world.core import FormationSpec, World
 
 
-_ONE_MOVE = ACTIONS.reshape(-1, 1, 1, 2).copy()   # the stepper's commands of a batch of one robot, per action
-_ONE_MOVE.flags.writeable = False
-_FLAGS = {value: np.full(1, value) for value in (False, True)}   # (1,) read-only flags of a batch of one
-for _flag in _FLAGS.values():
-    _flag.flags.writeable = False
 
 
 @dataclass
@@ -146,7 +140,6 @@ class NavigationTask:
         self._observation = _zeros(self.sensor.space(), self.num)
         self._u = np.zeros(self.num)     # the potential at each leader (its window's centre)
         self._moved = np.zeros((self.num, 2))   # each leader's last displacement (a holonomic robot's velocity)
-        self._thesis_one = self.team is None and robot.thesis   # with the stepper's scalar path: stepped by _step_one
 
     @property
     def positions(self) -> np.ndarray:
@@ -245,9 +238,6 @@ class NavigationTask:
         """
         if restart is not None and not len(restart[0]):
             restart = None
-        if self._thesis_one and self.stepper.scalar and self.stepper.outcome[0] == RUNNING and restart is None:
-            return self._step_one(int(actions) if isinstance(actions, (int, np.integer))
-                                  else int(np.asarray(actions).reshape(-1)[0]))
         commands = self.robot.commands(actions, self.num)
         before = self.stepper.positions[:, 0]
         if self.team is None:
@@ -257,18 +247,18 @@ class NavigationTask:
         else:
             commands = self.team.commands(self.stepper.positions, commands, self.stepper.running)
         report = self.stepper.step(commands)
-        moved = report.moved
-        everyone = bool(moved.all())
+        moved, everyone = report.moved, report.everyone
         slots = None if everyone else np.flatnonzero(moved)
         leaders = report.positions[:, 0]
-        if self.robot.unicycle is None:   # a holonomic robot's velocity, as the range sensor reads it
+        if self.sensor.reads_velocity and self.robot.unicycle is None:   # a holonomic robot's velocity
             self._moved = np.where(moved[:, None], leaders - before, self._moved)
         revisits = None
         if self.observer.memory is not None:
             revisits = np.zeros(self.num)
             revisits[moved] = self.observer.visit(leaders[moved], slots)
         u_before = self._u
-        self._u = self._u.copy()
+        if not everyone:   # the others' U stays as it was, in a new array (u_before is handed to the reward)
+            self._u = self._u.copy()
         observed = slots
         if restart is not None:
             self.start(*restart, observe=False)
@@ -277,11 +267,8 @@ class NavigationTask:
             observed = None if now.all() else np.flatnonzero(now)
         self._observe(observed)
         walked = np.sqrt(np.sum((leaders - before) ** 2, axis=1)) if self.weights.length else None
-        terms = reward_terms(self.weights, report.collided, report.reached, u_before, self._u,
-                             revisits if self.weights.revisit else None, walked)
-        if not everyone:
-            terms *= moved
-        reward = terms.sum(axis=0)
+        reward, terms = rewards(self.weights, report.collided, report.reached, u_before, self._u,
+                                revisits if self.weights.revisit else None, walked, None if everyone else moved)
         ended = report.ended
         terminated, truncated, trapped = _ends(ended, self.stepper.outcome)
         robot_contact = report.contacts.robot.reshape(self.num, -1).any(axis=1) if report.contacts.touched \
@@ -302,35 +289,6 @@ class NavigationTask:
                                 states[:, 0, 3], states[:, 0, 4])
         return team_drive(states, np.where(running, v, 0.0), np.where(running, omega, 0.0), running,
                           self.unicycle_followers)
-
-    def _step_one(self, action: int) -> TaskStep:
-        """:meth:`step` of a batch of one running robot alone (``Navigate-v0``): the same
-        numbers, with the reward and the episode's end decided in Python scalars
-        (``tests/test_single_path.py`` checks them against the batch path to the last bit)."""
-        if self.weights.length:
-            (x0, y0), = self.stepper.positions[0].tolist()
-        report = self.stepper.step(_ONE_MOVE[action])
-        revisits = None
-        if self.observer.memory is not None:
-            revisits = float(self.observer.visit(report.positions[:, 0])[0])
-        u_before = float(self._u[0])
-        self._observe(None)
-        walked = None
-        if self.weights.length:
-            (x1, y1), = report.positions[0].tolist()
-            walked = math.sqrt((x1 - x0) ** 2 + (y1 - y0) ** 2)
-        collided, reached, ended = bool(report.collided[0]), bool(report.reached[0]), bool(report.ended[0])
-        terms = reward_terms_one(self.weights, collided, reached, u_before, float(self._u[0]),
-                                 revisits if self.weights.revisit else None, walked)
-        outcome = int(self.stepper.outcome[0])
-        trapped = ended and outcome == TRAPPED
-        truncated = trapped or (ended and outcome == TIMEOUT)
-        robot_contact = bool(report.contacts.touched and report.contacts.robot[0])
-        # fresh arrays for what the vector env hands out (a caller may change its own), read-only
-        # shared flags for the rest
-        return TaskStep(self._observation, np.array([sum(terms)]), np.array([ended and not truncated]), np.array([truncated]),
-                        np.array(terms)[:, None], report.reached, report.collided, report.moved,
-                        _FLAGS[robot_contact], _FLAGS[trapped])
 
     def distance(self) -> np.ndarray:
         """(N,) each leader's distance to the nearest target of its world, after the last start or step."""
@@ -444,8 +402,8 @@ class FormationsTask:
         touched = report.contacts.any[self._robot] if self.mode == "all" else report.collided[self._formation]
         reached = report.reached[self._formation]
         walked = np.hypot(*(self._agent_positions() - before).T) if self.weights.length else None
-        terms = reward_terms(self.weights, touched & moved, reached & moved, u_before, self._u, None, walked) * moved
+        reward, terms = rewards(self.weights, touched & moved, reached & moved, u_before, self._u, None, walked, moved)
         terminated, truncated, trapped = _ends(report.ended[self._formation], self.stepper.outcome[self._formation])
         robot_contact = report.contacts.robot[self._robot]
-        return TaskStep(self._obs, terms.sum(axis=0), terminated, truncated, terms, reached, touched, moved,
+        return TaskStep(self._obs, reward, terminated, truncated, terms, reached, touched, moved,
                         robot_contact, trapped)

@@ -83,6 +83,9 @@ class ObservationKind(ABC):
         """(n,) U at each robot, where the observation holds it as it is (None: it does not)."""
         return None
 
+    reads_velocity = False
+    """It reads :attr:`Robots.velocity` (the caller may leave it None otherwise)."""
+
     def seed(self, seeds: Sequence[int | None]) -> None:
         """Restart robot ``i``'s noise from ``seeds[i]`` (kinds with noise)."""
 
@@ -131,6 +134,8 @@ class RangeObservation(ObservationKind):
         worlds: The worlds robots may be in; ``world_of`` (num,) each robot's, set at :meth:`reset`.
     """
 
+    reads_velocity = True
+
     def __init__(self, ranges: RangeObserver, worlds: Sequence[World]):
         self.ranges = ranges
         self.worlds = list(worlds)
@@ -162,6 +167,7 @@ class CombinedObservation(ObservationKind):
 
     def __init__(self, parts: dict[str, ObservationKind]):
         self.parts = parts
+        self.reads_velocity = any(part.reads_velocity for part in parts.values())
 
     def space(self) -> spaces.Dict:
         return spaces.Dict({name: part.space() for name, part in self.parts.items()})

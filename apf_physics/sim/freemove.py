@@ -23,7 +23,7 @@ import numpy as np
 from apf_physics.common.compiled import kernel
 from apf_physics.common.geometry import swept_distance
 from apf_physics.sim.slots import Slots
-from apf_physics.sim.swept import SweptDistances
+from apf_physics.sim.swept import SweptDistances, _move_near
 from apf_physics.world.core import World
 
 CONTACT_MARGIN = 0.01
@@ -73,7 +73,32 @@ class FreeMoveTest:
         the slots' steps put them, :attr:`Slots.time`).
         """
         keep_off = self.keep_off if bend is None else self.keep_off + bend
-        needs = self.swept.near(self.map_of, positions, moves, keep_off)
+        return self.close(positions, moves, self.swept.near(self.map_of, positions, moves, keep_off), bend, any_moving)
+
+    def step(self, positions: np.ndarray, v: np.ndarray, max_speed: float, control_dt: float, substeps: int,
+             offset: np.ndarray, movable: np.ndarray, move: bool) -> tuple[np.ndarray, int]:
+        """The free-move test of straight moves against the static obstacles, in one compiled pass.
+
+        Each command of ``v`` (N, 2) is first clipped to ``max_speed`` (in place); then each robot's
+        move is tested as :meth:`needs` tests it before :meth:`close` (which the caller applies
+        where robots meet others or moving obstacles). With ``move``, every ``movable`` robot whose
+        move needs no physics is moved as :func:`move_free` moves it.
+
+        Returns:
+            (N,) bool: the moves that come near a static obstacle or the map's edge; and how many
+            of them are ``movable``.
+        """
+        grid, shape, start, member, prim = self.swept.tables()
+        needs = np.empty(len(positions), np.bool_)
+        count = _free_step(positions, v, float(max_speed), float(control_dt), int(substeps), offset,
+                           self.slots.robots_per_slot, self.map_of, self.keep_off, movable, bool(move), needs,
+                           grid, shape, start, member, prim)
+        return needs, count
+
+    def close(self, positions: np.ndarray, moves: np.ndarray, needs: np.ndarray, bend: np.ndarray | None,
+              any_moving: bool) -> np.ndarray:
+        """``needs`` (the moves near a static obstacle) closed under "may touch a robot that goes to
+        pymunk" among robots that meet, and with the robots near a moving obstacle added."""
         slots = self.slots
         m = slots.robots_per_slot
         if m > 1:   # robots of one slot: closed under "may touch a robot that goes to pymunk"
@@ -152,6 +177,39 @@ def move_free(positions: np.ndarray, robots: np.ndarray, offset: np.ndarray, v: 
     else:   # one for every substep
         velocity = (v[robots] / control_dt)[:, None, :]
     _free_moves(positions, robots, offset, velocity, control_dt / substeps, substeps)
+
+
+@kernel
+def _free_step(positions, v, max_speed, control_dt, substeps, offset, m, map_of, keep_off, movable, move, needs,
+               grid, shape, start, member, prim):
+    """:meth:`FreeMoveTest.step`'s loop: per robot, the clip (as numpy clips: ``v · (top / |v|)``), the
+    static test (:func:`~apf_physics.sim.swept._move_near` of the segment ``p → p + v·dt``) and, with
+    ``move``, :func:`_free_moves`' additions for a movable robot whose move is free. Writes ``needs``;
+    returns how many movable robots need physics."""
+    n = positions.shape[0]
+    dt = control_dt / substeps
+    count = 0
+    for r in range(n):
+        vx, vy = v[r, 0], v[r, 1]
+        speed = np.hypot(vx, vy)
+        if speed > max_speed:
+            factor = max_speed / speed
+            vx, vy = vx * factor, vy * factor
+            v[r, 0], v[r, 1] = vx, vy
+        px, py = positions[r, 0], positions[r, 1]
+        needs[r] = _move_near(map_of[r], px, py, px + vx * control_dt, py + vy * control_dt, keep_off[r],
+                              grid, shape, start, member, prim)
+        if needs[r] and movable[r]:
+            count += 1
+        elif move and movable[r]:
+            ox, oy = offset[r // m, 0], offset[r // m, 1]
+            x, y = px + ox, py + oy
+            wx, wy = vx / control_dt, vy / control_dt
+            for _ in range(substeps):
+                x = x + wx * dt
+                y = y + wy * dt
+            positions[r, 0], positions[r, 1] = x - ox, y - oy
+    return count
 
 
 @kernel

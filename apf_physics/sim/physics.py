@@ -138,7 +138,6 @@ class Physics:
         for s, world in enumerate(worlds):
             self._assign(s, world)
 
-        self._alone = np.zeros(1, np.intp)            # the robots of a batch of one (_step_alone)
         self._arbiters = pymunk.batch.Buffer()
         self._touching = Touching(self.space, self._arbiters)
         self._touch_free = ContactLog.nothing(self.num_robots)   # the log of a step without contacts
@@ -207,15 +206,6 @@ class Physics:
             UserError: A centre inside an obstacle or outside the map, or robots that cannot be
                 separated in free space.
         """
-        if self.num_robots == 1 and not self._any_moving and np.size(robots) == 1:   # a single env's resets, in floats
-            (x, y), = np.asarray(positions, dtype=float).reshape(1, 2).tolist()
-            if self.proxies.of_robot[0] >= 0:
-                self.proxies.release(self._alone)
-            self._positions[0] = (x, y)
-            if self.present[0] and self.free.swept.near_one(int(self.free.map_of[0]), x, y, x, y,
-                                                             float(self.slots.radius[0]) + 1e-6):
-                self._separate(0, self._alone)
-            return
         robots = np.asarray(robots, dtype=np.intp).ravel()
         self.proxies.release(robots)
         self._positions[robots] = np.asarray(positions, dtype=float).reshape(-1, 2)
@@ -276,13 +266,9 @@ class Physics:
         Returns:
             The contacts seen during the step (read-only).
         """
-        v = np.asarray(velocities, dtype=float)
-        if self.num_robots == 1 and not self._any_moving and active is None and v.size == 2:
-            log = self._step_alone(v)
-            if log is not None:
-                return log
-        per_substep = v.ndim == 3
-        if per_substep:
+        v = np.array(velocities, dtype=float)   # a copy: clipped in place
+        movable = self.present if active is None else self.present & active
+        if v.ndim == 3 or v.size != 2 * self.num_robots:   # a velocity per substep: unicycles driving arcs
             v = v.reshape(self.num_robots, self.substeps, 2)
             speed = np.hypot(v[..., 0], v[..., 1])
             if speed.max() > self.max_speed:
@@ -292,37 +278,39 @@ class Physics:
             moves = v.mean(axis=1) * self.control_dt
             along = np.cumsum(v, axis=1) * (self.control_dt / self.substeps)
             stray = along - (np.arange(1, self.substeps + 1) / self.substeps)[None, :, None] * moves[:, None, :]
-            bend = np.hypot(stray[..., 0], stray[..., 1]).max(axis=1)
+            simulate = self.needs_physics(moves, np.hypot(stray[..., 0], stray[..., 1]).max(axis=1))
+            moved_free = False
         else:
             v = v.reshape(self.num_robots, 2)
-            speed = np.hypot(v[:, 0], v[:, 1])
-            if speed.max() > self.max_speed:
-                too_fast = speed > self.max_speed
-                v = v.copy()
-                v[too_fast] *= (self.max_speed / speed[too_fast])[:, None]
-            moves = v * self.control_dt
-            bend = None
-        simulate = self.needs_physics(moves, bend) & self.present
-        if active is not None:
-            simulate &= active
-            moves = moves * active[:, None]
+            # one compiled pass: each command clipped to the top speed, the free-move test against the
+            # static obstacles, and (where no robot meets another or a moving obstacle, so that the
+            # test is final) the free robots moved
+            moved_free = not self.slots.meet and not self._any_moving
+            simulate, count = self.free.step(self._positions, v, self.max_speed, self.control_dt, self.substeps,
+                                             self.slots.offset, movable, move=moved_free)
+            if moved_free and not count and not self.proxies.held:
+                return self._touch_free   # nobody near anything: every robot moved, by the compiled pass
+            if not moved_free:
+                simulate = self.free.close(self._positions, v * self.control_dt, simulate, None, self._any_moving)
+        simulate &= movable
         if not self.proxies.held and not simulate.any():
-            self._move_free(np.flatnonzero(self.present if active is None else self.present & active), v)
+            if not moved_free:
+                self._move_free(np.flatnonzero(movable), v)
             return self._touch_free
         held = self.proxies.of_robot >= 0
         self.proxies.release(np.flatnonzero(held & ~simulate))
         self._lend(np.flatnonzero(simulate & ~held))
         robots = np.flatnonzero(simulate)
         if len(robots):
-            self._ensure_obstacles(robots, moves)
+            self._ensure_obstacles(robots, (v.mean(axis=1) if v.ndim == 3 else v) * self.control_dt)
         if self._any_moving:
             self.movers.lend(self.free.movers_needed, self.slots.time, self.slots.offset, self.control_dt,
                              None if active is None else active.reshape(-1, self.robots_per_slot).any(axis=1))
         before = self._positions[robots].copy()
         # (proxies parked this step stay dirty, not lent, until pymunk next steps with robots in it)
         pairs = self._simulate(robots, v) if len(robots) else None
-        free = ~simulate & self.present
-        self._move_free(np.flatnonzero(free if active is None else free & active), v)
+        if not moved_free:
+            self._move_free(np.flatnonzero(movable & ~simulate), v)
         self.proxies.held = bool(len(robots))
         if pairs is None or not len(pairs):
             return self._touch_free
@@ -362,51 +350,6 @@ class Physics:
         self.proxies.dirty[:] = False
         self._positions[robots] = self.bodies.positions(proxies) - self.slots.offset[robots // self.robots_per_slot]
         return np.frombuffer(b"".join(touched), np.uintp).reshape(-1, 2)
-
-    def _step_alone(self, v: np.ndarray) -> ContactLog | None:
-        """:meth:`step` for one robot moving straight among static obstacles: the array path's
-        operations, in the same order, without its arrays' fixed costs (``tests/test_physics.py``
-        checks that both paths give the same steps to the bit). A move that comes near nothing is
-        done on Python floats; one that does goes to pymunk as the array path sends it, less the
-        free-move test (done here) and the bookkeeping of the robots that do not go.
-
-        Returns:
-            The step's contacts; None (nothing done) when the robot is absent or its command
-            exceeds the top speed: the array path takes it.
-        """
-        vx, vy = v.reshape(2).tolist()
-        if not self.present[0] or np.hypot(vx, vy) > self.max_speed:
-            return None
-        x, y = self._positions[0].tolist()
-        dt, control = self.dt, self.control_dt
-        if self.free.swept.near_one(int(self.free.map_of[0]), x, y, x + vx * control, y + vy * control,
-                                     float(self.free.keep_off[0])):
-            return self._simulate_alone(v.reshape(1, 2))
-        if self.proxies.held:   # it went to pymunk last step: its proxy goes back to the parking
-            self.proxies.release(self._alone)
-            self.proxies.held = False
-        ox, oy = self.slots.offset[0].tolist()
-        vx, vy = vx / control, vy / control
-        x, y = x + ox, y + oy
-        for _ in range(self.substeps):   # as _free_moves
-            x, y = x + vx * dt, y + vy * dt
-        self._positions[0] = (x - ox, y - oy)
-        return self._touch_free
-
-    def _simulate_alone(self, v: np.ndarray) -> ContactLog:
-        """The rest of :meth:`step` for one robot alone whose move needs pymunk (``v`` (1, 2))."""
-        robots = self._alone
-        if self.proxies.of_robot[0] < 0:
-            self._lend(robots)
-        self._ensure_obstacles(robots, v * self.control_dt)
-        before = self._positions[robots].copy()
-        pairs = self._simulate(robots, v)
-        self.proxies.held = True
-        if not len(pairs):
-            return self._touch_free
-        log = self._log(pairs)
-        self.settler.settle(self._depths, robots[:0], robots, before)   # (a robot alone touches no robot: none is put back)
-        return log
 
     def _move_free(self, robots: np.ndarray, v: np.ndarray) -> None:
         """Move ``robots`` as pymunk moves a free disc, to the bit (:func:`~apf_physics.sim.freemove.move_free`)."""

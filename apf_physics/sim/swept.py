@@ -95,6 +95,12 @@ class SweptDistances:
         shape = np.array([g[3:6] for g in grids], np.intp).reshape(-1, 3)          # cols, rows, first bucket
         return grid, shape, start, member, np.ascontiguousarray(prim)
 
+    def tables(self) -> tuple:
+        """The stacked worlds' arrays ``(grid, shape, start, member, prim)``, as the compiled loops take them."""
+        if self._tables is None:
+            self._tables = self._stack()
+        return self._tables
+
     def near(self, world: np.ndarray, p: np.ndarray, move: np.ndarray, distance: np.ndarray) -> np.ndarray:
         """(K,) bool: the segment from ``p`` to ``p + move`` (each (K, 2)) comes within ``distance``
         (K,) of a static obstacle or the map's edge of its world (``world`` (K,), numbers from
