@@ -397,7 +397,7 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
         if headings is not None:
             headings.append(stepper.headings.copy())
         touched = report.contacts
-        pairs = touched.pairs
+        pairs = touched.rows   # robot-robot rows: complete as read (only static obstacles are named later)
         robot_pairs = pairs[pairs[:, 1] == 2] if len(pairs) else pairs
         for f in np.flatnonzero(report.moved).tolist():
             mine = (robot_pairs[:, 0] // m == f) if len(robot_pairs) else np.zeros(0, bool)

@@ -13,6 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from enum import IntEnum
 
+from typing import Callable
+
 import numpy as np
 import pymunk
 import pymunk.batch
@@ -59,15 +61,26 @@ class ContactLog:
         wall: (N,) bool: the robot touched the map's edge.
         robot: (N,) bool: the robot touched another robot.
         moving: (N,) bool: the robot touched a moving obstacle (or one touched it).
-        pairs: (K, 3) int: one row ``(robot, kind, other)`` per touching pair (:data:`KINDS`;
-            a robot–robot touch appears once per robot), sorted.
+        rows: (K, 3) int: one row ``(robot, kind, other)`` per touching pair, as read, where a
+            static obstacle may still be unnamed (``other`` -1, a tile's obstacles' shared body).
+        namer: Names the static obstacles of ``rows`` (only when :attr:`pairs` is first read).
     """
 
     obstacle: np.ndarray
     wall: np.ndarray
     robot: np.ndarray
     moving: np.ndarray
-    pairs: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.intp))
+    rows: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.intp))
+    namer: Callable[[np.ndarray], np.ndarray] | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def pairs(self) -> np.ndarray:
+        """(K, 3) int: one row ``(robot, kind, other)`` per touching pair (:data:`KINDS`; a robot–robot
+        touch appears once per robot; a static obstacle by its index in the robot's world), sorted."""
+        if self.namer is not None:   # named once, when asked: stepping needs the kinds alone
+            object.__setattr__(self, "rows", self.namer(self.rows))
+            object.__setattr__(self, "namer", None)
+        return self.rows
 
     @classmethod
     def nothing(cls, num_robots: int) -> ContactLog:
@@ -89,7 +102,7 @@ class ContactLog:
     @property
     def touched(self) -> bool:
         """Whether anything touched anything."""
-        return len(self.pairs) > 0
+        return len(self.rows) > 0
 
     @property
     def contacts(self) -> list[Contact]:
@@ -208,11 +221,13 @@ def touching_depths(space: pymunk.Space, buffer: pymunk.batch.Buffer) -> tuple[n
     return ids, values[:, :2].copy(), values[:, 2].copy()
 
 
-def contact_log(rows: np.ndarray, num_robots: int) -> ContactLog:
-    """The contact log of the rows ``(robot, kind, other)`` (:func:`contact_rows`)."""
+def contact_log(rows: np.ndarray, num_robots: int, namer: Callable[[np.ndarray], np.ndarray] | None = None
+                ) -> ContactLog:
+    """The contact log of the rows ``(robot, kind, other)`` (:func:`contact_rows`); ``namer`` names
+    the static obstacles among them when the log's pairs are read."""
     flags = np.zeros((len(KINDS), num_robots), bool)
     flags[rows[:, 1], rows[:, 0]] = True
-    return ContactLog(flags[OBSTACLE], flags[WALL], flags[ROBOT], flags[MOVING], rows)
+    return ContactLog(flags[OBSTACLE], flags[WALL], flags[ROBOT], flags[MOVING], rows, namer)
 
 
 def contact_rows_few(pairs: np.ndarray, labels: BodyLabels, proxy_of_id: dict[int, int],
@@ -357,12 +372,13 @@ def _contact_rows(pairs, proxy_ids, proxy_order, proxy_robot, label_ids, label):
                 rows[count, 0], rows[count, 1], rows[count, 2] = robot[i, a], ROBOT, robot[i, b]
                 count += 1
     rows = rows[:count]
-    # rows as one sortable key: one 1-D unique
+    # rows as one sortable key: one 1-D unique (the index shifted by one: a tile's obstacles' body is -1)
     span = 1
     for i in range(count):
-        span = max(span, rows[i, 2] + 1)
-    key = np.unique((rows[:, 0] * _KIND_COUNT + rows[:, 1]) * span + rows[:, 2])
+        span = max(span, rows[i, 2] + 2)
+    key = np.unique((rows[:, 0] * _KIND_COUNT + rows[:, 1]) * span + rows[:, 2] + 1)
     out = np.empty((len(key), 3), np.intp)
     for i in range(len(key)):
-        out[i, 0], out[i, 1], out[i, 2] = key[i] // (_KIND_COUNT * span), key[i] // span % _KIND_COUNT, key[i] % span
+        out[i, 0], out[i, 1] = key[i] // (_KIND_COUNT * span), key[i] // span % _KIND_COUNT
+        out[i, 2] = key[i] % span - 1
     return out

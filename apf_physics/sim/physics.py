@@ -49,10 +49,12 @@ from apf_physics.sim.placement import separate
 from apf_physics.sim.proxies import ProxyPool
 from apf_physics.sim.settle import Settler
 from apf_physics.sim.slots import Slots
-from apf_physics.sim.tiles import Tiles
+from apf_physics.sim.tiles import ANY_OBSTACLE, Tiles
 from apf_physics.world.core import World
 
 MAX_SPEED = math.sqrt(2.0)  # a diagonal unit move (±1, ±1) per control step [units per control step]
+NAMED_WITHIN = 0.05
+"""A touched obstacle is one within the robot's radius and this much of where the step leaves it [units]."""
 _COUNT_AT_MOST = 8  # up to this many robots in pymunk, count touching pairs by callbacks; more: read every substep
 
 __all__ = ["CONTACT_MARGIN", "MAX_SPEED", "ContactLog", "Physics", "substeps_for"]
@@ -176,8 +178,7 @@ class Physics:
         reach = self.slots.radius[slots] + CONTACT_MARGIN + 0.5
         lo = np.minimum(p, p + moves[robots]) - reach[:, None]
         hi = np.maximum(p, p + moves[robots]) + reach[:, None]
-        if self._tiles.build_near(self.slots.tile[slots], lo, hi):
-            self.bodies.tiles_grew = True
+        self._tiles.build_near(self.slots.tile[slots], lo, hi)
 
     def set_world(self, slot: int, world: World) -> None:
         """Put ``slot`` in ``world`` (its robots keep their coordinates until :meth:`place`)."""
@@ -358,8 +359,40 @@ class Physics:
 
     def _log(self, pairs: np.ndarray) -> ContactLog:
         """The contact log of the touching body-id pairs (a pair may come several times)."""
-        return contact_log(self._contact_rows_few(pairs) if len(pairs) <= FEW_PAIRS else self._contact_rows(pairs),
-                           self.num_robots)
+        rows = self._contact_rows_few(pairs) if len(pairs) <= FEW_PAIRS else self._contact_rows(pairs)
+        if len(rows) and (rows[:, 2] == ANY_OBSTACLE).any():
+            return contact_log(rows, self.num_robots, self._namer(self._positions.copy()))
+        return contact_log(rows, self.num_robots)
+
+    def _namer(self, positions: np.ndarray):
+        """Names the obstacles of a log's rows from where the robots stood at the end of its step."""
+        return lambda rows: self._name_obstacles(rows, positions)
+
+    def _name_obstacles(self, rows: np.ndarray, positions: np.ndarray) -> np.ndarray:
+        """``rows`` with each touch of a tile's obstacles (:data:`~apf_physics.sim.tiles.ANY_OBSTACLE`)
+        made a touch of every static obstacle of the robot's world that its disc is against where
+        the step left it (within its radius and :data:`NAMED_WITHIN`), else of the nearest."""
+        named = [rows[rows[:, 2] != ANY_OBSTACLE]]
+        unknown = rows[rows[:, 2] == ANY_OBSTACLE]
+        robots = unknown[:, 0]
+        worlds = [self.worlds[s] for s in (robots // self.robots_per_slot).tolist()]
+        for world in {id(w): w for w in worlds}.values():   # one query per world for all its robots
+            mine = np.array([w is world for w in worlds])
+            who, shape, d, _ = world.shapes.pairs(positions[robots[mine]], with_nearest=False)
+            against = d <= world.robot_radius + NAMED_WITHIN
+            nearest = np.full(int(mine.sum()), -1, np.intp)   # each robot's nearest shape, for those against none
+            order = np.lexsort((d, who))
+            first = order[np.r_[True, who[order][1:] != who[order][:-1]]] if len(who) else order
+            nearest[who[first]] = shape[first]
+            lonely = np.setdiff1d(np.arange(len(nearest)), who[against])
+            k = np.concatenate([who[against], lonely])
+            index = np.concatenate([shape[against], nearest[lonely]])
+            known = index >= 0
+            index[known] = world.static_numbers[index[known]]
+            rows_of = unknown[mine][k]
+            rows_of[:, 2] = np.where(known, index, ANY_OBSTACLE)   # (none within reach: unnamed)
+            named.append(rows_of)
+        return np.unique(np.concatenate(named), axis=0)
 
     def _contact_rows_few(self, pairs: np.ndarray) -> np.ndarray:
         """:func:`~apf_physics.sim.contacts.contact_rows_few` of the touching body-id pairs."""
