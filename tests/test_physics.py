@@ -381,26 +381,30 @@ def test_skipping_arbiter_reads_on_untouched_substeps_changes_nothing():
 
 
 @pytest.mark.parametrize("robots_per_slot", [1, 3])
-def test_few_contacts_read_by_dicts_match_the_array_reading(worlds_dir, robots_per_slot):
-    """Contact rows are read with dicts for a few touching pairs and with arrays for many; both
-    readings of every step's pairs (obstacles, walls and robots touched) are the same."""
+def test_the_contact_log_names_what_each_robot_touched(worlds_dir, robots_per_slot):
+    """Every row of a step's contact log is true of where the step left the robots: an obstacle
+    named (its index in the world) is within a step's travel of the robot's disc, a wall likewise
+    (0 bottom, 1 right, 2 top, 3 left), and two robots said to touch within two steps' travel."""
     world = load_world(worlds_dir / "fixed20.yaml")
     rng = np.random.default_rng(5)
     physics = Physics([world] * 16, robots_per_slot)
     physics.place(np.arange(16 * robots_per_slot), world.random_free_positions(rng, 16 * robots_per_slot, margin=0.6))
-    simulate, seen = physics._simulate, []
-
-    def recording(robots, v):
-        pairs = simulate(robots, v)
-        seen.append(pairs)
-        return pairs
-
-    physics._simulate = recording
-    for _ in range(60):
-        physics.step(rng.uniform(-1.4, 1.4, (physics.num_robots, 2)))
+    # a robot touches something at some substep and may move on, up to its step's travel, before the step ends
+    r, reach = world.robot_radius, physics.max_speed
+    w, h = world.size
     kinds = set()
-    for pairs in seen:
-        few, many = physics._contact_rows_few(pairs), physics._contact_rows(pairs)
-        np.testing.assert_array_equal(few, many)
-        kinds |= set(few[:, 1].tolist())
+    for _ in range(60):
+        log = physics.step(rng.uniform(-1.4, 1.4, (physics.num_robots, 2)))
+        p = physics.positions
+        for robot, kind, other in log.pairs.tolist():
+            kinds.add(kind)
+            x, y = p[robot]
+            if kind == 0:     # an obstacle, by its index
+                d, _ = world.obstacles[other].signed_distance(p[robot][None])
+                assert d[0] <= r + reach, (robot, other, d)
+            elif kind == 1:   # a wall
+                assert [y, w - x, h - y, x][other] <= r + reach, (robot, other, x, y)
+            elif kind == 2:   # a robot of its slot
+                assert other // robots_per_slot == robot // robots_per_slot
+                assert np.hypot(*(p[other] - p[robot])) <= 2 * r + 2 * reach
     assert {0, 1} <= kinds and (robots_per_slot == 1 or 2 in kinds)   # obstacles, walls (and robots) were touched

@@ -4,8 +4,8 @@ Every static body the physics builds (an obstacle, a wall slab, a moving obstacl
 labelled with what it is (:class:`BodyLabels`), and every robot's proxy is known by its body
 id. After a substep in which shapes may touch (:class:`Touching`), the arbiters' body-id pairs are
 read (:func:`touching_pairs`), and at the end of the step they become the rows
-``(robot, kind, other)`` of a :class:`ContactLog` (:func:`contact_rows`, or
-:func:`contact_rows_few` for a few pairs; :func:`contact_log`).
+``(robot, kind, other)`` of a :class:`ContactLog` (:func:`contact_rows`, one compiled loop;
+:func:`contact_log`).
 """
 
 from __future__ import annotations
@@ -26,8 +26,6 @@ KINDS = ("obstacle", "wall", "robot", "moving_obstacle")
 OBSTACLE, WALL, ROBOT, MOVING = range(4)
 """Indices into :data:`KINDS`."""
 _KIND_COUNT = len(KINDS)
-FEW_PAIRS = 64
-"""Up to this many touching pairs, contacts are read with dicts (:func:`contact_rows_few`) rather than arrays."""
 
 
 class CollisionType(IntEnum):
@@ -228,31 +226,6 @@ def contact_log(rows: np.ndarray, num_robots: int, namer: Callable[[np.ndarray],
     flags = np.zeros((len(KINDS), num_robots), bool)
     flags[rows[:, 1], rows[:, 0]] = True
     return ContactLog(flags[OBSTACLE], flags[WALL], flags[ROBOT], flags[MOVING], rows, namer)
-
-
-def contact_rows_few(pairs: np.ndarray, labels: BodyLabels, proxy_of_id: dict[int, int],
-                     proxy_robot: np.ndarray) -> np.ndarray:
-    """:func:`contact_rows` for a few pairs: dict look-ups beat the arrays' fixed costs.
-
-    Args:
-        pairs: (K, 2) touching body ids (a pair may come several times).
-        labels: What the static bodies are.
-        proxy_of_id: The proxy of each proxy body id.
-        proxy_robot: The robot each proxy simulates (-1: parked).
-    """
-    rows = set()
-    label_of = labels.of_id
-    for ids in pairs.tolist():
-        for a, b in ((ids[0], ids[1]), (ids[1], ids[0])):   # an arbiter's bodies come in either order
-            k = proxy_of_id.get(a)
-            if k is None or proxy_robot[k] < 0:
-                continue
-            j = proxy_of_id.get(b)
-            if j is None:
-                rows.add((int(proxy_robot[k]), *label_of[b]))
-            elif proxy_robot[j] >= 0:
-                rows.add((int(proxy_robot[k]), ROBOT, int(proxy_robot[j])))
-    return np.array(sorted(rows), np.intp).reshape(-1, 3)
 
 
 def contact_rows(pairs: np.ndarray, labels: BodyLabels, proxy_ids: np.ndarray, proxy_order: np.ndarray,

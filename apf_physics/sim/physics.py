@@ -41,8 +41,8 @@ import pymunk
 import pymunk.batch
 
 from apf_physics.sim.bodies import SpaceBodies
-from apf_physics.sim.contacts import (FEW_PAIRS, BodyLabels, ContactLog, Touching, contact_log, contact_rows,
-                                      contact_rows_few, touching_depths, touching_pair_bytes)
+from apf_physics.sim.contacts import (BodyLabels, ContactLog, Touching, contact_log, contact_rows, touching_depths,
+                                      touching_pair_bytes)
 from apf_physics.sim.freemove import CONTACT_MARGIN, FreeMoveTest, move_free
 from apf_physics.sim.movers import MoverPool
 from apf_physics.sim.placement import separate
@@ -364,7 +364,7 @@ class Physics:
 
     def _log(self, pairs: np.ndarray) -> ContactLog:
         """The contact log of the touching body-id pairs (a pair may come several times)."""
-        rows = self._contact_rows_few(pairs) if len(pairs) <= FEW_PAIRS else self._contact_rows(pairs)
+        rows = contact_rows(pairs, self._labels, self.proxies.ids, self.proxies.order, self.proxies.robot)
         if len(rows) and (rows[:, 2] == ANY_OBSTACLE).any():
             return contact_log(rows, self.num_robots, self._namer(self._positions.copy()))
         return contact_log(rows, self.num_robots)
@@ -398,11 +398,3 @@ class Physics:
             rows_of[:, 2] = np.where(known, index, ANY_OBSTACLE)   # (none within reach: unnamed)
             named.append(rows_of)
         return np.unique(np.concatenate(named), axis=0)
-
-    def _contact_rows_few(self, pairs: np.ndarray) -> np.ndarray:
-        """:func:`~apf_physics.sim.contacts.contact_rows_few` of the touching body-id pairs."""
-        return contact_rows_few(pairs, self._labels, self.proxies.of_id, self.proxies.robot)
-
-    def _contact_rows(self, pairs: np.ndarray) -> np.ndarray:
-        """(K, 3) sorted distinct rows ``(robot, kind, other)`` of the touching body-id pairs."""
-        return contact_rows(pairs, self._labels, self.proxies.ids, self.proxies.order, self.proxies.robot)
