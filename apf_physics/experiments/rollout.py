@@ -199,6 +199,34 @@ def kinematics_option(kinematics: str | None) -> bool | None:
     return kinematics == "unicycle"
 
 
+class _Trace:
+    """What a rollout keeps of its slots' episodes: every step's positions (and headings), and what
+    each slot's robots touched at the step it collided (``robots``: each slot's robots' global
+    indices of the stepper)."""
+
+    def __init__(self, stepper: Stepper, initial: np.ndarray, robots: Sequence[range]):
+        self.positions = [initial.copy()]
+        self.headings = [stepper.headings.copy()] if stepper.unicycle is not None else None
+        self.robots = robots
+        self.contacts: list[list[str]] = [[] for _ in robots]
+
+    def record(self, stepper: Stepper, report) -> None:
+        self.positions.append(report.positions)
+        if self.headings is not None:
+            self.headings.append(stepper.headings.copy())
+        for slot in np.flatnonzero(report.collided).tolist():
+            mine = self.robots[slot]
+            self.contacts[slot] = sorted({c.kind for c in report.contacts.contacts if c.robot in mine})
+
+    def episode(self, slot: int, steps: int, size: int | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """``(positions (steps + 1, m, 2), headings (steps + 1, m) or None)`` of a slot's episode
+        (its first ``size`` robots)."""
+        robots = slice(None) if size is None else slice(0, size)
+        positions = np.stack([p[slot, robots] for p in self.positions[:steps + 1]])
+        theta = None if self.headings is None else np.stack([h[slot, robots] for h in self.headings[:steps + 1]])
+        return positions, theta
+
+
 def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | np.ndarray,
             max_steps: int | None = None, trap: TrapDetector = TrapDetector(), formation: bool = False,
             unicycle: UnicycleLimits | bool | None = None) -> list[Episode]:
@@ -246,10 +274,7 @@ def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | 
         for slot in range(n):
             followers.append(UnicycleFollowers(world, team.spec, limits))
             followers[slot].reset(states[slot])
-    headings = [stepper.headings.copy()] if limits is not None else None
-
-    history = [initial.copy()]
-    contacts: list[list[str]] = [[] for _ in range(n)]
+    trace = _Trace(stepper, initial, [range(s * m, (s + 1) * m) for s in range(n)])
     robot_steps = np.zeros(n, int)
     obstacle_steps = np.zeros(n, int)
     in_range = np.zeros((n, max(m - 1, 0)))
@@ -268,33 +293,25 @@ def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | 
         else:
             commands = team.commands(positions, leader, moving)
         report = stepper.step(commands, gave_up)
-        history.append(report.positions)
-        if headings is not None:
-            headings.append(stepper.headings.copy())
+        trace.record(stepper, report)
         touched = report.contacts
-        for slot in np.flatnonzero(report.collided).tolist():
-            mine = range(slot * m, (slot + 1) * m)
-            contacts[slot] = sorted({c.kind for c in touched.contacts if c.robot in mine})
         if team is not None:
             moved = report.moved
             robot_steps += moved & touched.robot.reshape(n, m).any(axis=1)
             obstacle_steps += moved & touched.obstacle_or_edge.reshape(n, m).any(axis=1)
             in_range += moved[:, None] & links_in_range(report.positions, team.followed, team.spec.comm_range)
 
-    trajectory = np.stack(history)                                     # (T, n, m, 2)
-    turns = np.stack(headings) if headings is not None else None       # (T, n, m)
     episodes = []
     for i in range(n):
         steps = int(stepper.steps[i])
-        positions = trajectory[: steps + 1, i]
-        theta = turns[: steps + 1, i] if turns is not None else None
+        positions, theta = trace.episode(i, steps)
         record = None
         if team is not None:
             record = FormationRecord(positions, team.spec.comm_range, team.followed, int(robot_steps[i]),
                                      int(obstacle_steps[i]), list(in_range[i] / max(steps, 1)),
                                      headings=None if theta is None else theta.copy())
         episodes.append(Episode(world.name, starts[i], Outcome(stepper.outcome[i]).label, steps,
-                                positions[:, 0].copy(), contacts[i], record,
+                                positions[:, 0].copy(), trace.contacts[i], record,
                                 headings=None if theta is None else theta[:, 0].copy()))
     return episodes
 
@@ -364,10 +381,7 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
         for f in range(count):
             followers.append(UnicycleFollowers(formations.worlds[f], formations.tasks[f].spec, limits))
             followers[-1].reset(states[f, :formations.sizes[f]])
-    headings = [stepper.headings.copy()] if limits is not None else None
-
-    history = [initial.copy()]
-    contacts: list[list[str]] = [[] for _ in range(count)]
+    trace = _Trace(stepper, initial, [range(f * m, (f + 1) * m) for f in range(count)])
     within = np.zeros(count, int)
     between = np.zeros(count, int)
     obstacle_steps = np.zeros(count, int)
@@ -393,9 +407,7 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
         report = stepper.step(commands, gave_up)
         step += 1
         formations.watch(report.positions, report.moved, step)
-        history.append(report.positions)
-        if headings is not None:
-            headings.append(stepper.headings.copy())
+        trace.record(stepper, report)
         touched = report.contacts
         pairs = touched.rows   # robot-robot rows: complete as read (only static obstacles are named later)
         robot_pairs = pairs[pairs[:, 1] == 2] if len(pairs) else pairs
@@ -408,22 +420,17 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
             obstacle_steps[f] += bool(touched.obstacle_or_edge[robots].any())
             in_range[f] += links_in_range(report.positions[f, :formations.sizes[f]], formations.followed[f],
                                           formations.tasks[f].spec.comm_range)
-        for f in np.flatnonzero(report.collided).tolist():
-            contacts[f] = sorted({c.kind for c in touched.contacts if c.robot // m == f})
 
-    trajectory = np.stack(history)                                     # (T, F, m, 2)
-    turns = np.stack(headings) if headings is not None else None       # (T, F, m)
     episodes = []
     for f in range(count):
         steps = int(stepper.steps[f])
-        size = formations.sizes[f]
-        positions = trajectory[: steps + 1, f, :size]
-        theta = turns[: steps + 1, f, :size].copy() if turns is not None else None
+        positions, theta = trace.episode(f, steps, formations.sizes[f])
         record = FormationRecord(positions, formations.tasks[f].spec.comm_range, formations.followed[f],
-                                 int(within[f] + between[f]), int(obstacle_steps[f]), list(in_range[f] / max(steps, 1)), crowd=world.name, index=f,
-                                 between_collisions=int(between[f]), deadlocks=int(formations.deadlocks[f]), headings=theta)
+                                 int(within[f] + between[f]), int(obstacle_steps[f]), list(in_range[f] / max(steps, 1)),
+                                 crowd=world.name, index=f, between_collisions=int(between[f]),
+                                 deadlocks=int(formations.deadlocks[f]), headings=theta)
         episodes.append(Episode(world.name, formations.tasks[f].start, Outcome(stepper.outcome[f]).label, steps,
-                                positions[:, 0].copy(), contacts[f], record,
+                                positions[:, 0].copy(), trace.contacts[f], record,
                                 headings=None if theta is None else theta[:, 0].copy()))
     return episodes
 
