@@ -249,3 +249,29 @@ def test_a_unicycle_that_hits_a_bar_and_turns_away_is_no_faster_than_its_top_spe
     moved = np.hypot(*(physics.positions - state[:, :2]).T)
     assert moved.max() <= 3.0 + 1e-9
     assert np.all(physics.positions[:, 0] < 10.0 - world.robot_radius + 0.01)   # all still on their side
+
+
+@pytest.mark.parametrize("half_angle", [2.0, 3.0, 4.0])
+def test_a_crowd_pressed_into_a_narrow_v_of_bars_holds(half_angle):
+    # Pushed toward the apex, the first robot wedges where the V is as wide as it, and the others
+    # press it on: the pushes free it only a little at a time along the V. Before, it ended up to
+    # 0.045 inside a bar, and one put back alone where it started seemed to have been passed through.
+    t = math.radians(half_angle)
+    apex = np.array([15.0, 10.0])
+
+    def bar(a, b, width=0.01):
+        u = (b - a) / np.hypot(*(b - a))
+        n = np.array([-u[1], u[0]]) * width / 2
+        return {"polygon": [(a - n).tolist(), (b - n).tolist(), (b + n).tolist(), (a + n).tolist()]}
+
+    sides = [bar(apex + 12 * np.array([-math.cos(t), s * math.sin(t)]), apex + np.array([0.05, s * 0.05 * math.tan(t)]))
+             for s in (1, -1)]
+    world = world_from_dict({"size": [20, 20], "field": "thesis-fixed", "targets": [[19.5, 19.5]], "obstacles": sides})
+    slots, m = 4, 2
+    physics = Physics([world] * slots, robots_per_slot=m, crowds=[0] * slots)
+    physics.place(np.arange(slots * m), np.column_stack([3.5 + 0.52 * np.arange(slots * m), np.full(slots * m, 10.0)]))
+    rng = np.random.default_rng(0)
+    for _ in range(40):
+        before = physics.positions
+        physics.step(np.tile([math.sqrt(2), 0.0], (slots * m, 1)) + rng.normal(0, 0.3, (slots * m, 2)))
+        assert_contacts_hold(physics, before)

@@ -66,8 +66,9 @@ class Settler:
 
         A robot that pymunk wedged between two shapes nearly facing each other (a narrow V)
         would take the pushes many rounds to leave; after :data:`SETTLE_ROUNDS` it is put back
-        where it started the step (``before``, of ``simulated``: where the step before left it),
-        and after as many more, with the robots pressing it there (:meth:`_undo_pile_up`).
+        where it started the step (``before``, of ``simulated``: where the step before left it)
+        with the robots that meet it and that pymunk moved, and so again after as many more
+        (:meth:`_undo_pile_up`).
         """
         if depths is None and not len(undone):
             return
@@ -103,11 +104,7 @@ class Settler:
         still = np.zeros(0, np.intp)   # robots still overlapping after a round
         for round_ in range(2 * SETTLE_ROUNDS):
             if round_ == SETTLE_ROUNDS:   # still overlapping: back to the step's start, and what is there
-                back = still[np.isin(still, simulated)]
-                self.positions[back] = before[np.searchsorted(simulated, back)]
-                self.proxies.target[self.proxies.of_robot[back]] = (self.positions[back]
-                                                               + self.slots.offset[back // m])
-                self.proxies.moved[self.proxies.of_robot[back]] = True
+                back = self._undo_pile_up(still, simulated, before)
                 static_robot, static_normal, static_depth, pair_robots = self.overlaps_at(back)
                 anchor = self.positions[static_robot]
             involved = self._with_mates(np.unique(np.concatenate([static_robot, pair_robots.ravel()])))
@@ -136,15 +133,16 @@ class Settler:
             static_depth = np.concatenate([static_depth, more_depth])
         self._undo_pile_up(still, simulated, before)
 
-    def _undo_pile_up(self, still: np.ndarray, simulated: np.ndarray, before: np.ndarray) -> None:
-        """Put back where the step began every robot that pymunk moved among those that meet the
-        robots ``still`` overlapping after every round of :meth:`settle`.
+    def _undo_pile_up(self, still: np.ndarray, simulated: np.ndarray, before: np.ndarray) -> np.ndarray:
+        """Put back where the step began the robots ``still`` overlapping and every robot that pymunk
+        moved among those that meet them (for a robot alone in its slot, itself); returns them.
 
         A robot that others press into a narrow V leaves it only along the V, a little at each
-        round of pushes, and its mates press it back in after it is put back alone; where the
-        step began, the pile-up stands as the step before settled it. (Robots that meet others
-        only; the few steps a crowd jams: a robot 0.025 inside a bar in 15 of 96,000 robot-steps
-        of ``tools/probe_contacts.py``'s holonomic crowds before.)
+        round of pushes, and its mates press it back in after it is put back alone; and a mate
+        that pymunk moved past it would seem to have gone through it, the robot put back where
+        it was. Where the step began, the pile-up stands as the step before settled it. (The few
+        steps a crowd jams: before, a robot 0.025 inside a bar in 15 of 96,000 robot-steps of
+        ``tools/probe_contacts.py``'s holonomic crowds, and 6 centres through another robot.)
         """
         back = self._with_mates(still)
         back = back[np.isin(back, simulated)]
@@ -152,6 +150,7 @@ class Settler:
         proxies = self.proxies.of_robot[back]
         self.proxies.target[proxies] = self.positions[back] + self.slots.offset[back // self.slots.robots_per_slot]
         self.proxies.moved[proxies] = True
+        return back
 
     def _alone(self, robots: np.ndarray, first: np.ndarray, planes: np.ndarray, simulated: np.ndarray,
                before: np.ndarray) -> None:

@@ -27,6 +27,7 @@ import os
 import re
 import reprlib
 import struct
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterator, Sequence
@@ -290,6 +291,8 @@ def _quiet_stderr() -> Iterator[None]:
     warnings) straight to it when a file is broken; the reader says what is wrong, once. Only
     the C libraries write during the block (a decode), so nothing of the program's own is lost.
     """
+    with contextlib.suppress(Exception):   # what the program wrote before goes out before the block
+        sys.stderr.flush()
     try:
         saved = os.dup(2)
     except OSError:   # no standard error to silence
