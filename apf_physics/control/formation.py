@@ -255,7 +255,7 @@ def initial_followers(world: World, spec: FormationSpec, leader: np.ndarray) -> 
                             f"at {np.round(leader, 3).tolist()} (within comm_range {spec.comm_range:g})")
         good = candidates[ok]
         placed.append(good[np.argmin(np.hypot(*(good - wanted).T))])
-    return np.array(placed[1:])
+    return np.array(placed[1:], float).reshape(-1, 2)   # (0, 2) for a robot alone
 
 
 class FormationTeam:

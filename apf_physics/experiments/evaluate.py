@@ -109,11 +109,12 @@ class Evaluation:
             links = [np.asarray(f.link_in_range, float) for f in formations]
             in_range = sum(float(np.sum(share) * s) for share, s in zip(links, steps))
             link_steps = sum(len(share) * s for share, s in zip(links, steps))
+            closest = [f.min_robot_distance for f in formations if f.min_robot_distance is not None]
             extra = {
                 "links_in_range": round(in_range / link_steps, 4) if link_steps else 1.0,
                 "episodes_all_links_99": int(sum(share.min(initial=1.0) >= 0.99 for share in links)),
                 "robot_robot_collisions": int(sum(f.robot_robot_collisions for f in formations)),
-                "min_robot_distance": round(float(min(f.min_robot_distance for f in formations)), 4),
+                "min_robot_distance": round(float(min(closest)), 4) if closest else None,   # None: robots alone
             }
             if len({len(share) for share in links}) == 1:   # the same formation everywhere: per link
                 shares = np.array(links).reshape(n, -1)
@@ -199,11 +200,16 @@ def format_table(evaluations: Sequence[Evaluation]) -> str:
             lines.append(row(ev.planner, "(all)", ev.summary()))
         summary = ev.summary()
         if "links_in_range" in summary:
-            shares = (", ".join(f"{v:.1%}" for v in summary["link_in_range"]) if "link_in_range" in summary
-                      else f"{summary['links_in_range']:.1%} (all links)")
-            notes.append(f"{ev.planner}: steps each link in range {shares}; episodes with every link >= 99%: "
-                         f"{summary['episodes_all_links_99']}/{summary['episodes']}; robot-robot collisions "
-                         f"{summary['robot_robot_collisions']}; closest robots {summary['min_robot_distance']:.2f}")
+            parts = []
+            if summary.get("link_in_range") != []:   # (robots alone have no links)
+                shares = (", ".join(f"{v:.1%}" for v in summary["link_in_range"]) if "link_in_range" in summary
+                          else f"{summary['links_in_range']:.1%} (all links)")
+                parts += [f"steps each link in range {shares}", f"episodes with every link >= 99%: "
+                          f"{summary['episodes_all_links_99']}/{summary['episodes']}"]
+            parts.append(f"robot-robot collisions {summary['robot_robot_collisions']}")
+            if summary["min_robot_distance"] is not None:
+                parts.append(f"closest robots {summary['min_robot_distance']:.2f}")
+            notes.append(f"{ev.planner}: " + "; ".join(parts))
         if "worlds" in summary:
             notes.append(f"{ev.planner}: worlds where every formation arrived {summary['worlds_all_arrived']}/"
                          f"{summary['worlds']}; robot-robot collisions between formations {summary['between_collisions']}, "

@@ -71,11 +71,12 @@ class FormationRecord:
     headings: np.ndarray | None = None
 
     @property
-    def min_robot_distance(self) -> float:
+    def min_robot_distance(self) -> float | None:
+        """The least distance between two of its robots over the episode; None for a robot alone."""
         p = self.positions
         n = p.shape[1]
         if n < 2:
-            return float("inf")
+            return None
         diff = p[:, :, None, :] - p[:, None, :, :]
         d = np.sqrt(np.sum(diff * diff, axis=-1))
         return float(d[:, ~np.eye(n, dtype=bool)].min())
@@ -149,7 +150,8 @@ class Episode:
                 {"role": role, "success": reached if k == 0 else reached and links[k - 1],
                  "final_position": [round(float(v), 4) for v in f.positions[-1, k]]}
                 for k, role in enumerate(roles)]
-            data["min_robot_distance"] = round(f.min_robot_distance, 4)
+            closest = f.min_robot_distance
+            data["min_robot_distance"] = None if closest is None else round(closest, 4)
             data["robot_robot_collisions"] = f.robot_robot_collisions
             data["robot_obstacle_collisions"] = f.robot_obstacle_collisions
             data["link_in_range"] = [round(v, 4) for v in f.link_in_range]
