@@ -405,6 +405,48 @@ def test_a_file_with_five_mistakes_gets_one_report_naming_all_five(tmp_path):
         assert sum(words in line for line in lines) == 1, words
 
 
+@pytest.mark.parametrize("obstacle, problem", [
+    ({"circle": {"center": [19, 10], "radius": 2}}, "circle: circle reaches outside the map [0, 20] x [0, 20]"),
+    ({"circle": {"center": [10, 10], "radius": -1}}, "circle.radius: must not be negative, got -1"),
+    ({"polygon": [[1, 1], [3, 3], [3, 1], [1, 3]]}, "polygon: polygon crosses itself"),
+    ({"polygon": [[1, 1], [3, 1], [3, "x"]]}, "polygon[2][1]: expected a number"),
+    ({"circle": {"center": [10, 10], "radius": 1}, "colour": "red"}, "colour: unknown key"),
+    ({"circle": {"center": [10, 10], "radius": 1}, "motion": {"path": [[0, 3]], "speed": 2}},
+     "motion.speed: at most 1 unit per control step, got 2"),
+    ({"circle": {"center": [10, 10], "radius": 1}, "motion": {"path": [[0, 0]], "speed": 0.5}},
+     "motion.path: the route has no length"),
+    ({"circle": {"center": [15, 11], "radius": 1}, "motion": {"path": [[0, 5]], "speed": 0.5}},
+     "motion: the obstacle sweeps over targets[0] [15.0, 15.0]"),
+])
+def test_every_message_about_a_named_obstacle_names_it(obstacle, problem):
+    data = simple_world_dict(obstacles=[simple_world_dict()["obstacles"][0], {**obstacle, "name": "pillar"}])
+    message = one_line_error(lambda: world_from_dict(data, "w.yaml"))
+    assert message.startswith(f"w.yaml: obstacles[1] 'pillar': {problem}"), message
+    unnamed = simple_world_dict(obstacles=[simple_world_dict()["obstacles"][0], obstacle])
+    assert one_line_error(lambda: world_from_dict(unnamed, "w.yaml")).startswith("w.yaml: obstacles[1].")
+
+
+@pytest.mark.parametrize("name, image", [
+    ("office.pgm", b"P5\n4 3\n255\n" + bytes(range(200, 212))),
+    ("office.png", b"\x89PNG\r\n\x1a\n" + bytes(24)),
+    ("office", b"\x89PNG\r\n\x1a\n" + bytes(24)),                  # an image whatever its name
+    ("scan.bmp", b"BM" + bytes([0xcd] * 30)),
+])
+def test_an_image_given_as_a_world_gets_a_hint(tmp_path, name, image):
+    """As a bare ROS map YAML or a .map does: what to write, not how its bytes fail to decode."""
+    path = tmp_path / name
+    path.write_bytes(image)
+    message = one_line_error(lambda: load_world(path))
+    assert message.startswith(f"{path}: an image alone is not a world") and "not UTF-8" not in message
+    assert f"'grid: {{image: {name}, resolution: R, origin: [x, y, 0]}}'" in message
+
+
+def test_an_image_beside_its_ros_yaml_points_to_the_yaml(tmp_path):
+    (tmp_path / "office.pgm").write_bytes(b"P5\n2 2\n255\n" + bytes(4))
+    (tmp_path / "office.yaml").write_text("image: office.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n")
+    assert "write 'grid: {map: office.yaml}' instead" in one_line_error(lambda: load_world(tmp_path / "office.pgm"))
+
+
 def test_obstacle_names_are_checked_and_kept(tmp_path):
     data = simple_world_dict()
     data["obstacles"][0]["name"] = "pillar"

@@ -42,7 +42,7 @@ from apf_physics.world.io.schema import (MAX_FOLLOWERS, MAX_FORMATIONS, MAX_NAME
                                      MAX_OBSTACLES, MAX_POLYGON_VERTICES, MAX_PROBLEMS, MAX_ROUTE_POINTS, MAX_SIDE,
                                      MAX_STARTS, MAX_TARGETS, MAX_VERTICES, MIN_SIDE)
 from apf_physics.world.io.schema import (MAX_POTENTIAL, MIN_GOAL_TOLERANCE, MIN_ROBOT_RADIUS, Checker, TooMany,
-                                     parse_world)
+                                     join_key, obstacle_place, parse_world)
 
 # -- limits that depend on several values (README "World files") ---------------------------
 
@@ -212,8 +212,7 @@ def _nearest_obstacle(world: World, point: np.ndarray, index: Sequence[int] | No
     k = int(np.argmin(distances))
     if isinstance(placed[k], GridObstacle):
         return "the grid map's occupied cells"
-    name = getattr(world.obstacles[k], "name", None)
-    return f"obstacles[{index[k] if index is not None else k}]" + (f" {name!r}" if name is not None else "")
+    return obstacle_place(index[k] if index is not None else k, getattr(world.obstacles[k], "name", None))
 
 
 def _check_formations(check: Checker, world: World) -> None:
@@ -240,8 +239,9 @@ def _check_routes(check: Checker, world: World) -> None:
     for i in world.moving:
         obstacle = world.obstacles[i]
         motion = obstacle.motion
+        where = join_key(obstacle_place(i, getattr(obstacle, "name", None)), "motion")
         if motion.length <= 1e-9:
-            check.bad(f"obstacles[{i}].motion.path", "the route has no length (every offset is [0, 0])")
+            check.bad(f"{where}.path", "the route has no length (every offset is [0, 0])")
             continue
         # where the obstacle is along its route, at most 0.05 apart (it moves in straight legs)
         travel = np.linspace(0.0, motion.period, max(2, int(np.ceil(motion.period / 0.05)) + 1))
@@ -249,7 +249,7 @@ def _check_routes(check: Checker, world: World) -> None:
         for k, target in enumerate(world.targets):
             d, _ = obstacle.signed_distance(target[None] - offsets)
             if d.min() <= 0:
-                check.bad(f"obstacles[{i}].motion", f"the obstacle sweeps over targets[{k}] {target.tolist()}")
+                check.bad(where, f"the obstacle sweeps over targets[{k}] {target.tolist()}")
 
 
 def _build(check: Checker, data: Any, source: str) -> World | None:
@@ -372,6 +372,13 @@ def load_world(path: str | Path) -> World:
             the contract (every problem, one line each).
     """
     path = resolve_world(path)
+    if _is_image(path):
+        beside = Path(path).with_suffix(".yaml")
+        ros = (f"; {beside.name} beside it looks like its ROS map YAML: write 'grid: {{map: {beside.name}}}' instead"
+               if beside.is_file() else "")
+        raise WorldError(f"{path}: an image alone is not a world (it has no scale, origin or target): write a world "
+                         f"file with 'grid: {{image: {Path(path).name}, resolution: R, origin: [x, y, 0]}}' (R: map "
+                         f"units per pixel), robot: {{radius, step}}, a field and targets{ros}")
     if Path(path).suffix.lower() == ".map":
         raise WorldError(f"{path}: a MovingAI map alone has no target: evaluate its scenarios with "
                          f"`apf-physics eval {path} --scen {path}.scen`, or write a world file with "
@@ -381,6 +388,30 @@ def load_world(path: str | Path) -> World:
         raise WorldError(f"{path}: a ROS map alone has no target: write a world file with "
                          f"'grid: {{map: {Path(path).name}}}', robot: {{radius, step}}, a field and targets")
     return world_from_dict(data, str(path))
+
+
+IMAGE_SUFFIXES = (".pgm", ".pbm", ".ppm", ".png", ".bmp", ".jpg", ".jpeg", ".gif", ".tif", ".tiff", ".webp")
+IMAGE_SIGNATURES = (b"\x89PNG", b"\xff\xd8\xff", b"GIF8", b"II*\x00", b"MM\x00*", b"P5\n", b"P5 ", b"P2\n", b"P2 ",
+                    b"P5\r", b"P2\r", b"BM")
+"""How images start (PNG, JPEG, GIF, TIFF, PGM binary and plain, BMP)."""
+
+
+def _is_image(path: Path) -> bool:
+    """Whether ``path`` is an image (by its name, or by how it starts), not a world file."""
+    if Path(path).suffix.lower() in IMAGE_SUFFIXES:
+        return True
+    try:
+        with open_regular_file(path, "world", WorldError) as (fd, _):
+            head = os.read(fd, 8)
+    except (WorldError, OSError):   # (reported by the YAML reader, which opens it again)
+        return False
+    if head.startswith(b"BM"):   # a bitmap's header is binary; a world file starting "BM" is text
+        try:
+            head.decode("ascii")
+            return False
+        except UnicodeDecodeError:
+            return True
+    return head.startswith(IMAGE_SIGNATURES)
 
 
 class _WorldDumper(yaml.SafeDumper):
