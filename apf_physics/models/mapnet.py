@@ -131,6 +131,44 @@ class MapNetwork(nn.Module):
         return F.softplus(self.value_weight) * dv + self.linear(rest)[..., 0] + self.head(x)[..., 0]
 
 
+def replan(network: MapNetwork, features: torch.Tensor, free: torch.Tensor, held: torch.Tensor,
+           values: torch.Tensor, extra_cost: torch.Tensor | float = 0.0) -> torch.Tensor:
+    """V over a patch of the grid in which something changed (other robots stand in it), the
+    patch's edge held at the values of the whole map.
+
+    Value iteration over the patch alone: the network's cost map from the patch's ``features``
+    (plus ``extra_cost``), the nodes in ``held`` (the patch's edge, and its target nodes) keeping
+    their ``values``, the others found by sweeps until nothing changes. A node's value is then
+    the best of going to the patch's edge (and on from there as the map's values say) or to a
+    target within it, around what is blocked in the patch.
+
+    Args:
+        network: The map network.
+        features: (F, R, C) the patch's node features.
+        free: (R, C) bool: the patch's nodes where the robot fits.
+        held: (R, C) bool: nodes whose value is kept.
+        values: (R, C) the map's V over the patch (read at ``held``).
+        extra_cost: Added to the learned cost per unit length, per node ((R, C) or a number).
+
+    Returns:
+        (R, C) V over the patch (:data:`UNREACHED` where no way leads).
+    """
+    with torch.no_grad():
+        kappa = network.cost(features) + extra_cost
+        edges = [(dr, dc, w * 0.5 * (kappa + _shift(kappa, dr, dc, float("inf"))))
+                 for dr, dc, w in _neighbours(network.resolution)]
+        held = held & free
+        kept = torch.where(held, values.to(kappa.dtype), torch.full_like(kappa, UNREACHED))
+        none = torch.zeros_like(free)
+        v = kept
+        for _ in range(free.numel()):   # a sweep extends every path by an edge: at most one per node
+            new = torch.where(held, kept, _sweep(v, edges, free, none))
+            if torch.equal(new, v):
+                break
+            v = new
+        return v
+
+
 def _shift(x: torch.Tensor, dr: int, dc: int, fill: float) -> torch.Tensor:
     """``y[r, c] = x[r + dr, c + dc]`` (``fill`` beyond the edge)."""
     padded = F.pad(x[None, None], (1, 1, 1, 1), value=fill)[0, 0]

@@ -342,7 +342,9 @@ class World:
         least ``u_max`` above the lowest, so that blocked points always read as a maximum.
         """
         def build() -> float:
-            values = self.raster(4).values
+            kept = self._cache.get(("potential", 4))   # else U at those nodes, not kept: two numbers are needed
+            values = kept.values if kept is not None else apf.Grid.covering((0.0, 0.0), self.size, 4).map_nodes(
+                lambda nodes: self.potential(nodes), RASTER_CHUNK)
             return float(max(values.max(), values.min() + self.field.u_max))
         return self.cached("u_wall", build)
 

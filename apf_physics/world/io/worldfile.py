@@ -65,6 +65,14 @@ RASTER_BYTES_PER_TARGET = 1_500
 """Further peak bytes per square unit per target: U is computed from a column per target
 (measured 370 at the default 4 nodes per unit; 1,500 covers a model's observer at 8)."""
 
+RASTER_BYTES_PER_FORMATION = 600
+"""Further bytes per square unit per formation of a world's ``formations:``: each formation plans
+in a world of its own target, which keeps its own rasters while the evaluation runs. Measured
+(``tools/bench_warehouse.py``, BENCHMARKS.md "Many formations in a warehouse"): the map network's
+values and goal nodes, 20 (its map view's clearance is shared by every formation); the window
+network's observation raster of U at 4 nodes per unit, about 140; 600 covers a model's observer
+at 8. What depends on the map alone (the obstacles' index, clearance) is shared and counted once."""
+
 
 def memory_budget() -> int:
     """The peak memory the rasters of one world may take [bytes]: :data:`MEMORY_BUDGET`, or
@@ -87,24 +95,29 @@ def memory_budget() -> int:
     return int(value)
 
 
-def raster_memory(size: Sequence[float], targets: int) -> float:
+def raster_memory(size: Sequence[float], targets: int, formations: int = 0) -> float:
     """Estimated peak memory [bytes] of the rasters an evaluation of a world builds.
 
     The potential and observation rasters and the A* grid (4 nodes per unit) over the map and
     :data:`RASTER_MARGIN` beyond
     it: :data:`RASTER_BYTES_PER_UNIT2` plus :data:`RASTER_BYTES_PER_TARGET` per target, per
-    square unit (measured peaks, rounded up).
+    square unit (measured peaks, rounded up); with ``formations`` (a world's ``formations:``,
+    each planning to its own target: ``targets`` is then 1), :data:`RASTER_BYTES_PER_FORMATION`
+    per formation.
     """
     area = (float(size[0]) + 2 * RASTER_MARGIN) * (float(size[1]) + 2 * RASTER_MARGIN)
-    return area * (RASTER_BYTES_PER_UNIT2 + RASTER_BYTES_PER_TARGET * int(targets))
+    return area * (RASTER_BYTES_PER_UNIT2 + RASTER_BYTES_PER_TARGET * int(targets)
+                   + RASTER_BYTES_PER_FORMATION * int(formations))
 
 
-def raster_memory_problem(size: Sequence[float], targets: int) -> str | None:
-    """What to say when the rasters of a map of ``size`` with ``targets`` targets exceed :func:`memory_budget`, else None."""
-    need, budget = raster_memory(size, targets), memory_budget()
+def raster_memory_problem(size: Sequence[float], targets: int, formations: int = 0) -> str | None:
+    """What to say when the rasters of a map of ``size`` with ``targets`` targets (or ``formations``
+    formations, each with its own) exceed :func:`memory_budget`, else None."""
+    need, budget = raster_memory(size, targets, formations), memory_budget()
     if need <= budget:
         return None
-    return (f"a {size[0]:g} x {size[1]:g} map with {targets} target(s) needs about {_gib(need)} of rasters "
+    what = f"{formations} formations" if formations else f"{targets} target(s)"
+    return (f"a map of {size[0]:g} x {size[1]:g} steps with {what} needs about {_gib(need)} of rasters "
             f"(the planners' at 4 nodes per unit), over the budget of {_gib(budget)}; "
             f"use a smaller map, or set {MEMORY_BUDGET_VARIABLE} (e.g. {math.ceil(need / 2**30)}G) on a machine "
             f"with that much memory")
@@ -135,7 +148,8 @@ def _field_bounds(params: FieldParams, size: tuple[float, float], targets: int,
         }
 
 
-def _check_together(check: Checker, size, robot_radius, goal_tolerance, params, obstacles, targets) -> None:
+def _check_together(check: Checker, size, robot_radius, goal_tolerance, params, obstacles, targets,
+                    formations: int = 0) -> None:
     """The limits that depend on several values (each checked when its values are valid)."""
     if size is not None:
         if robot_radius is not None and robot_radius >= min(size) / 2:
@@ -146,7 +160,8 @@ def _check_together(check: Checker, size, robot_radius, goal_tolerance, params, 
             check.bad("goal_tolerance", f"{goal_tolerance:g} is not less than half the map's diagonal "
                                         f"({half_diagonal:.4g}): nearly every point would count as reached")
     if size is not None and targets is not None:
-        problem = raster_memory_problem(size, len(targets))
+        # formations plan each to its own target, in worlds of their own
+        problem = raster_memory_problem(size, 1, formations) if formations else raster_memory_problem(size, len(targets))
         if problem:
             check.bad("size", problem)
     if size is not None and targets is not None and params is not None and obstacles is not None:
@@ -274,7 +289,7 @@ def _build(check: Checker, data: Any, source: str) -> World | None:
     formation = None if parts.formation is None else _formation_to_world(parts.formation, u)
     formations = tuple(FormationTask(to_world(t.start), to_world(t.target), _formation_to_world(t.spec, u))
                        for t in parts.formations or ())
-    _check_together(check, size, robot_radius, goal_tolerance, parts.params, obstacles, targets)
+    _check_together(check, size, robot_radius, goal_tolerance, parts.params, obstacles, targets, len(formations))
     if check.problems:
         _check_what_parsed(check, parts, size, robot_radius, goal_tolerance, obstacles, targets, starts, to_world,
                            (data.get("grid") if isinstance(data, Mapping) else None), source)
