@@ -54,6 +54,7 @@ from apf_physics.sim.swept import Sweeps
 from apf_physics.sim.tiles import Tiles, obstacle_shapes
 from apf_physics.sim.tiles import CHUNK, TILE_GAP, WALL_THICKNESS  # noqa: F401 (public here too)
 from apf_physics.world.core import World
+from apf_physics.world.io.units import show_point
 
 MAX_SPEED = math.sqrt(2.0)  # a diagonal unit move (±1, ±1) per control step [units per control step]
 CONTACT_MARGIN = 0.01  # a move that keeps this much more than touching distance needs no physics [units]
@@ -379,7 +380,7 @@ class Physics:
         clearance = world.clearance(p, t)
         if np.any(clearance <= 0):
             k = int(np.argmin(clearance))
-            raise UserError(f"{world.label}: robot {int(mine[k])} placed at {np.round(p[k], 4).tolist()} has its "
+            raise UserError(f"{world.label}: robot {int(mine[k])} placed at {show_point(world.frame, p[k])} has its "
                             f"centre inside an obstacle or outside the map")
         need = 2 * r + 1e-6
         for _ in range(200):

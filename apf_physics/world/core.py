@@ -61,10 +61,12 @@ class Frame:
     Attributes:
         offset: File coordinates of the world's origin.
         unit: File units per step.
+        name: The file's unit of length (``units:``; ``m`` for a ROS map), or ``""`` when it names none.
     """
 
     offset: tuple[float, float] = (0.0, 0.0)
     unit: float = 1.0
+    name: str = ""
 
     def to_file(self, points: np.ndarray) -> np.ndarray:
         """Points in the world file's coordinates."""
@@ -504,7 +506,8 @@ class World:
         """
         cells = self.start_cells() if away_from_targets else self.free_cells(margin)
         if not len(cells):
-            raise WorldError(f"{self.label}: no free position for a robot of radius {self.robot_radius}")
+            raise WorldError(f"{self.label}: no free position for a robot of radius "
+                             f"{self.robot_radius * self.frame.unit:g}{' ' + self.frame.name if self.frame.name else ''}")
         half = 0.5 / 4
         return cells[rng.integers(len(cells), size=count)] + rng.uniform(-half, half, size=(count, 2))
 
@@ -521,7 +524,7 @@ class World:
         """The world as the world-file contract's mapping, in the file's units (round-trips through ``world_from_dict``)."""
         frame, u = self.frame, self.frame.unit
         grids = [o for o in self.obstacles if isinstance(o, GridObstacle)]
-        data: dict[str, Any] = {"name": self.name}
+        data: dict[str, Any] = {"name": self.name, **({"units": frame.name} if frame.name else {})}
         if grids:
             data["grid"] = dict(grids[0].spec)
         else:

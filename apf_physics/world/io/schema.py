@@ -65,8 +65,10 @@ MAX_COUNTED = 1000
 """Problems counted in one file before the check stops (a file of a million bad entries is
 not read to its end)."""
 
-_TOP_KEYS = {"name", "size", "grid", "robot", "robot_radius", "goal_tolerance", "field", "obstacles", "targets", "starts",
-             "formation", "formations"}
+_TOP_KEYS = {"name", "units", "size", "grid", "robot", "robot_radius", "goal_tolerance", "field", "obstacles", "targets",
+             "starts", "formation", "formations"}
+MAX_UNIT_CHARS = 16
+"""Longest name of the file's unit (``units:``) [characters]."""
 _GRID_KEYS = {"image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh", "mode", "map", "movingai", "cell"}
 
 
@@ -221,6 +223,15 @@ def _parse_name(check: Checker, value: Any, key: str = "name") -> str:
         raise check.bad(key, f"at most {MAX_NAME_CHARS} characters, got {len(value):,}")
     if not value.isprintable():
         raise check.bad(key, f"must be printable on one line, got {shortened(value)}")
+    return value
+
+
+def _parse_units(check: Checker, value: Any) -> str:
+    """The name of the file's unit of length (shown after lengths and on axes)."""
+    if not isinstance(value, str) or not value or len(value) > MAX_UNIT_CHARS or not value.isprintable() \
+            or value != value.strip():
+        raise check.bad("units", f"expected the name of a unit of length, such as m or cm (at most {MAX_UNIT_CHARS} "
+                                 f"printable characters), got {_kind(value)}")
     return value
 
 
@@ -563,7 +574,10 @@ def parse_world(check: Checker, data: Any, source: str) -> FileWorld | None:
     default_name = Path(source).stem if source != "<dict>" else "world"
     name = check.attempt(_parse_name, check, data.get("name", default_name))
     robot_radius, step, unicycle = _parse_robot(check, data)
-    frame = Frame((float(offset[0]), float(offset[1])), float(step if step is not None else 1.0))
+    units = check.attempt(_parse_units, check, data["units"]) if "units" in data else None
+    if units is None and has_grid and isinstance(data["grid"], Mapping) and "movingai" not in data["grid"]:
+        units = "m"   # a ROS map's resolution and origin are in metres
+    frame = Frame((float(offset[0]), float(offset[1])), float(step if step is not None else 1.0), units or "")
     goal_tolerance = check.attempt(check.number, data.get("goal_tolerance", 0.75 * frame.unit), "goal_tolerance",
                                    positive=True)
     params = check.attempt(_parse_field, check, data["field"], frame) if "field" in data else None

@@ -1,0 +1,90 @@
+"""A world file's units and coordinates, both ways: where positions and lengths cross between a user and the world.
+
+A world is laid out in **steps**: one unit is the robot's travel per control step and the origin
+is the map's lower-left corner (:class:`~apf_physics.world.core.Frame`); everything inside the
+package works in them. What a user writes and reads is in the world file's own units and
+coordinates: the world file itself (read by :mod:`~apf_physics.world.io.worldfile` through the
+inbound functions here), a start given to an environment, and everything shown back (``eval``'s
+table and JSON, video captions, an environment's ``info``, messages, the ``worlds`` listing, the
+axes of a field figure), which goes out through the outbound functions here. A point is
+``x_file = x · unit + offset``; a length ``l_file = l · unit``. Counts of control steps stay steps.
+
+The unit's name (``units: m`` in a world file; ``m`` for a ROS map, whose resolution is in
+metres) is :attr:`Frame.name`; empty when the file names none.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Sequence
+
+import numpy as np
+
+from apf_physics.world.core import Frame, FormationSpec
+from apf_physics.world.obstacles import CircleObstacle, Motion, Obstacle, PolygonObstacle
+
+
+# -- inbound: the file's units to steps ------------------------------------------------------
+def points_to_steps(frame: Frame, points) -> np.ndarray:
+    """Points (..., 2) in the file's coordinates, in the world's (steps from the map's corner)."""
+    return (np.asarray(points, float) - np.asarray(frame.offset, float)) / frame.unit
+
+
+def length_to_steps(frame: Frame, length):
+    """A length (or an array of them) in the file's units, in steps."""
+    return np.asarray(length, float) / frame.unit if np.ndim(length) else float(length) / frame.unit
+
+
+def obstacle_to_steps(frame: Frame, obstacle: Obstacle) -> Obstacle:
+    """An obstacle as written in the file (and its route), in steps."""
+    if frame.unit == 1.0 and not any(frame.offset):
+        return obstacle
+    unit, offset = frame.unit, np.asarray(frame.offset, float)
+    motion = obstacle.motion
+    if motion is not None:
+        motion = Motion(np.asarray(motion.path, float) / unit, motion.speed / unit, motion.loop, motion.phase / unit)
+    if isinstance(obstacle, CircleObstacle):
+        return CircleObstacle((obstacle.center - offset) / unit, obstacle.radius / unit, motion, obstacle.name)
+    return PolygonObstacle((obstacle.vertices - offset) / unit, motion, obstacle.name)
+
+
+def formation_to_steps(frame: Frame, spec: FormationSpec) -> FormationSpec:
+    """A formation's lengths (range, spacing, offsets) as written in the file, in steps."""
+    unit = frame.unit
+    if unit == 1.0:
+        return spec
+    return replace(spec, comm_range=spec.comm_range / unit, spacing=spec.spacing / unit,
+                   offsets=tuple((a / unit, b / unit) for a, b in spec.offsets))
+
+
+# -- outbound: steps to the file's units -----------------------------------------------------
+def points_to_file(frame: Frame, points) -> np.ndarray:
+    """Points (..., 2) of the world, in the file's coordinates (:meth:`Frame.to_file`)."""
+    return frame.to_file(points)
+
+
+def length_to_file(frame: Frame, length):
+    """A length (or an array of them) in steps, in the file's units."""
+    return np.asarray(length, float) * frame.unit if np.ndim(length) else float(length) * frame.unit
+
+
+def unit_suffix(frame: Frame) -> str:
+    """``" m"`` to write after a length in the file's units, or ``""`` when the file names no unit."""
+    return f" {frame.name}" if frame.name else ""
+
+
+def show_point(frame: Frame, point, digits: int = 4) -> str:
+    """A point of the world as a user wrote it: ``[6.5, -0.5]`` in the file's coordinates (rounded)."""
+    return str([round(float(v), digits) for v in points_to_file(frame, point).reshape(2)])
+
+
+def show_length(frame: Frame, length: float, digits: int = 4) -> str:
+    """A length in steps as a user reads it: ``0.2 m`` (or ``0.2``), in the file's units."""
+    return f"{round(length_to_file(frame, length), digits):g}{unit_suffix(frame)}"
+
+
+def same_units(frames: Sequence[Frame]) -> Frame | None:
+    """The frame of lengths shared by ``frames`` (one unit, one name), or None when they differ:
+    a mean length over worlds in other units has no unit."""
+    scales = {(f.unit, f.name) for f in frames}
+    return frames[0] if len(scales) == 1 else None
