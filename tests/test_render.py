@@ -33,7 +33,7 @@ from apf_physics.render import (
     write_png,
     write_video,
 )
-from apf_physics.render.drawing import BLACK, BLUE, RED, YELLOW, heatmap
+from apf_physics.render.drawing import BLACK, BLUE, RED, YELLOW, caption_height, heatmap
 from apf_physics.render.field_plot import figure_map_origin
 from apf_physics.render.video import choose_codec
 
@@ -153,6 +153,33 @@ def test_bigger_images_scale_lines_and_discs(world):
     assert large.line_width > small.line_width
 
 
+@pytest.mark.parametrize("caption", ["below", "off"])
+def test_captions_never_hide_the_map(world, caption):
+    """A frame's text (the step, the world, a collision's place) goes in a band below the map, or
+    nowhere: the map's pixels are those of the same frame without text, whatever the text."""
+    image = FieldImage.from_world(world, 256, caption=caption)
+    snapshot = Snapshot([[2.0, 18.0]], ("single",), (np.array([[1.0, 19.0], [2.0, 18.0]]),), t=0)
+    bare = draw_frame(image, snapshot)
+    lines = ("step 3/40", "world w, planner dqn", "start 0 (1, 19)", "COLLISION at step 3: hit obstacle at (2, 18)")
+    texted = draw_frame(image, Snapshot(snapshot.positions, ("single",), snapshot.trails, lines, 0))
+    rows = image.shape[0]
+    np.testing.assert_array_equal(texted[:rows], bare)          # the upper-left corner too
+    assert texted.shape[0] == rows + caption_height(image, len(lines))
+    if caption == "below":
+        band = texted[rows:]
+        assert band.shape[0] > 0 and len(np.unique(band.reshape(-1, 3), axis=0)) > 2   # text on the band
+    over = draw_frame(FieldImage.from_world(world, 256, caption="over"), Snapshot(snapshot.positions, ("single",),
+                                                                                  snapshot.trails, lines, 0))
+    assert over.shape == bare.shape and not np.array_equal(over, bare)   # by option, over the corner as before
+
+
+def test_frames_of_a_video_share_one_size_whatever_their_lines(world):
+    trajectory = np.linspace([2.0, 2.0], [10.0, 15.0], 6)
+    frames = list(render_trajectory(world, trajectory, long_side=128, overlay=("world w",), final_overlay=("done",),
+                                    events=[(3, "COLLISION at step 3")]))
+    assert len({frame.shape for frame in frames}) == 1
+
+
 def test_trajectory_snapshots_and_hold():
     trajectory = np.stack([np.linspace([1, 1], [5, 5], 6), np.linspace([1, 3], [5, 7], 6)], axis=1)
     snapshots = list(trajectory_snapshots(trajectory, formation_roles(2), final_overlay=("done",), hold=3))
@@ -186,7 +213,7 @@ def test_browser_video_is_h264_or_vp9_yuv420p_with_frames_and_duration(world, tm
     name, pix_fmt, count, duration, frames = read_with_pyav(out)
     assert (name, pix_fmt, count) == (expected, "yuv420p", 12)
     assert duration == pytest.approx(1.2, abs=0.05)
-    assert frames[0].shape == (256, 256, 3)
+    assert frames[0].shape == (256 + caption_height(FieldImage.from_world(world, 256), 1), 256, 3)   # "step t/T" below
 
 
 def test_h264_mp4_has_its_index_first(world, tmp_path):
@@ -217,7 +244,7 @@ def test_opencv_video_reads_back_with_frame_count_and_size(world, tmp_path, suff
         ok, frame = capture.read()
         if not ok:
             break
-        assert frame.shape == (256, 256, 3)
+        assert frame.shape == (256 + caption_height(FieldImage.from_world(world, 256), 1), 256, 3)
         count += 1
     capture.release()
     assert count == 12
@@ -427,7 +454,11 @@ def test_render_command_writes_h264_and_png_into_a_new_folder(world, tmp_path, c
     name, pix_fmt, frames, _, _ = read_with_pyav(out)
     assert (name, pix_fmt) == ("h264", "yuv420p") and frames >= 2
     assert f"wrote {out} (H.264;" in capsys.readouterr().out
-    assert cv2.imread(str(png)).shape == (128, 128, 3)
+    height, width = cv2.imread(str(png)).shape[:2]
+    assert width == 128 and height > 128            # the text in a band below the map
+    plain = parser.parse_args(["render", str(world_file), "--out", str(tmp_path / "plain.mp4"), "--png", str(png),
+                               "--size", "128", "--hold", "0", "--no-progress", "--caption", "off"])
+    assert plain.func(plain) == 0 and cv2.imread(str(png)).shape == (128, 128, 3)
     bad = parser.parse_args(["render", str(world_file), "--start", "7", "--out", str(out), "--no-progress"])
     with pytest.raises(UserError, match="--start 7"):
         bad.func(bad)

@@ -16,20 +16,24 @@ from apf_physics.render.video import render_trajectory, stack_headings, stack_pa
 
 def write_episode_video(world, episodes: Sequence, out: str | Path, png: str | Path | None = None, fps: float = 10.0,
                         size: int = 512, hold: float = 1.0, overlay: tuple[str, ...] = (), formation: bool = False,
-                        start_index: int | None = None, codec: str | None = None, progress: bool = True) -> int:
+                        start_index: int | None = None, codec: str | None = None, progress: bool = True,
+                        caption: str = "below") -> int:
     """Render rollout episodes of one world to a video (and the last frame to a PNG).
 
     Single robots from several starts share one clip (all move at once); each formation
     episode is a clip of its own. ``codec`` is a name from
     :data:`~apf_physics.render.video.CODECS` (default: the extension's); ``progress`` shows
     a bar of frames on stderr when it is a terminal. Unicycles' episodes (with ``headings``)
-    draw each robot's heading. Positions in the text are in the world file's units. Returns the
-    number of frames written.
+    draw each robot's heading. The text goes where ``caption`` says
+    (:data:`~apf_physics.render.drawing.CAPTIONS`: below the map by default, never over it unless
+    asked), positions in it in the world file's units. Returns the number of frames written.
     """
-    image = FieldImage.from_world(world, size)
+    image = FieldImage.from_world(world, size, caption=caption)
     hold_frames = max(0, int(round(hold * fps)))
     clips = list(zip(episode_clips(episodes, overlay, formation, start_index, world.frame),
                      clip_members(episodes, formation)))
+    # every frame of the video has the most lines any clip shows (one size for the whole video)
+    rows = max(1 + len(lines) + len(collision_events(members)) + len(final) for (_, _, lines, final, _), members in clips)
     total = sum(len(clip[0]) + hold_frames for clip, _ in clips)
     last: list[np.ndarray] = []
 
@@ -38,7 +42,7 @@ def write_episode_video(world, episodes: Sequence, out: str | Path, png: str | P
         for (trajectory, roles, lines, final, families), members in clips:
             for frame in render_trajectory(world, trajectory, roles, overlay=lines, final_overlay=final, families=families,
                                            hold=hold_frames, image=image,
-                                           events=collision_events(members, world.frame),
+                                           events=collision_events(members, world.frame), caption_lines=rows,
                                            headings=clip_headings(members, trajectory)):
                 yield frame
         last.append(frame)
