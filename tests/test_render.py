@@ -395,6 +395,29 @@ def test_field_plot_draws_yellow_paths_blue_starts_and_rings_for_traps(world, tm
     assert out.is_file() and cv2.imread(str(out)).shape == written.shape
 
 
+def test_field_figure_has_axes_in_the_world_files_units():
+    """plot-field's axes read the file's coordinates: ros_arena is in metres around [0, 0], its ticks
+    at whole metres where those points are drawn, and the unit is named."""
+    from apf_physics import load_world
+    from apf_physics.render.field_plot import INK, axis_label, nice_ticks
+    from apf_physics.world.io.units import points_to_steps
+
+    arena = load_world("ros_arena")
+    image = FieldImage.from_world(arena, 256, caption="off")
+    figure = field_figure(arena, image=image)
+    top, left = figure_map_origin(0, image)
+    height, width = image.shape[:2]
+    assert axis_label(arena, "x") == "x [m]" and axis_label(arena, "y") == "y [m]"
+    assert axis_label(make_world(), "x") == "x [steps]"
+    assert list(nice_ticks(-2.7, 2.7)) == [-2, 0, 2] and list(nice_ticks(0, 20)) == [0, 5, 10, 15, 20]
+    for value in (-2.0, 0.0, 2.0):   # a tick below the map where x = value is drawn, and one left of y = value
+        col = left + int(round(image.to_pixels(points_to_steps(arena.frame, [value, -2.7]))[0, 0]))
+        row = top + int(round(image.to_pixels(points_to_steps(arena.frame, [-2.7, value]))[0, 1]))
+        assert tuple(figure[top + height + 2, col]) == INK and tuple(figure[row, left - 3]) == INK
+    assert (figure[top + height + 8:, left: left + width] != 255).any()      # tick labels and the axis name
+    assert (figure[top: top + height, :left - 6] != 255).any()
+
+
 def test_field_figure_keeps_the_map_clear_and_adds_a_colour_bar(world):
     image = FieldImage.from_world(world, 512)
     paths = [np.linspace([2.0, 2.0], world.targets[0], 20)]
