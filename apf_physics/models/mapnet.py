@@ -36,6 +36,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from apf_physics.common.compiled import kernel
 from apf_physics.world.search import shortest_paths
 
 MAP_FEATURES = 2
@@ -138,9 +139,10 @@ def replan(network: MapNetwork, features: torch.Tensor, free: torch.Tensor, held
 
     Value iteration over the patch alone: the network's cost map from the patch's ``features``
     (plus ``extra_cost``), the nodes in ``held`` (the patch's edge, and its target nodes) keeping
-    their ``values``, the others found by sweeps until nothing changes. A node's value is then
-    the best of going to the patch's edge (and on from there as the map's values say) or to a
-    target within it, around what is blocked in the patch.
+    their ``values``, the others settled by sweeps (:func:`_settle`, compiled) until nothing
+    changes: the fixed point of :func:`_sweep`'s, to the bit. A node's value is then the best of
+    going to the patch's edge (and on from there as the map's values say) or to a target within
+    it, around what is blocked in the patch.
 
     Args:
         network: The map network.
@@ -151,22 +153,44 @@ def replan(network: MapNetwork, features: torch.Tensor, free: torch.Tensor, held
         extra_cost: Added to the learned cost per unit length, per node ((R, C) or a number).
 
     Returns:
-        (R, C) V over the patch (:data:`UNREACHED` where no way leads).
+        (R, C) float32 V over the patch (:data:`UNREACHED` where no way leads).
     """
     with torch.no_grad():
         kappa = network.cost(features) + extra_cost
-        edges = [(dr, dc, w * 0.5 * (kappa + _shift(kappa, dr, dc, float("inf"))))
-                 for dr, dc, w in _neighbours(network.resolution)]
-        held = held & free
-        kept = torch.where(held, values.to(kappa.dtype), torch.full_like(kappa, UNREACHED))
-        none = torch.zeros_like(free)
-        v = kept
-        for _ in range(free.numel()):   # a sweep extends every path by an edge: at most one per node
-            new = torch.where(held, kept, _sweep(v, edges, free, none))
-            if torch.equal(new, v):
-                break
-            v = new
-        return v
+        neighbours = _neighbours(network.resolution)
+        costs = torch.stack([w * 0.5 * (kappa + _shift(kappa, dr, dc, float("inf"))) for dr, dc, w in neighbours])
+        held = (held & free).numpy()
+        v = np.where(held, values.numpy(), np.float32(UNREACHED)).astype(np.float32)
+        _settle(v, held, free.numpy(), costs.numpy().astype(np.float32),
+                np.array([(dr, dc) for dr, dc, _ in neighbours], np.intp))
+        return torch.from_numpy(v)
+
+
+@kernel
+def _settle(v, held, free, costs, steps):
+    """Sweeps of ``v(x) ← max(v(x), v(x + n) − cost_n(x))`` over the free nodes not ``held``, in
+    place, forwards and backwards in turn until nothing changes (``costs[k]``: the edge to the
+    neighbour ``steps[k]``)."""
+    rows, cols = v.shape
+    changed = True
+    while changed:
+        changed = False
+        for backwards in range(2):
+            for i in range(rows * cols):
+                flat = rows * cols - 1 - i if backwards else i
+                r, c = flat // cols, flat % cols
+                if held[r, c] or not free[r, c]:
+                    continue
+                best = v[r, c]
+                for k in range(steps.shape[0]):
+                    nr, nc = r + steps[k, 0], c + steps[k, 1]
+                    if 0 <= nr < rows and 0 <= nc < cols:
+                        offer = v[nr, nc] - costs[k, r, c]
+                        if offer > best:
+                            best = offer
+                if best > v[r, c]:
+                    v[r, c] = best
+                    changed = True
 
 
 def _shift(x: torch.Tensor, dr: int, dc: int, fill: float) -> torch.Tensor:
