@@ -289,6 +289,49 @@ def test_the_raster_memory_estimate_covers_what_an_evaluation_builds(kind, tmp_p
     assert 0 < used <= estimate
 
 
+FORMATIONS_PEAK = """
+import sys
+import numpy as np
+import torch
+from apf_physics.experiments.rollout import rollout_formations
+from apf_physics.planners import make_planner
+from apf_physics.world.io.worldfile import raster_memory, world_from_dict
+torch.set_num_threads(1)
+angles = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+ring = np.column_stack([np.cos(angles), np.sin(angles)])
+formations = [{"start": (75 + 60 * u).round(2).tolist(), "target": (75 - 58 * u).round(2).tolist(), "followers": 1}
+              for u in ring]
+world = world_from_dict({"size": [150, 150], "field": "thesis-general", "formations": formations,
+                         "obstacles": [{"circle": {"center": [40, 40], "radius": 3}}]})
+planner = make_planner("dqn", model=sys.argv[1])
+planner.reset(world.formation_world(0), world.formations[0].start[None])   # the model loaded before the count
+def status(key):
+    return next(int(line.split()[1]) * 1024 for line in open("/proc/self/status") if line.startswith(key + ":"))
+try:
+    open("/proc/self/clear_refs", "w").write("5")
+except OSError:
+    pass
+before = status("VmRSS")
+rollout_formations(world, planner, max_steps=5)
+print(status("VmHWM") - before, raster_memory(world.size, 1, len(world.formations)))
+"""
+
+
+@pytest.mark.skipif(not Path("/proc/self/statm").exists(), reason="reads the resident set from /proc")
+@pytest.mark.parametrize("model", ["map", "general"])
+def test_the_raster_memory_estimate_covers_many_formations(model):
+    """Twelve formations on a 150 x 150 map, each planning in a world of its own target, with the
+    default leader (the map network) and the window network: the peak stays within the estimate,
+    which counts formations (it counted 1,500 bytes per square unit per target before)."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", FORMATIONS_PEAK, model], capture_output=True, text=True,
+                         check=True).stdout
+    used, estimate = (int(float(v)) for v in out.split())
+    assert 0 < used <= estimate
+
+
 def test_a_polygon_of_20k_vertices_is_refused_before_its_simplicity_is_checked(tmp_path, monkeypatch):
     from apf_physics.common import geometry
 

@@ -65,13 +65,15 @@ and observation rasters at 4 nodes per unit dominate: 1,100–1,600 bytes per sq
 RASTER_BYTES_PER_TARGET = 1_500
 """Further peak bytes per square unit per target: U is computed from a column per target
 (measured 370 at the default 4 nodes per unit; 1,500 covers a model's observer at 8)."""
-RASTER_BYTES_PER_FORMATION = 600
+RASTER_BYTES_PER_FORMATION = 300
 """Further bytes per square unit per formation of a world's ``formations:``: each formation plans
 in a world of its own target, which keeps its own rasters while the evaluation runs. Measured
-(``tools/bench_warehouse.py``, BENCHMARKS.md "Many formations in a warehouse"): the map network's
-values and goal nodes, 20 (its map view's clearance is shared by every formation); the window
-network's observation raster of U at 4 nodes per unit, about 140; 600 covers a model's observer
-at 8. What depends on the map alone (the obstacles' index, clearance) is shared and counted once."""
+(``tools/bench_warehouse.py``, BENCHMARKS.md "Many formations in a warehouse"): the map network
+(the default leader) keeps its values and goal nodes, about 20 (its map view's clearance is
+shared by every formation); the window network ``general.pt`` its observation raster of U at 4
+nodes per unit, about 130. A model observing at 8 nodes per unit keeps four times that: raise
+the budget for many formations of one. What depends on the map alone (the obstacles' index,
+clearance) is shared and counted once, in :data:`RASTER_BYTES_PER_UNIT2`."""
 
 
 def memory_budget() -> int:
