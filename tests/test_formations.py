@@ -10,7 +10,7 @@ import yaml
 
 from apf_physics import WorldError, load_world, world_from_dict
 from apf_physics.experiments.evaluate import evaluate
-from apf_physics.control.formation import FormationCrowd, right_of_way
+from apf_physics.control.formation import Formations, right_of_way
 from apf_physics.world.generate import generate_world
 from apf_physics.planners import make_planner
 from apf_physics.experiments.rollout import rollout_formations
@@ -126,7 +126,7 @@ def test_the_default_leader_crosses_a_warehouse_of_formations(tmp_path):
 
 def test_followers_are_placed_clear_of_other_formations():
     world = three_formations()
-    crowd = FormationCrowd(world)
+    crowd = Formations(world)
     robots = np.concatenate([p[:size] for p, size in zip(crowd.starts(), crowd.sizes)])
     gaps = np.hypot(*(robots[:, None] - robots[None]).transpose(2, 0, 1)) + 9 * np.eye(len(robots))
     assert gaps.min() >= 2 * world.robot_radius and np.all(world.clearance(robots) >= world.robot_radius)
@@ -164,7 +164,8 @@ def test_parallel_env_is_deterministic_and_leaders_never_touch():
         frame = env.render()
         runs.append(trace)
     assert runs[0] == runs[1]
-    assert frame.shape == (512, 512, 3)
+    from apf_physics.render.drawing import caption_height, field_image
+    assert frame.shape == (512 + caption_height(field_image(env.world), 1), 512, 3)   # the map, its caption below
 
 
 def test_spatial_hash_finds_exactly_the_near_points():

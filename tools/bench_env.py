@@ -9,9 +9,10 @@ Prints, from one process:
   their ratio (aim ≤ 5);
 - robot-steps per second of ``NavigateVectorEnv`` on fixed20 (random starts and actions) at
   each N, and with ``--vmas`` VMAS's ``navigation`` scenario (CPU, one agent per env,
-  continuous random actions, one torch thread) at the same N, stepped in alternating blocks,
-  and their ratio by the wall clock and by this process's CPU time. Aims: ours
-  never falls as N grows, and ≥ 400,000 robot-steps/s at N = 1024.
+  continuous random actions, one torch thread) at the same N, both without obstacles and in
+  fixed20 (its three obstacles as colliding box landmarks, :func:`vmas_fixed20`: the same work
+  as ours), stepped in alternating blocks, and the ratios by the wall clock and by this
+  process's CPU time. Aim: ours at or above VMAS in fixed20 at every N.
 - with ``--robots-kinds``, a second table from the same runs: robot-steps per second of the
   window env beside ``NavigateVectorEnv`` with a unicycle, continuous ``(v, ω)`` actions and a
   64-beam lidar observation (random actions in the box), their ratio (aim ≥ 0.5 at N = 1024),
@@ -96,11 +97,11 @@ class OursVector:
 
     def via_pymunk(self) -> float:
         """The share of robot-steps that go through pymunk (robots holding a proxy after a step)."""
-        physics = self.env._task.stepper.physics
+        physics = self.env.task.stepper.physics
         simulated = 0
         for a in self.actions[:50]:
             self.env.step(a)
-            simulated += int((physics._robot_proxy >= 0).sum())
+            simulated += int(physics.in_pymunk.sum())
         return simulated / (50 * self.env.num_envs)
 
 
@@ -144,6 +145,63 @@ class VmasVector:
             self.env.step(a)
 
 
+FIXED20_BOXES = (
+    # fixed20's three obstacles as VMAS boxes (centre x, y; length, width; rotation), in fixed20's units:
+    # the funnel's two arms, the L's two legs, the quadrilateral
+    (8.35, 10.85, 10.0, 1.2, 0.40), (10.85, 8.35, 10.0, 1.2, 1.17),
+    (16.25, 2.75, 3.5, 1.5, 0.0), (17.25, 6.25, 1.5, 5.5, 0.0),
+    (4.9, 16.4, 4.2, 3.4, -0.14),
+)
+"""fixed20's obstacles as box landmarks, for VMAS: the same world's work for both engines."""
+
+
+def vmas_fixed20(num_envs: int, seed: int = 0):
+    """VMAS's ``navigation`` scenario in fixed20: one agent (radius 0.25 of fixed20's 20 units) in a
+    bounded square, among fixed20's obstacles as colliding box landmarks (:data:`FIXED20_BOXES`),
+    scaled by 1/10 into VMAS's [-1, 1]."""
+    import torch
+    import vmas
+    from vmas.scenarios.navigation import Scenario
+    from vmas.simulator.core import Box, Landmark
+
+    class Fixed20(Scenario):
+        def make_world(self, batch_dim, device, **kwargs):
+            world = super().make_world(batch_dim, device, n_agents=1, agent_radius=0.025, enforce_bounds=True,
+                                       **kwargs)
+            self.boxes = []
+            for k, (x, y, length, width, angle) in enumerate(FIXED20_BOXES):
+                box = Landmark(name=f"obstacle {k}", collide=True, shape=Box(length=length / 10, width=width / 10))
+                box.placed = (x / 10 - 1.0, y / 10 - 1.0, angle)
+                world.add_landmark(box)
+                self.boxes.append(box)
+            return world
+
+        def reset_world_at(self, env_index=None):
+            super().reset_world_at(env_index)
+            for box in self.boxes:
+                x, y, angle = box.placed
+                box.set_pos(torch.tensor([x, y], device=self.world.device), batch_index=env_index)
+                box.set_rot(torch.tensor([angle], device=self.world.device), batch_index=env_index)
+
+    return vmas.make_env(Fixed20(), num_envs=num_envs, device="cpu", continuous_actions=True, seed=seed)
+
+
+class VmasFixed20(VmasVector):
+    """:func:`vmas_fixed20` stepped like :class:`VmasVector` (one torch thread, random actions)."""
+
+    def __init__(self, num_envs: int, steps: int):
+        import torch
+
+        torch.set_num_threads(1)
+        self.env = vmas_fixed20(num_envs)
+        self.env.reset()
+        generator = torch.Generator().manual_seed(0)
+        self.actions = [[torch.rand(num_envs, 2, generator=generator) * 2 - 1 for _ in self.env.agents]
+                        for _ in range(steps)]
+        for a in self.actions[:10]:
+            self.env.step(a)
+
+
 def vector_rates(num_envs: int, steps: int, vmas: bool, block: int = 25, kinds: bool = False,
                  no_chipmunk: bool = False) -> dict:
     """Robot-steps per second of ours (and VMAS's), wall clock and CPU time of this process.
@@ -161,6 +219,7 @@ def vector_rates(num_envs: int, steps: int, vmas: bool, block: int = 25, kinds: 
         runners["lidar"] = OursVector(num_envs, steps, LIDAR_ROBOT)
     if vmas:
         runners["vmas"] = VmasVector(num_envs, steps)
+        runners["vmas fixed20"] = VmasFixed20(num_envs, steps)
         if kinds:
             runners["vmas lidar64"] = VmasVector(num_envs, steps, n_lidar_rays=64)
     wall = dict.fromkeys(runners, 0.0)
@@ -322,7 +381,8 @@ def main() -> None:
     print(f"  a Navigate step costs      {cart / ours:10.1f} x a CartPole step (aim <= 5)")
     header = f"  {'N':>5} {'ours robot-steps/s':>20} {'via pymunk':>11}"
     if args.vmas:
-        header += f" {'VMAS navigation':>17} {'ours / VMAS':>12} {'(CPU time)':>11}"
+        header += (f" {'VMAS navigation':>17} {'ours / VMAS':>12} {'(CPU time)':>11}"
+                   f" {'VMAS in fixed20':>16} {'ours / VMAS':>12} {'(CPU time)':>11}")
     print("vectorised: NavigateVectorEnv on fixed20 (random starts and actions)"
           + (" beside VMAS 'navigation' (CPU, 1 agent, 1 torch thread), in alternating blocks of 25 steps"
              if args.vmas else ""))
@@ -334,7 +394,9 @@ def main() -> None:
         line = f"  {n:>5} {r['ours wall']:>20,.0f} {r['via pymunk']:>10.1%}"
         if args.vmas:
             line += (f" {r['vmas wall']:>17,.0f} {r['ours wall'] / r['vmas wall']:>12.2f}"
-                     f" {r['ours cpu'] / r['vmas cpu']:>11.2f}")
+                     f" {r['ours cpu'] / r['vmas cpu']:>11.2f}"
+                     f" {r['vmas fixed20 wall']:>16,.0f} {r['ours wall'] / r['vmas fixed20 wall']:>12.2f}"
+                     f" {r['ours cpu'] / r['vmas fixed20 cpu']:>11.2f}")
         if args.no_chipmunk:
             line += f"   without chipmunk's stepping: {r['no chipmunk wall']:,.0f}"
             if args.vmas:

@@ -1,7 +1,7 @@
 """A Q-network that plans: a learned cost map, value iteration over it, and a per-move head.
 
 The thesis's second direction of future work is an observation that is an image map of the
-world. This network takes one (:class:`~apf_physics.sensing.observation.MapView`): every node of a
+world. This network takes one (:class:`~apf_physics.sensing.mapview.MapView`): every node of a
 grid over the map (``resolution`` per unit) carries the robot's clearance there and whether a
 target is within reach. It has three parts, all learned:
 
@@ -40,7 +40,7 @@ from apf_physics.common.compiled import kernel
 from apf_physics.world.search import shortest_paths
 
 MAP_FEATURES = 2
-"""Node features of a :class:`~apf_physics.sensing.observation.MapView`: clearance margin, target."""
+"""Node features of a :class:`~apf_physics.sensing.mapview.MapView`: clearance margin, target."""
 MOVE_FEATURES = 5
 """Per-move features of the head: ΔV, length, room, ΔU, stay."""
 UNREACHED = -1e6
@@ -100,7 +100,7 @@ class MapNetwork(nn.Module):
             free: (R, C) bool, nodes where the robot fits.
             goal: (R, C) bool, free nodes within reach of a target.
             grad_iterations: Iterations run with gradients after the fixed point is reached.
-            max_iterations: Sweeps without gradients, at most (default: none; the fixed point is
+            max_iterations: SweptDistances without gradients, at most (default: none; the fixed point is
                 found by :func:`fixed_point`, however long the paths).
         """
         kappa = self.cost(features)
@@ -113,12 +113,12 @@ class MapNetwork(nn.Module):
             else:
                 v = torch.where(goal, 0.0, UNREACHED).to(kappa.dtype)
                 for k in range(max_iterations):
-                    new = _sweep(v, plain, free, goal)
+                    new = _bellman_update(v, plain, free, goal)
                     if k % 8 == 7 and torch.equal(new, v):
                         break
                     v = new
         for _ in range(grad_iterations):
-            v = _sweep(v, edges, free, goal)
+            v = _bellman_update(v, edges, free, goal)
         return v
 
     # -- the head -------------------------------------------------------------------------------
@@ -139,8 +139,8 @@ def replan(network: MapNetwork, features: torch.Tensor, free: torch.Tensor, held
 
     Value iteration over the patch alone: the network's cost map from the patch's ``features``
     (plus ``extra_cost``), the nodes in ``held`` (the patch's edge, and its target nodes) keeping
-    their ``values``, the others settled by sweeps (:func:`_settle`, compiled) until nothing
-    changes: the fixed point of :func:`_sweep`'s, to the bit. A node's value is then the best of
+    their ``values``, the others settled by Bellman updates (:func:`_settle`, compiled) until nothing
+    changes: the fixed point of :func:`_bellman_update`, to the bit. A node's value is then the best of
     going to the patch's edge (and on from there as the map's values say) or to a target within
     it, around what is blocked in the patch.
 
@@ -168,9 +168,9 @@ def replan(network: MapNetwork, features: torch.Tensor, free: torch.Tensor, held
 
 @kernel
 def _settle(v, held, free, costs, steps):
-    """Sweeps of ``v(x) ← max(v(x), v(x + n) − cost_n(x))`` over the free nodes not ``held``, in
-    place, forwards and backwards in turn until nothing changes (``costs[k]``: the edge to the
-    neighbour ``steps[k]``)."""
+    """Bellman updates ``v(x) ← max(v(x), v(x + n) − cost_n(x))`` of the free nodes not ``held``, in
+    place, in forward and backward passes over the grid in turn until nothing changes
+    (``costs[k]``: the edge to the neighbour ``steps[k]``)."""
     rows, cols = v.shape
     changed = True
     while changed:
@@ -201,12 +201,12 @@ def _shift(x: torch.Tensor, dr: int, dc: int, fill: float) -> torch.Tensor:
 
 
 def fixed_point(edges: list, free: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
-    """The fixed point of :func:`_sweep`, without sweeping the whole grid again and again.
+    """The fixed point of :func:`_bellman_update`, without updating the whole grid again and again.
 
     ``−V`` is a shortest-path cost to the goal nodes with positive edge costs, so it is found
     by :func:`~apf_physics.world.search.shortest_paths` (relaxing outward from the nodes whose value
     just fell): each round costs what the wavefront holds, not the whole grid, and long paths
-    (a maze's) are followed to their end. The values are the sweeps' own, to the bit: each is
+    (a maze's) are followed to their end. The values are the updates' own, to the bit: each is
     ``V(x + n) − cost``, in float32.
 
     Args:
@@ -225,8 +225,8 @@ def fixed_point(edges: list, free: torch.Tensor, goal: torch.Tensor) -> torch.Te
     return torch.from_numpy(v.reshape(free.shape))
 
 
-def _sweep(v: torch.Tensor, edges: list, free: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
-    """One Bellman sweep: each free node takes its best neighbour's value minus the edge's cost."""
+def _bellman_update(v: torch.Tensor, edges: list, free: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+    """One Bellman update (a value-iteration step over the whole grid): each free node takes its best neighbour's value minus the edge's cost."""
     padded = F.pad(v[None, None], (1, 1, 1, 1), value=UNREACHED)[0, 0]
     rows, cols = v.shape
     best = v

@@ -4,14 +4,16 @@ Every static body the physics builds (an obstacle, a wall slab, a moving obstacl
 labelled with what it is (:class:`BodyLabels`), and every robot's proxy is known by its body
 id. After a substep in which shapes may touch (:class:`Touching`), the arbiters' body-id pairs are
 read (:func:`touching_pairs`), and at the end of the step they become the rows
-``(robot, kind, other)`` of a :class:`ContactLog` (:func:`contact_rows`, or
-:func:`contact_rows_few` for a few pairs; :func:`contact_log`).
+``(robot, kind, other)`` of a :class:`ContactLog` (:func:`contact_rows`, one compiled loop;
+:func:`contact_log`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import IntEnum
+
+from typing import Callable
 
 import numpy as np
 import pymunk
@@ -24,8 +26,6 @@ KINDS = ("obstacle", "wall", "robot", "moving_obstacle")
 OBSTACLE, WALL, ROBOT, MOVING = range(4)
 """Indices into :data:`KINDS`."""
 _KIND_COUNT = len(KINDS)
-FEW_PAIRS = 64
-"""Up to this many touching pairs, contacts are read with dicts (:func:`contact_rows_few`) rather than arrays."""
 
 
 class CollisionType(IntEnum):
@@ -59,15 +59,26 @@ class ContactLog:
         wall: (N,) bool: the robot touched the map's edge.
         robot: (N,) bool: the robot touched another robot.
         moving: (N,) bool: the robot touched a moving obstacle (or one touched it).
-        pairs: (K, 3) int: one row ``(robot, kind, other)`` per touching pair (:data:`KINDS`;
-            a robot–robot touch appears once per robot), sorted.
+        rows: (K, 3) int: one row ``(robot, kind, other)`` per touching pair, as read, where a
+            static obstacle may still be unnamed (``other`` -1, a tile's obstacles' shared body).
+        namer: Names the static obstacles of ``rows`` (only when :attr:`pairs` is first read).
     """
 
     obstacle: np.ndarray
     wall: np.ndarray
     robot: np.ndarray
     moving: np.ndarray
-    pairs: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.intp))
+    rows: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.intp))
+    namer: Callable[[np.ndarray], np.ndarray] | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def pairs(self) -> np.ndarray:
+        """(K, 3) int: one row ``(robot, kind, other)`` per touching pair (:data:`KINDS`; a robot–robot
+        touch appears once per robot; a static obstacle by its index in the robot's world), sorted."""
+        if self.namer is not None:   # named once, when asked: stepping needs the kinds alone
+            object.__setattr__(self, "rows", self.namer(self.rows))
+            object.__setattr__(self, "namer", None)
+        return self.rows
 
     @classmethod
     def nothing(cls, num_robots: int) -> ContactLog:
@@ -82,9 +93,14 @@ class ContactLog:
         return self.obstacle | self.wall | self.robot | self.moving
 
     @property
+    def obstacle_or_edge(self) -> np.ndarray:
+        """(N,) bool: touched an obstacle, static or moving, or the map's edge (anything but a robot)."""
+        return self.obstacle | self.wall | self.moving
+
+    @property
     def touched(self) -> bool:
         """Whether anything touched anything."""
-        return len(self.pairs) > 0
+        return len(self.rows) > 0
 
     @property
     def contacts(self) -> list[Contact]:
@@ -203,36 +219,13 @@ def touching_depths(space: pymunk.Space, buffer: pymunk.batch.Buffer) -> tuple[n
     return ids, values[:, :2].copy(), values[:, 2].copy()
 
 
-def contact_log(rows: np.ndarray, num_robots: int) -> ContactLog:
-    """The contact log of the rows ``(robot, kind, other)`` (:func:`contact_rows`)."""
+def contact_log(rows: np.ndarray, num_robots: int, namer: Callable[[np.ndarray], np.ndarray] | None = None
+                ) -> ContactLog:
+    """The contact log of the rows ``(robot, kind, other)`` (:func:`contact_rows`); ``namer`` names
+    the static obstacles among them when the log's pairs are read."""
     flags = np.zeros((len(KINDS), num_robots), bool)
     flags[rows[:, 1], rows[:, 0]] = True
-    return ContactLog(flags[OBSTACLE], flags[WALL], flags[ROBOT], flags[MOVING], rows)
-
-
-def contact_rows_few(pairs: np.ndarray, labels: BodyLabels, proxy_of_id: dict[int, int],
-                     proxy_robot: np.ndarray) -> np.ndarray:
-    """:func:`contact_rows` for a few pairs: dict look-ups beat the arrays' fixed costs.
-
-    Args:
-        pairs: (K, 2) touching body ids (a pair may come several times).
-        labels: What the static bodies are.
-        proxy_of_id: The proxy of each proxy body id.
-        proxy_robot: The robot each proxy simulates (-1: parked).
-    """
-    rows = set()
-    label_of = labels.of_id
-    for ids in pairs.tolist():
-        for a, b in ((ids[0], ids[1]), (ids[1], ids[0])):   # an arbiter's bodies come in either order
-            k = proxy_of_id.get(a)
-            if k is None or proxy_robot[k] < 0:
-                continue
-            j = proxy_of_id.get(b)
-            if j is None:
-                rows.add((int(proxy_robot[k]), *label_of[b]))
-            elif proxy_robot[j] >= 0:
-                rows.add((int(proxy_robot[k]), ROBOT, int(proxy_robot[j])))
-    return np.array(sorted(rows), np.intp).reshape(-1, 3)
+    return ContactLog(flags[OBSTACLE], flags[WALL], flags[ROBOT], flags[MOVING], rows, namer)
 
 
 def contact_rows(pairs: np.ndarray, labels: BodyLabels, proxy_ids: np.ndarray, proxy_order: np.ndarray,
@@ -352,12 +345,13 @@ def _contact_rows(pairs, proxy_ids, proxy_order, proxy_robot, label_ids, label):
                 rows[count, 0], rows[count, 1], rows[count, 2] = robot[i, a], ROBOT, robot[i, b]
                 count += 1
     rows = rows[:count]
-    # rows as one sortable key: one 1-D unique
+    # rows as one sortable key: one 1-D unique (the index shifted by one: a tile's obstacles' body is -1)
     span = 1
     for i in range(count):
-        span = max(span, rows[i, 2] + 1)
-    key = np.unique((rows[:, 0] * _KIND_COUNT + rows[:, 1]) * span + rows[:, 2])
+        span = max(span, rows[i, 2] + 2)
+    key = np.unique((rows[:, 0] * _KIND_COUNT + rows[:, 1]) * span + rows[:, 2] + 1)
     out = np.empty((len(key), 3), np.intp)
     for i in range(len(key)):
-        out[i, 0], out[i, 1], out[i, 2] = key[i] // (_KIND_COUNT * span), key[i] // span % _KIND_COUNT, key[i] % span
+        out[i, 0], out[i, 1] = key[i] // (_KIND_COUNT * span), key[i] // span % _KIND_COUNT
+        out[i, 2] = key[i] % span - 1
     return out

@@ -6,8 +6,10 @@ whole, a grid's cells as boxes) in :data:`CHUNK` squares when a robot that needs
 comes near (:meth:`Tiles.build_near`): a large map costs pymunk only where its robots go.
 Which slots share a tile is the physics' choice (:class:`~apf_physics.sim.physics.Physics`).
 
-Each obstacle and each wall of a tile has a static body of its own, labelled in the physics'
-:class:`~apf_physics.sim.contacts.BodyLabels`: an arbiter's body ids then say what a robot touched.
+Each wall of a tile has a static body of its own, and the tile's static obstacles share one, all
+labelled in the physics' :class:`~apf_physics.sim.contacts.BodyLabels`: an arbiter's body ids then
+say what a robot touched (which of the obstacles: :data:`ANY_OBSTACLE`). One body for thousands of
+obstacles, because pymunk's batched reads and writes visit every body of the space at every step.
 """
 
 from __future__ import annotations
@@ -22,6 +24,9 @@ from apf_physics.world.obstacles import CircleObstacle, GridObstacle, PolygonObs
 from apf_physics.world.core import World
 
 WALL_THICKNESS = 1.0  # of the slabs around each map [units]
+ANY_OBSTACLE = -1
+"""The index in the label of a tile's obstacles' shared body: the obstacle touched is the one the
+robot's disc is against, found by its world's geometry (:meth:`~apf_physics.sim.physics.Physics`)."""
 TILE_GAP = 4.0  # free space between neighbouring tiles, beyond their walls [units]
 CHUNK = 4.0
 """Least side of the squares [units] by which a world's static obstacles are built into pymunk as
@@ -66,9 +71,12 @@ class Tiles:
             wall.friction = wall.elasticity = 0.0
             self.space.add(body, wall)
             bodies.append((body, WALL, i))
+        obstacles = pymunk.Body(body_type=pymunk.Body.STATIC)   # every static obstacle of the tile
+        self.space.add(obstacles)
+        bodies.append((obstacles, OBSTACLE, ANY_OBSTACLE))
         self.labels.add(bodies)
         self.offset = np.vstack([self.offset, [ox, oy]])
-        self.pieces.append(TilePieces(world, max(CHUNK, side)))
+        self.pieces.append(TilePieces(world, max(CHUNK, side), obstacles))
         self.index[key] = tile
         return tile
 
@@ -77,7 +85,7 @@ class Tiles:
         """Every obstacle of every tile is built (small maps soon are)."""
         return all(pieces.complete for pieces in self.pieces)
 
-    def build_near(self, tiles: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
+    def build_near(self, tiles: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
         """Build the static obstacles of ``tiles`` near the boxes ``[lo, hi]`` (each in its tile's
         world coordinates, smaller than a chunk) that are not built yet.
 
@@ -85,47 +93,37 @@ class Tiles:
         :data:`CHUNK`; the first box that meets a chunk builds its pieces. A map of any size
         thus costs pymunk only what its robots come near, and so does start-up.
 
-        Returns:
-            Whether bodies were added to the space (an obstacle's first piece makes its body).
+        Only shapes are added (on the tile's obstacles' body, made with the tile): the space's
+        bodies stay as they were.
         """
-        added = False
         for tile in np.unique(tiles).tolist():
             mine = tiles == tile
             pieces = self.pieces[tile]
             new = pieces.take(lo[mine], hi[mine])
             if len(new):
-                added |= self._add_pieces(tile, pieces, new)
-        return added
+                self._add_pieces(tile, pieces, new)
 
-    def _add_pieces(self, tile: int, pieces: TilePieces, new: np.ndarray) -> bool:
-        """Add pieces ``new`` of ``tile``'s obstacles as static shapes; whether bodies were added."""
+    def _add_pieces(self, tile: int, pieces: TilePieces, new: np.ndarray) -> None:
+        """Add pieces ``new`` of ``tile``'s obstacles as static shapes on the tile's obstacles' body."""
         offset = tuple(self.offset[tile])
-        labelled = []
         shapes = []
         for k in new.tolist():
-            index = int(pieces.owner[k])
-            body = pieces.bodies.get(index)
-            if body is None:
-                body = pieces.bodies[index] = pymunk.Body(body_type=pymunk.Body.STATIC)
-                self.space.add(body)
-                labelled.append((body, OBSTACLE, index))
-            shapes += piece_shapes(body, pieces.world.obstacles[index], pieces.box(k), offset)
+            shapes += piece_shapes(pieces.body, pieces.world.obstacles[int(pieces.owner[k])], pieces.box(k), offset)
         for shape in shapes:
             shape.friction = 0.0
             shape.elasticity = 0.0
         self.space.add(*shapes)
-        if labelled:
-            self.labels.add(labelled)
-        return bool(labelled)
 
 
 class TilePieces:
     """A world's static obstacles cut into pieces (a polygon or circle whole, a grid box by box),
     bucketed by squares of ``side`` (at least :data:`CHUNK`), and which of them are built."""
 
-    def __init__(self, world: World, side: float):
+    def __init__(self, world: World, side: float, body: pymunk.Body):
         self.world = world
         self.side = float(side)
+        self.body = body
+        """The static body every piece's shapes go on."""
         owners, boxes = [], []
         for i, obstacle in enumerate(world.obstacles):
             if obstacle.motion is not None:
@@ -141,7 +139,6 @@ class TilePieces:
         self.owner = np.concatenate(owners).astype(np.intp) if owners else np.zeros(0, np.intp)
         self.boxes = np.vstack(boxes) if boxes else np.zeros((0, 4))
         self.built = np.zeros(len(self.owner), bool)
-        self.bodies: dict[int, pymunk.Body] = {}
         self.cols = max(1, int(math.ceil(world.size[0] / self.side)))
         rows = max(1, int(math.ceil(world.size[1] / self.side)))
         self.chunk_done = np.zeros(self.cols * rows, bool)
