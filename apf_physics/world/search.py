@@ -466,6 +466,50 @@ def escape_moves(world: World, position: np.ndarray, t0: int, steps: int, moves:
     return chain[::-1]
 
 
+def _move_lattice(world: World, start: np.ndarray, moves: np.ndarray, margin: float, samples: int):
+    """The lattice of the moves' sums through ``start`` over the map: ``(xy (V, 2), static (V, M)
+    bool: each move from each node clear of the static obstacles by ``robot_radius + margin``,
+    neighbour (V, M): the node each move leads to, or -1 off the lattice, target (T,): the nodes
+    within the goal tolerance)``; None when the lattice or its targets are empty."""
+    r = world.robot_radius
+    w, h = world.size
+    ix = np.arange(math.ceil(-start[0] + r), math.floor(w - start[0] - r) + 1)
+    iy = np.arange(math.ceil(-start[1] + r), math.floor(h - start[1] - r) + 1)
+    if not len(ix) or not len(iy):
+        return None
+    nx, ny = len(ix), len(iy)
+    xy = np.stack(np.meshgrid(start[0] + ix, start[1] + iy, indexing="ij"), axis=-1).reshape(-1, 2)   # node = a*ny + b
+    steps = moves.astype(int)
+    static = timed_move_clearance(world, xy, moves, 0.0, samples, moving=False) >= r + margin
+    a_idx, b_idx = np.divmod(np.arange(len(xy)), ny)
+    na, nb = a_idx[:, None] + steps[None, :, 0], b_idx[:, None] + steps[None, :, 1]
+    inside = (na >= 0) & (na < nx) & (nb >= 0) & (nb < ny)
+    target = np.flatnonzero(world.distance_to_target(xy) < world.goal_tolerance)
+    if not len(target):
+        return None
+    return xy, static & inside, np.where(inside, na * ny + nb, -1), target
+
+
+def _lattice_costs(static: np.ndarray, neighbour: np.ndarray, target: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """(V,) each node's shortest path to a target on the lattice around the static obstacles alone
+    (Dijkstra from the targets: moves are symmetric, u → v clear iff v → u clear)."""
+    cost = np.full(len(static), np.inf)
+    cost[target] = 0.0
+    heap = [(0.0, int(v)) for v in target]
+    static_l, neighbour_l = static.tolist(), neighbour.tolist()
+    while heap:
+        c, u = heapq.heappop(heap)
+        if c > cost[u]:
+            continue
+        for k, v in enumerate(neighbour_l[u]):
+            if v >= 0 and static_l[u][k] and length[k] > 0:
+                nc = c + length[k]
+                if nc < cost[v]:
+                    cost[v] = nc
+                    heapq.heappush(heap, (nc, v))
+    return cost
+
+
 def timed_path(world: World, start: np.ndarray, t0: int = 0, moves: np.ndarray = UNIT_MOVES,
                margin: float = 0.05, max_steps: int = 400, max_expansions: int = 60_000,
                samples: int = TIME_SAMPLES) -> np.ndarray | None:
@@ -490,47 +534,19 @@ def timed_path(world: World, start: np.ndarray, t0: int = 0, moves: np.ndarray =
     r = world.robot_radius
     if world.distance_to_target(start[None])[0] <= world.goal_tolerance:
         return start[None].copy()
-    w, h = world.size
-    ix = np.arange(math.ceil(-start[0] + r), math.floor(w - start[0] - r) + 1)
-    iy = np.arange(math.ceil(-start[1] + r), math.floor(h - start[1] - r) + 1)
-    if not len(ix) or not len(iy):
+    lattice = _move_lattice(world, start, moves, margin, samples)
+    if lattice is None:
         return None
-    nx, ny = len(ix), len(iy)
-    xy = np.stack(np.meshgrid(start[0] + ix, start[1] + iy, indexing="ij"), axis=-1).reshape(-1, 2)   # node = a*ny + b
-    steps = moves.astype(int)
-    static = timed_move_clearance(world, xy, moves, 0.0, samples, moving=False) >= r + margin
-    di, dj = steps[:, 0], steps[:, 1]
-    a_idx, b_idx = np.divmod(np.arange(len(xy)), ny)
-    na, nb = a_idx[:, None] + di[None, :], b_idx[:, None] + dj[None, :]
-    inside = (na >= 0) & (na < nx) & (nb >= 0) & (nb < ny)
-    static &= inside
-    target = np.flatnonzero(world.distance_to_target(xy) < world.goal_tolerance)
-    if not len(target):
-        return None
-    # Static lattice Dijkstra from the targets (moves are symmetric: u → v clear iff v → u clear).
+    xy, static, neighbour, target = lattice
     length = np.hypot(*moves.T)
-    neighbour = np.where(inside, na * ny + nb, -1)
-    cost = np.full(len(xy), np.inf)
-    cost[target] = 0.0
-    heap = [(0.0, int(v)) for v in target]
-    static_l, neighbour_l = static.tolist(), neighbour.tolist()
-    while heap:
-        c, u = heapq.heappop(heap)
-        if c > cost[u]:
-            continue
-        for k, v in enumerate(neighbour_l[u]):
-            if v >= 0 and static_l[u][k] and length[k] > 0:
-                nc = c + length[k]
-                if nc < cost[v]:
-                    cost[v] = nc
-                    heapq.heappush(heap, (nc, v))
+    cost = _lattice_costs(static, neighbour, target, length)
     s0 = int(np.argmin(np.hypot(*(xy - start).T)))
     if not math.isfinite(cost[s0]):
         return None
     goal = np.zeros(len(xy), bool)
     goal[target] = True
     wait_cost = 1.0
-    cost_l = cost.tolist()
+    cost_l, static_l, neighbour_l = cost.tolist(), static.tolist(), neighbour.tolist()
     g = {(s0, 0): 0.0}
     came: dict[tuple[int, int], tuple[int, int]] = {}
     heap = [(cost_l[s0], 0.0, s0, 0)]
