@@ -28,8 +28,8 @@ from apf_physics.common import geometry
 from apf_physics.common.compiled import kernel
 from apf_physics.errors import WorldError
 from apf_physics.world.field import FieldParams
-from apf_physics.world.kinematics import LIMIT_KEYS, UnicycleLimits
-from apf_physics.world.obstacles import CircleObstacle, GridObstacle, Obstacle
+from apf_physics.world.kinematics import UnicycleLimits
+from apf_physics.world.obstacles import CircleObstacle, Obstacle
 from apf_physics.world.spatial import ShapeSet
 
 T = TypeVar("T")
@@ -538,40 +538,6 @@ class World:
         half = 0.5 / 4
         return cells[rng.integers(len(cells), size=count)] + rng.uniform(-half, half, size=(count, 2))
 
-    # -- serialisation -----------------------------------------------------------------
-    def _robot_to_file(self) -> dict[str, Any]:
-        u = self.frame.unit
-        robot: dict[str, Any] = {"radius": self.robot_radius * u, "step": u}
-        if self.unicycle is not None:
-            limits = self.unicycle.scaled(1.0 / u)
-            robot.update({"kinematics": "unicycle", **{k: float(getattr(limits, k)) for k in LIMIT_KEYS}})
-        return robot
-
-    def to_dict(self) -> dict[str, Any]:
-        """The world as the world-file contract's mapping, in the file's units (round-trips through ``world_from_dict``)."""
-        frame, u = self.frame, self.frame.unit
-        grids = [o for o in self.obstacles if isinstance(o, GridObstacle)]
-        data: dict[str, Any] = {"name": self.name, **({"units": frame.name} if frame.name else {})}
-        if grids:
-            data["grid"] = dict(grids[0].spec)
-        else:
-            data["size"] = [self.size[0] * u, self.size[1] * u]
-        data.update({
-            "robot": self._robot_to_file(),
-            "goal_tolerance": self.goal_tolerance * u,
-            "field": frame.field_to_file(self.field),
-            "obstacles": [_obstacle_to_file(o, frame) for o in self.obstacles if not isinstance(o, GridObstacle)],
-            "targets": frame.to_file(self.targets).tolist(),
-            "starts": frame.to_file(self.starts).tolist(),
-        })
-        if self.formation is not None:
-            data["formation"] = _formation_to_file(self.formation.to_dict(), u)
-        if self.formations:
-            data["formations"] = [{**_formation_to_file(task.spec.to_dict(), u),
-                                   "start": frame.to_file(task.start).tolist(),
-                                   "target": frame.to_file(task.target).tolist()} for task in self.formations]
-        return data
-
 
 class Moment:
     """A world at one control step: the queries of Model §1's ``U(·, t)`` and the clearance at ``t``.
@@ -740,29 +706,3 @@ def _least_per_segment(count: int, owner: np.ndarray, clearance: np.ndarray) -> 
     out = np.full(count, np.inf)
     np.minimum.at(out, owner, clearance)
     return out
-
-def _formation_to_file(spec: dict[str, Any], unit: float) -> dict[str, Any]:
-    spec = dict(spec, comm_range=spec["comm_range"] * unit, spacing=spec["spacing"] * unit)
-    if "offsets" in spec:
-        spec["offsets"] = (np.asarray(spec["offsets"], float) * unit).tolist()
-    return spec
-
-
-def _obstacle_to_file(obstacle: Obstacle, frame: Frame) -> dict[str, Any]:
-    """An obstacle's world-file mapping, in the file's units."""
-    u = frame.unit
-    moved = obstacle.moved(np.zeros(2))   # the shape alone
-    if isinstance(moved, CircleObstacle):
-        data: dict[str, Any] = {"circle": {"center": frame.to_file(moved.center).tolist(), "radius": moved.radius * u}}
-    else:
-        data = {"polygon": frame.to_file(moved.vertices).tolist()}
-    if getattr(obstacle, "name", None) is not None:
-        data["name"] = obstacle.name
-    if obstacle.motion is not None:
-        motion = obstacle.motion.to_dict()
-        motion["path"] = (np.asarray(motion["path"], float) * u).tolist()
-        motion["speed"] = motion["speed"] * u
-        if "phase" in motion:
-            motion["phase"] = motion["phase"] * u
-        data["motion"] = motion
-    return data
