@@ -1,4 +1,6 @@
 import os
+
+import numpy as np
 from pathlib import Path
 
 import pytest
@@ -34,3 +36,47 @@ def simple_world_dict(**overrides):
     }
     data.update(overrides)
     return data
+
+
+
+def write_warehouse_map(path, blocks=(5, 4), shelf=6, aisle=2, border=3) -> np.ndarray:
+    """A small warehouse-like MovingAI map at ``path``: ``blocks`` (columns, rows) of shelves two
+    cells deep and ``shelf`` long, ``aisle`` cells between them, a free ``border`` around (the
+    layout of MovingAI's ``warehouse-*`` maps, made here: no third-party map is committed).
+
+    Returns:
+        (height, width) bool, the occupied cells, row 0 the map's top line (highest y).
+    """
+    columns, rows = blocks
+    width = 2 * border + columns * (shelf + aisle) - aisle
+    height = 2 * border + rows * (2 + aisle) - aisle
+    occupied = np.zeros((height, width), bool)
+    for i in range(columns):
+        for j in range(rows):
+            x, y = border + i * (shelf + aisle), border + j * (2 + aisle)
+            occupied[y:y + 2, x:x + shelf] = True
+    lines = ["type octile", f"height {height}", f"width {width}", "map"]
+    lines += ["".join("@" if cell else "." for cell in row) for row in occupied]
+    path.write_text("\n".join(lines) + "\n")
+    return occupied
+
+
+def warehouse_formations(occupied: np.ndarray, count: int, followers: int, seed: int = 0) -> list[dict]:
+    """``count`` formations (a world file's ``formations:``) whose starts and targets are centres of
+    free cells of :func:`write_warehouse_map`'s map, each with its 8 neighbours free, at least 4
+    cells from one another, drawn from ``seed``."""
+    height, width = occupied.shape
+    padded = np.pad(occupied, 1, constant_values=True)
+    open_cells = ~np.max([padded[1 + dr:1 + dr + height, 1 + dc:1 + dc + width]
+                          for dr in (-1, 0, 1) for dc in (-1, 0, 1)], axis=0)
+    rows, cols = np.nonzero(open_cells)
+    centres = np.column_stack([cols + 0.5, height - rows - 0.5])
+    rng = np.random.default_rng(seed)
+    points: list[np.ndarray] = []
+    for k in rng.permutation(len(centres)):
+        if all(np.abs(centres[k] - p).max() >= 4 for p in points):
+            points.append(centres[k])
+        if len(points) == 2 * count:
+            break
+    return [{"start": points[2 * i].tolist(), "target": points[2 * i + 1].tolist(), "followers": followers}
+            for i in range(count)]

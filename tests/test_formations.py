@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
+import yaml
 
 from apf_physics import WorldError, load_world, world_from_dict
 from apf_physics.experiments.evaluate import evaluate
@@ -11,6 +14,8 @@ from apf_physics.control.formation import Formations, right_of_way
 from apf_physics.world.generate import generate_world
 from apf_physics.planners import make_planner
 from apf_physics.experiments.rollout import rollout_formations
+from apf_physics.cli import main
+from conftest import warehouse_formations, write_warehouse_map
 
 THREE = [{"start": [3, 3], "target": [45, 45], "followers": 2, "shape": "line", "spacing": 1.0, "comm_range": 3.0},
          {"start": [45, 3], "target": [3, 45], "followers": 2, "shape": "wedge"},
@@ -80,17 +85,43 @@ def test_crossing_family_and_a_crowd_of_learned_leaders():
         assert sum(e.success for e in episodes) >= len(episodes) - 1
 
 
-def test_formation_leaders_default_to_the_window_network_on_table_4s_field():
-    from apf_physics.models import SHIPPED, SHIPPED_FORMATION, shipped_model_for
+def warehouse_world(tmp_path, count: int, followers: int, seed: int = 0):
+    occupied = write_warehouse_map(tmp_path / "warehouse.map")
+    data = {"name": "warehouse", "grid": {"movingai": "warehouse.map"}, "field": "thesis-general",
+            "formations": warehouse_formations(occupied, count, followers, seed)}
+    path = tmp_path / "warehouse.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
 
-    world = load_world("four_formations")
-    assert world.field.equals_preset("thesis-general")
-    assert shipped_model_for(world) == SHIPPED["thesis-general"]            # a robot alone: the map network
-    leader_world = world.formation_world(0)
-    assert shipped_model_for(leader_world) == SHIPPED_FORMATION["thesis-general"] != SHIPPED["thesis-general"]
-    planner = make_planner("dqn")
-    planner.reset(leader_world, leader_world.starts[:1])
-    assert planner.observer is not None    # the window network's observer (a map network has none)
+
+def test_robots_alone_in_a_crowd_evaluate(tmp_path, capsys):
+    """``followers: 0`` is a single robot among the others: a warehouse of ten evaluates, and its
+    JSON is strict JSON (no Infinity for the closest robots of a formation of one)."""
+    path = warehouse_world(tmp_path, 10, followers=0)
+    out = tmp_path / "eval.json"
+    assert main(["eval", str(path), "--planner", "dqn", "--formation", "--json", str(out), "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    assert "closest robots" not in printed and "link in range" not in printed   # no links to speak of
+    def refuse(constant):
+        raise AssertionError(f"not JSON: {constant}")
+    (evaluation,) = json.loads(out.read_text(), parse_constant=refuse)
+    episodes = evaluation["episodes"]
+    assert len(episodes) == 10 and all(len(e["robots"]) == 1 and e["link_in_range"] == [] for e in episodes)
+    assert all(e["min_robot_distance"] is None for e in episodes)
+    assert evaluation["summary"]["robot_robot_collisions"] == 0
+
+
+def test_the_default_leader_crosses_a_warehouse_of_formations(tmp_path):
+    """On Table 4's field the default leader of a formation is the map network, single robots' too:
+    among six formations in a warehouse-like map every one arrives (the window network's leaders
+    were trapped behind shelves: 3 of 6 on this world)."""
+    from apf_physics.models import SHIPPED, shipped_model_for
+
+    world = load_world(warehouse_world(tmp_path, 6, followers=1))
+    assert shipped_model_for(world.formation_world(0)) == shipped_model_for(world) == SHIPPED["thesis-general"]
+    episodes = rollout_formations(world, make_planner("dqn"))
+    assert [e.outcome for e in episodes] == ["reached"] * 6 and all(e.success for e in episodes)
+    assert sum(e.formation.robot_robot_collisions for e in episodes) == 0
 
 
 def test_followers_are_placed_clear_of_other_formations():
@@ -133,7 +164,8 @@ def test_parallel_env_is_deterministic_and_leaders_never_touch():
         frame = env.render()
         runs.append(trace)
     assert runs[0] == runs[1]
-    assert frame.shape == (512, 512, 3)
+    from apf_physics.render.drawing import caption_height, field_image
+    assert frame.shape == (512 + caption_height(field_image(env.world), 1), 512, 3)   # the map, its caption below
 
 
 def test_spatial_hash_finds_exactly_the_near_points():

@@ -11,7 +11,7 @@ import torch
 from apf_physics import world_from_dict
 from apf_physics.errors import ModelError
 from apf_physics.experiments.evaluate import evaluate
-from apf_physics.models import MapNetwork, MapPolicy, load_policy, model_meta, save_model
+from apf_physics.models import SHIPPED, MapNetwork, MapPolicy, load_policy, model_meta, save_model
 from apf_physics.models.mapnet import UNREACHED
 from apf_physics.sensing.mapview import MapView
 from apf_physics.planners.dqn import DQNPlanner
@@ -176,6 +176,49 @@ def _validation_success(network, phase):
     from apf_physics.learning import validation
     planner = DQNPlanner(policy=MapPolicy(network), shield=False)     # as the preset evaluates: unshielded
     return validation.summarise(evaluate(planner, phase.validation.worlds).episodes, phase.validation)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_replanning_a_patch_settles_where_the_bellman_updates_do_to_the_bit(seed):
+    """The compiled Bellman updates of ``replan`` reach the fixed point of :func:`_bellman_update` (held nodes kept)."""
+    from apf_physics.models.mapnet import _neighbours, _shift, _bellman_update, replan
+
+    rng = np.random.default_rng(seed)
+    net = MapNetwork(resolution=2, channels=4, hidden=(8,))
+    rows, cols = rng.integers(4, 26, 2)
+    features = torch.from_numpy(rng.uniform(-0.5, 1.0, (2, rows, cols)).astype(np.float32))
+    free = torch.from_numpy(rng.random((rows, cols)) > 0.25)
+    held = torch.zeros((rows, cols), dtype=torch.bool)
+    held[[0, -1], :] = held[:, [0, -1]] = True
+    held &= torch.from_numpy(rng.random((rows, cols)) > 0.3)
+    values = torch.from_numpy(rng.uniform(-40.0, 0.0, (rows, cols)).astype(np.float32))
+    extra = torch.from_numpy(np.where(rng.random((rows, cols)) > 0.7, 8.0, 0.0).astype(np.float32))
+    fast = replan(net, features, free, held, values, extra)
+    with torch.no_grad():
+        kappa = net.cost(features) + extra
+        edges = [(dr, dc, w * 0.5 * (kappa + _shift(kappa, dr, dc, float("inf")))) for dr, dc, w in _neighbours(2)]
+        kept = torch.where(held & free, values, torch.full_like(kappa, UNREACHED))
+        v = kept
+        for _ in range(rows * cols):
+            new = torch.where(held & free, kept, _bellman_update(v, edges, free, torch.zeros_like(free)))
+            if torch.equal(new, v):
+                break
+            v = new
+    assert torch.equal(fast, v)
+
+
+def test_the_map_policy_goes_round_a_robot_in_its_way():
+    """Another robot straight between a robot and its target: with it in the world's crowd, the
+    policy's best move no longer heads into it (the static values alone would)."""
+    world = world_from_dict(simple_world_dict(obstacles=[], targets=[[17, 10]], starts=[[5, 10]],
+                                              field="thesis-general", goal_tolerance=0.75))
+    policy = load_policy(SHIPPED["thesis-general"])
+    position = np.array([[5.0, 10.0]])
+    zeros = np.zeros((1, len(policy.moves)))
+    alone = policy.moves[policy.q_values(world, position, zeros, zeros).argmax()]
+    among = policy.moves[policy.q_values(world.among([[6.2, 10.0]]), position, zeros, zeros).argmax()]
+    assert alone[0] > 0 and alone[1] == 0                            # straight at the target
+    assert among[0] >= 0 and among[1] != 0                           # round the other robot
 
 
 def test_a_short_imitation_run_beats_the_untrained_network_on_its_validation_set(tmp_path):

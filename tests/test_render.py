@@ -33,7 +33,7 @@ from apf_physics.render import (
     write_png,
     write_video,
 )
-from apf_physics.render.drawing import BLACK, BLUE, OBSTACLE_FILL, RED, YELLOW, heatmap
+from apf_physics.render.drawing import BLACK, BLUE, OBSTACLE_FILL, RED, YELLOW, caption_height, heatmap
 from apf_physics.render.field_plot import figure_map_origin
 from apf_physics.render.video import choose_codec
 
@@ -164,6 +164,33 @@ def test_bigger_images_scale_lines_and_discs(world):
     assert large.line_width > small.line_width
 
 
+@pytest.mark.parametrize("caption", ["below", "off"])
+def test_captions_never_hide_the_map(world, caption):
+    """A frame's text (the step, the world, a collision's place) goes in a band below the map, or
+    nowhere: the map's pixels are those of the same frame without text, whatever the text."""
+    image = FieldImage.from_world(world, 256, caption=caption)
+    snapshot = Snapshot([[2.0, 18.0]], ("single",), (np.array([[1.0, 19.0], [2.0, 18.0]]),), t=0)
+    bare = draw_frame(image, snapshot)
+    lines = ("step 3/40", "world w, planner dqn", "start 0 (1, 19)", "COLLISION at step 3: hit obstacle at (2, 18)")
+    texted = draw_frame(image, Snapshot(snapshot.positions, ("single",), snapshot.trails, lines, 0))
+    rows = image.shape[0]
+    np.testing.assert_array_equal(texted[:rows], bare)          # the upper-left corner too
+    assert texted.shape[0] == rows + caption_height(image, len(lines))
+    if caption == "below":
+        band = texted[rows:]
+        assert band.shape[0] > 0 and len(np.unique(band.reshape(-1, 3), axis=0)) > 2   # text on the band
+    over = draw_frame(FieldImage.from_world(world, 256, caption="over"), Snapshot(snapshot.positions, ("single",),
+                                                                                  snapshot.trails, lines, 0))
+    assert over.shape == bare.shape and not np.array_equal(over, bare)   # by option, over the corner as before
+
+
+def test_frames_of_a_video_share_one_size_whatever_their_lines(world):
+    trajectory = np.linspace([2.0, 2.0], [10.0, 15.0], 6)
+    frames = list(render_trajectory(world, trajectory, long_side=128, overlay=("world w",), final_overlay=("done",),
+                                    events=[(3, "COLLISION at step 3")]))
+    assert len({frame.shape for frame in frames}) == 1
+
+
 def test_trajectory_snapshots_and_hold():
     trajectory = np.stack([np.linspace([1, 1], [5, 5], 6), np.linspace([1, 3], [5, 7], 6)], axis=1)
     snapshots = list(trajectory_snapshots(trajectory, formation_roles(2), final_overlay=("done",), hold=3))
@@ -197,7 +224,7 @@ def test_browser_video_is_h264_or_vp9_yuv420p_with_frames_and_duration(world, tm
     name, pix_fmt, count, duration, frames = read_with_pyav(out)
     assert (name, pix_fmt, count) == (expected, "yuv420p", 12)
     assert duration == pytest.approx(1.2, abs=0.05)
-    assert frames[0].shape == (256, 256, 3)
+    assert frames[0].shape == (256 + caption_height(FieldImage.from_world(world, 256), 1), 256, 3)   # "step t/T" below
 
 
 def test_h264_mp4_has_its_index_first(world, tmp_path):
@@ -228,7 +255,7 @@ def test_opencv_video_reads_back_with_frame_count_and_size(world, tmp_path, suff
         ok, frame = capture.read()
         if not ok:
             break
-        assert frame.shape == (256, 256, 3)
+        assert frame.shape == (256 + caption_height(FieldImage.from_world(world, 256), 1), 256, 3)
         count += 1
     capture.release()
     assert count == 12
@@ -379,6 +406,29 @@ def test_field_plot_draws_yellow_paths_blue_starts_and_rings_for_traps(world, tm
     assert out.is_file() and cv2.imread(str(out)).shape == written.shape
 
 
+def test_field_figure_has_axes_in_the_world_files_units():
+    """plot-field's axes read the file's coordinates: ros_arena is in metres around [0, 0], its ticks
+    at whole metres where those points are drawn, and the unit is named."""
+    from apf_physics import load_world
+    from apf_physics.render.field_plot import INK, axis_label, nice_ticks
+    from apf_physics.world.io.units import points_to_steps
+
+    arena = load_world("ros_arena")
+    image = FieldImage.from_world(arena, 256, caption="off")
+    figure = field_figure(arena, image=image)
+    top, left = figure_map_origin(0, image)
+    height, width = image.shape[:2]
+    assert axis_label(arena, "x") == "x [m]" and axis_label(arena, "y") == "y [m]"
+    assert axis_label(make_world(), "x") == "x [steps]"
+    assert list(nice_ticks(-2.7, 2.7)) == [-2, 0, 2] and list(nice_ticks(0, 20)) == [0, 5, 10, 15, 20]
+    for value in (-2.0, 0.0, 2.0):   # a tick below the map where x = value is drawn, and one left of y = value
+        col = left + int(round(image.to_pixels(points_to_steps(arena.frame, [value, -2.7]))[0, 0]))
+        row = top + int(round(image.to_pixels(points_to_steps(arena.frame, [-2.7, value]))[0, 1]))
+        assert tuple(figure[top + height + 2, col]) == INK and tuple(figure[row, left - 3]) == INK
+    assert (figure[top + height + 8:, left: left + width] != 255).any()      # tick labels and the axis name
+    assert (figure[top: top + height, :left - 6] != 255).any()
+
+
 def test_field_figure_keeps_the_map_clear_and_adds_a_colour_bar(world):
     image = FieldImage.from_world(world, 512)
     paths = [np.linspace([2.0, 2.0], world.targets[0], 20)]
@@ -438,7 +488,11 @@ def test_render_command_writes_h264_and_png_into_a_new_folder(world, tmp_path, c
     name, pix_fmt, frames, _, _ = read_with_pyav(out)
     assert (name, pix_fmt) == ("h264", "yuv420p") and frames >= 2
     assert f"wrote {out} (H.264;" in capsys.readouterr().out
-    assert cv2.imread(str(png)).shape == (128, 128, 3)
+    height, width = cv2.imread(str(png)).shape[:2]
+    assert width == 128 and height > 128            # the text in a band below the map
+    plain = parser.parse_args(["render", str(world_file), "--out", str(tmp_path / "plain.mp4"), "--png", str(png),
+                               "--size", "128", "--hold", "0", "--no-progress", "--caption", "off"])
+    assert plain.func(plain) == 0 and cv2.imread(str(png)).shape == (128, 128, 3)
     bad = parser.parse_args(["render", str(world_file), "--start", "7", "--out", str(out), "--no-progress"])
     with pytest.raises(UserError, match="--start 7"):
         bad.func(bad)

@@ -129,7 +129,7 @@ def test_figures_follow_their_definitions():
 def test_every_report_takes_its_figures_from_figures():
     f = figures(EPISODES, optimal=OPTIMAL, trapped=TRAPPED)
     summary = Evaluation("p", EPISODES).summary()
-    assert summary == {"episodes": 6, "successes": 3, "success_rate": round(f.success_rate, 4),
+    assert summary == {"units": None, "episodes": 6, "successes": 3, "success_rate": round(f.success_rate, 4),
                        "collision_rate": round(f.collision_rate, 4), "trapped_rate": round(f.trapped_rate, 4),
                        "mean_steps": round(f.mean_steps, 2), "mean_path_length": round(f.mean_path_length, 3)}
 

@@ -13,6 +13,7 @@ from apf_physics import WorldError, load_world, world_from_dict
 from apf_physics.errors import UserError
 from apf_physics.world.obstacles import PolygonObstacle
 from apf_physics.world.io.worldfile import dump_world_yaml, load_worlds, save_world
+from apf_physics.world.io.units import world_to_file
 from conftest import simple_world_dict
 
 
@@ -310,6 +311,49 @@ def test_the_raster_memory_estimate_covers_what_an_evaluation_builds(kind, tmp_p
     assert 0 < used <= estimate
 
 
+FORMATIONS_PEAK = """
+import sys
+import numpy as np
+import torch
+from apf_physics.experiments.rollout import rollout_formations
+from apf_physics.planners import make_planner
+from apf_physics.world.io.worldfile import raster_memory, world_from_dict
+torch.set_num_threads(1)
+angles = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+ring = np.column_stack([np.cos(angles), np.sin(angles)])
+formations = [{"start": (75 + 60 * u).round(2).tolist(), "target": (75 - 58 * u).round(2).tolist(), "followers": 1}
+              for u in ring]
+world = world_from_dict({"size": [150, 150], "field": "thesis-general", "formations": formations,
+                         "obstacles": [{"circle": {"center": [40, 40], "radius": 3}}]})
+planner = make_planner("dqn", model=sys.argv[1])
+planner.reset(world.formation_world(0), world.formations[0].start[None])   # the model loaded before the count
+def status(key):
+    return next(int(line.split()[1]) * 1024 for line in open("/proc/self/status") if line.startswith(key + ":"))
+try:
+    open("/proc/self/clear_refs", "w").write("5")
+except OSError:
+    pass
+before = status("VmRSS")
+rollout_formations(world, planner, max_steps=5)
+print(status("VmHWM") - before, raster_memory(world.size, 1, len(world.formations)))
+"""
+
+
+@pytest.mark.skipif(not Path("/proc/self/statm").exists(), reason="reads the resident set from /proc")
+@pytest.mark.parametrize("model", ["map", "general"])
+def test_the_raster_memory_estimate_covers_many_formations(model):
+    """Twelve formations on a 150 x 150 map, each planning in a world of its own target, with the
+    default leader (the map network) and the window network: the peak stays within the estimate,
+    which counts formations (it counted 1,500 bytes per square unit per target before)."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", FORMATIONS_PEAK, model], capture_output=True, text=True,
+                         check=True).stdout
+    used, estimate = (int(float(v)) for v in out.split())
+    assert 0 < used <= estimate
+
+
 def test_a_polygon_of_20k_vertices_is_refused_before_its_simplicity_is_checked(tmp_path, monkeypatch):
     from apf_physics.common import geometry
 
@@ -383,14 +427,14 @@ def test_a_bounded_number_of_generated_worlds_stay_within_the_limits():
     for family in FAMILIES:
         for size in (20, 100):
             world = generate_world(family, rng, size=size, n_starts=2)
-            assert world_from_dict(world.to_dict()).size == (size, size)
+            assert world_from_dict(world_to_file(world)).size == (size, size)
 
 
 def test_moving_obstacles_round_trip_and_their_routes_stay_inside_the_map():
     moving = {"circle": {"center": [10, 4], "radius": 0.5}, "motion": {"path": [[0, 8]], "speed": 0.5, "phase": 2}}
     world = world_from_dict(simple_world_dict(obstacles=[moving]))
     assert world.moving == (0,)
-    assert world_from_dict(yaml.safe_load(dump_world_yaml(world))).to_dict() == world.to_dict()
+    assert world_to_file(world_from_dict(yaml.safe_load(dump_world_yaml(world)))) == world_to_file(world)
     far = {**moving, "motion": {"path": [[0, 30]], "speed": 0.5}}
     assert "obstacles[0].circle: circle reaches outside the map [0, 20] x [0, 20] on its route" in one_line_error(
         lambda: world_from_dict(simple_world_dict(obstacles=[far]), "w.yaml"))
@@ -424,6 +468,48 @@ def test_a_file_with_five_mistakes_gets_one_report_naming_all_five(tmp_path):
     assert len(lines) == 5 and all(str(path) in line for line in lines)
     for words in expected:
         assert sum(words in line for line in lines) == 1, words
+
+
+@pytest.mark.parametrize("obstacle, problem", [
+    ({"circle": {"center": [19, 10], "radius": 2}}, "circle: circle reaches outside the map [0, 20] x [0, 20]"),
+    ({"circle": {"center": [10, 10], "radius": -1}}, "circle.radius: must not be negative, got -1"),
+    ({"polygon": [[1, 1], [3, 3], [3, 1], [1, 3]]}, "polygon: polygon crosses itself"),
+    ({"polygon": [[1, 1], [3, 1], [3, "x"]]}, "polygon[2][1]: expected a number"),
+    ({"circle": {"center": [10, 10], "radius": 1}, "colour": "red"}, "colour: unknown key"),
+    ({"circle": {"center": [10, 10], "radius": 1}, "motion": {"path": [[0, 3]], "speed": 2}},
+     "motion.speed: at most 1 unit per control step, got 2"),
+    ({"circle": {"center": [10, 10], "radius": 1}, "motion": {"path": [[0, 0]], "speed": 0.5}},
+     "motion.path: the route has no length"),
+    ({"circle": {"center": [15, 11], "radius": 1}, "motion": {"path": [[0, 5]], "speed": 0.5}},
+     "motion: the obstacle sweeps over targets[0] [15.0, 15.0]"),
+])
+def test_every_message_about_a_named_obstacle_names_it(obstacle, problem):
+    data = simple_world_dict(obstacles=[simple_world_dict()["obstacles"][0], {**obstacle, "name": "pillar"}])
+    message = one_line_error(lambda: world_from_dict(data, "w.yaml"))
+    assert message.startswith(f"w.yaml: obstacles[1] 'pillar': {problem}"), message
+    unnamed = simple_world_dict(obstacles=[simple_world_dict()["obstacles"][0], obstacle])
+    assert one_line_error(lambda: world_from_dict(unnamed, "w.yaml")).startswith("w.yaml: obstacles[1].")
+
+
+@pytest.mark.parametrize("name, image", [
+    ("office.pgm", b"P5\n4 3\n255\n" + bytes(range(200, 212))),
+    ("office.png", b"\x89PNG\r\n\x1a\n" + bytes(24)),
+    ("office", b"\x89PNG\r\n\x1a\n" + bytes(24)),                  # an image whatever its name
+    ("scan.bmp", b"BM" + bytes([0xcd] * 30)),
+])
+def test_an_image_given_as_a_world_gets_a_hint(tmp_path, name, image):
+    """As a bare ROS map YAML or a .map does: what to write, not how its bytes fail to decode."""
+    path = tmp_path / name
+    path.write_bytes(image)
+    message = one_line_error(lambda: load_world(path))
+    assert message.startswith(f"{path}: an image alone is not a world") and "not UTF-8" not in message
+    assert f"'grid: {{image: {name}, resolution: R, origin: [x, y, 0]}}'" in message
+
+
+def test_an_image_beside_its_ros_yaml_points_to_the_yaml(tmp_path):
+    (tmp_path / "office.pgm").write_bytes(b"P5\n2 2\n255\n" + bytes(4))
+    (tmp_path / "office.yaml").write_text("image: office.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n")
+    assert "write 'grid: {map: office.yaml}' instead" in one_line_error(lambda: load_world(tmp_path / "office.pgm"))
 
 
 def test_obstacle_names_are_checked_and_kept(tmp_path):

@@ -23,7 +23,6 @@ import argparse
 import json
 import shlex
 import subprocess
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -179,7 +178,7 @@ def _crossing_what(data: dict) -> str:
 
 def _crossing(data: dict) -> str:
     s = _eval(data, "dqn+formation")
-    return (f"every formation arrived in **{s['worlds_all_arrived']}/{s['worlds']}** worlds (leaders: `general.pt`, "
+    return (f"every formation arrived in **{s['worlds_all_arrived']}/{s['worlds']}** worlds (leaders: `map.pt`, "
             f"their default), {_n(s['robot_robot_collisions'], 'robot–robot collision')}, links in range "
             f"{_pct(s['links_in_range'])} of steps")
 

@@ -22,6 +22,7 @@ from apf_physics.common.safefile import check_writable
 from apf_physics.render.page import PAGE, write_results
 from apf_physics.world.kinematics import KINEMATICS
 from apf_physics.experiments.rollout import kinematics_option
+from apf_physics.world.io.units import show_length
 from apf_physics.world.io.worldfile import MAX_STARTS, load_worlds
 
 
@@ -155,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
         for world in worlds:
             if not len(world.start_cells()):
                 raise UserError(f"{world.label}: no free position for a robot farther than goal_tolerance "
-                                f"{world.goal_tolerance:g} from every target, so no random start")
+                                f"{show_length(world.frame, world.goal_tolerance)} from every target, so no random start")
         starts = {w.name: random_starts(w, args.random_starts, args.seed) for w in worlds}
     else:
         empty = [w.label for w in worlds if not len(w.starts)]

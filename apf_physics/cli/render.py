@@ -7,6 +7,7 @@ from collections import Counter
 
 from apf_physics.errors import UserError
 from apf_physics.planners import make_planner
+from apf_physics.render.drawing import CAPTIONS
 from apf_physics.render.episodes import write_episode_video
 from apf_physics.common.safefile import check_writable
 from apf_physics.render.video import VIDEO_EXTENSIONS, choose_codec
@@ -56,6 +57,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "mp4v (.mp4 through OpenCV: browsers do not play it; the fallback without PyAV)")
     # Before 0.2 H.264 needed --h264 (and imageio-ffmpeg); it is now the .mp4 default.
     parser.add_argument("--h264", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--caption", choices=CAPTIONS, default="below",
+                        help="where the text (step, world, planner, start, outcome) goes: below the map in a band "
+                             "of its own (default; it never hides the map), over the map's top-left corner, or off")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar (it shows only on a terminal)")
 
 
@@ -90,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
                                   overlay=(f"world {world.name}", f"planner {args.planner}"),
                                   formation=bool(args.formation),
                                   start_index=None if args.all_starts else args.start,
-                                  codec=codec.name, progress=not args.no_progress)
+                                  codec=codec.name, progress=not args.no_progress, caption=args.caption)
     counts = Counter(episode.outcome for episode in episodes)
     playable = "" if codec.browsers else ", which browsers do not play" + (
         "" if args.codec else " (write .mp4 for H.264 or .webm for VP9)" if out.suffix.lower() != ".mp4"

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from apf_physics import load_world
 from apf_physics.world.bundled import bundled_dir, list_bundled, resolve_world
+from apf_physics.world.io.units import length_to_file, unit_suffix
 
 
 def add_parser(subparsers) -> None:
@@ -42,7 +43,8 @@ def run(args: argparse.Namespace) -> int:
     for name in list_bundled():
         path = resolve_world(name)
         world = load_world(path)
-        size = f"{world.size[0]:g}x{world.size[1]:g}"
+        width, height = (length_to_file(world.frame, side) for side in world.size)
+        size = f"{width:g}x{height:g}{unit_suffix(world.frame)}"   # in the file's units, as it is written
         rows.append((name, size, str(len(world.obstacles)), str(len(world.starts)), describe(path)))
     header = ("world", "size", "obstacles", "starts", "what it shows")
     widths = [max(len(row[i]) for row in [header, *rows]) for i in range(4)]

@@ -28,6 +28,7 @@ from apf_physics.errors import UserError
 from apf_physics.world.field import repulsive, repulsive_term
 from apf_physics.common.geometry import near_any, swept_distance
 from apf_physics.world.core import FormationSpec, World
+from apf_physics.world.io.units import show_length, show_point
 
 
 def formation_spec(world: World) -> FormationSpec:
@@ -242,10 +243,11 @@ def initial_followers(world: World, spec: FormationSpec, leader: np.ndarray) -> 
             ok &= np.hypot(*(candidates - q).T) >= 2 * r + SAFETY
         if not ok.any():
             raise UserError(f"{world.source or world.name}: no free position for follower {i + 1} near the leader "
-                            f"at {np.round(leader, 3).tolist()} (within comm_range {spec.comm_range:g})")
+                            f"at {show_point(world.frame, leader, 3)} (within comm_range "
+                            f"{show_length(world.frame, spec.comm_range)})")
         good = candidates[ok]
         placed.append(good[np.argmin(np.hypot(*(good - wanted).T))])
-    return np.array(placed[1:])
+    return np.array(placed[1:], float).reshape(-1, 2)   # (0, 2) for a robot alone
 
 
 class FormationTeam:

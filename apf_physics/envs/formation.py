@@ -7,13 +7,14 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, resolve_worlds, robot_options
+from apf_physics.envs.options import FileUnits, StartChooser, WorldSpec, observer_config, resolve_worlds, robot_options
 from apf_physics.envs.reward import TERMS, reward_weights
 from apf_physics.envs.task import NavigationTask, TrapOption
 from apf_physics.control.formation import formation_success, link_lengths, links_in_range
 from apf_physics.sensing.observation import ObserverConfig
 from apf_physics.render.drawing import Snapshot, draw_frame, field_image, formation_roles
 from apf_physics.world.core import FormationSpec
+from apf_physics.world.io.units import formation_to_steps
 
 
 class FormationEnv(gym.Env):
@@ -60,7 +61,10 @@ class FormationEnv(gym.Env):
     world's, else 2 followers in a line, comm_range 3).
 
     ``info`` carries ``positions`` (every robot, leader first), ``links`` (distance of each
-    follower to the robot it follows), ``links_in_range``, and ``link_in_range_share`` so far.
+    follower to the robot it follows), ``links_in_range``, and ``link_in_range_share`` so far;
+    positions and lengths are in the world file's units and coordinates, as ``Navigate-v0``'s
+    (``units`` names the unit), and so are a ``formation`` dict's ``comm_range``, ``spacing`` and
+    ``offsets``.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -76,7 +80,8 @@ class FormationEnv(gym.Env):
         if formation is None:
             spec = self.worlds[0].formation or FormationSpec()
         else:
-            spec = formation if isinstance(formation, FormationSpec) else FormationSpec(**formation)
+            spec = formation if isinstance(formation, FormationSpec) else formation_to_steps(
+                self.worlds[0].frame, FormationSpec(**formation))
         self.formation = spec
         self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer, previous)
         self.weights = reward_weights(reward)
@@ -87,6 +92,7 @@ class FormationEnv(gym.Env):
                                     robot=self.robot)
         """The episodes this environment steps (stepper, physics, observer): for tools and tests to look inside."""
         self.observation_space = self.task.observation_space()
+        self._units = FileUnits(self.worlds)
         self.m = spec.followers + 1
         self.followed = spec.followed
 
@@ -131,8 +137,11 @@ class FormationEnv(gym.Env):
     def _get_info(self) -> dict:
         links = link_lengths(self.positions, self.followed)
         share = self.in_range / self.steps if self.steps else np.ones_like(links)
-        return {"positions": self.positions, "position": self.positions[0], "world": self.world.name,
-                "distance": float(self.task.distance()[0]), "links": links,
+        w, units = int(self.task.world_of[0]), self._units
+        positions = units.points(self.positions, w)
+        return {"positions": positions, "position": positions[0], "world": self.world.name,
+                "distance": float(units.lengths(self.task.distance()[0], w)), "links": units.lengths(links, w),
+                "units": units.names[w],
                 "links_in_range": links_in_range(self.positions, self.followed, self.formation.comm_range),
                 "link_in_range_share": share}
 

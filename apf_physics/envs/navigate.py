@@ -8,7 +8,7 @@ import gymnasium as gym
 import numpy as np
 
 from apf_physics.control.shield import ACTION_NAMES, ACTIONS
-from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, resolve_worlds, robot_options
+from apf_physics.envs.options import FileUnits, StartChooser, WorldSpec, observer_config, resolve_worlds, robot_options
 from apf_physics.envs.reward import TERMS, reward_weights
 from apf_physics.envs.task import NavigationTask, TrapOption
 from apf_physics.sensing.observation import ObserverConfig
@@ -78,7 +78,8 @@ class NavigateEnv(gym.Env):
     with a list of worlds, the world) from the environment's ``np_random``: ``reset(seed=k)``
     makes the episode and all that follow reproducible, and different seeds give different
     starts. ``reset(options={"start": i})`` takes start row ``i`` instead,
-    ``options={"start": [x, y]}`` a position, ``options={"world": j}`` world ``j``.
+    ``options={"start": [x, y]}`` a position (in the world file's units and coordinates, as its
+    starts are written), ``options={"world": j}`` world ``j``.
 
     ## Episode End
 
@@ -121,9 +122,16 @@ class NavigateEnv(gym.Env):
       :class:`~apf_physics.sim.engine.TrapDetector` (see Episode End).
     - ``render_mode``: ``"rgb_array"`` for OpenCV-drawn frames.
 
-    ``info`` holds ``position``, ``world`` (its name) and ``distance`` (to the nearest target)
-    after every reset and step, and after a step also ``reward_terms``, ``success`` and
-    ``collision`` (and ``trapped``, with a ``trap`` detector).
+    ``info`` holds ``position``, ``world`` (its name), ``distance`` (to the nearest target) and
+    ``units`` after every reset and step, and after a step also ``reward_terms``, ``success`` and
+    ``collision`` (and ``trapped``, with a ``trap`` detector; ``heading`` [rad] for a unicycle).
+    Positions and lengths (``position``, ``distance``, and an array of ``starts`` or a
+    ``reset`` start given as ``[x, y]``) are in the world file's units and coordinates: a world
+    in metres whose map's corner is at ``[-1, -2]`` reports metres from the map's origin, as its
+    file is written (``units``: the unit's name, e.g. ``"m"``, or None when the file names none).
+    Inside, a world is laid out in steps (one unit per control step's move: the actions and the
+    observation's spacing are in steps), and ``env.unwrapped.position`` gives the robot's centre
+    there.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -145,6 +153,7 @@ class NavigateEnv(gym.Env):
         self.action_space = self.robot.action_space()
         self.task = NavigationTask(self.worlds, 1, self.observer, self.weights, trap=trap, robot=self.robot)
         """The episodes this environment steps (stepper, physics, observer): for tools and tests to look inside."""
+        self._units = FileUnits(self.worlds)
         self.observation_space = self.task.observation_space()
         self._trail: list[np.ndarray] = []
         self._steps = 0
@@ -157,6 +166,7 @@ class NavigateEnv(gym.Env):
 
     @property
     def position(self) -> np.ndarray:
+        """The robot's centre in the world's steps (``info["position"]`` is in the file's units)."""
         return self.task.positions[0, 0].copy()
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
@@ -185,8 +195,10 @@ class NavigateEnv(gym.Env):
                 info)
 
     def _get_info(self) -> dict:
-        info = {"position": self.task.positions[0, 0].copy(), "world": self._world_name,
-                "distance": float(self.task.distance()[0])}
+        w = int(self.task.world_of[0])
+        units = self._units
+        info = {"position": units.points(self.task.positions[0, 0], w), "world": self._world_name,
+                "distance": float(units.lengths(self.task.distance()[0], w)), "units": units.names[w]}
         if self.robot.unicycle is not None:
             info["heading"] = float(self.task.stepper.headings[0, 0])
         return info

@@ -16,6 +16,7 @@ from apf_physics.sensing.lidar import LidarConfig
 from apf_physics.sensing.kinds import OBSERVATIONS
 from apf_physics.sensing.observation import ObserverConfig
 from apf_physics.world.core import World
+from apf_physics.world.io.units import points_to_steps, show_length
 from apf_physics.world.io.worldfile import load_world
 
 WorldSpec = Union[str, Path, World, Sequence[Union[str, Path, World]]]
@@ -171,6 +172,40 @@ def observer_config(obs_size: int, resolution: int, memory: bool, obs_scale: str
     return ObserverConfig.of(obs_size, resolution, previous=previous, memory=memory, scale=obs_scale)
 
 
+class FileUnits:
+    """The environments' worlds' file units: what ``info`` reports positions and lengths in.
+
+    A world is laid out in steps; ``info``'s positions and lengths are in its world file's units
+    and coordinates (:mod:`apf_physics.world.io.units`), converted here for a batch of robots in
+    several worlds at once. Worlds written in steps from their corner (every bundled one but
+    ``ros_arena``) cost nothing.
+
+    Args:
+        worlds: The environment's worlds.
+    """
+
+    def __init__(self, worlds: Sequence[World]):
+        frames = [w.frame for w in worlds]
+        self.unit = np.array([f.unit for f in frames])
+        self.offset = np.array([f.offset for f in frames], float).reshape(-1, 2)
+        self.names = [f.name or None for f in frames]
+        """Per world, the name of its file's unit (``info["units"]``), or None."""
+        self.plain = bool(np.all(self.unit == 1.0) and not self.offset.any())
+
+    def points(self, points: np.ndarray, world_of: np.ndarray | int) -> np.ndarray:
+        """Points (N, 2) (or one (2,)) in steps in worlds ``world_of``, in their files' coordinates (a new array)."""
+        if self.plain:
+            return np.array(points, float)
+        w = np.asarray(world_of)
+        return np.asarray(points, float) * self.unit[w][..., None] + self.offset[w]
+
+    def lengths(self, lengths: np.ndarray | float, world_of: np.ndarray | int) -> np.ndarray | float:
+        """Lengths in steps in worlds ``world_of``, in their files' units."""
+        if self.plain:
+            return lengths
+        return lengths * self.unit[world_of]
+
+
 class StartChooser:
     """Picks each episode's world and start.
 
@@ -183,7 +218,8 @@ class StartChooser:
     Every choice is drawn from the generator it is given (the environment's ``np_random``),
     so ``reset(seed=k)`` makes it reproducible and different seeds give different starts.
     ``options={"start": i}`` picks row ``i`` of the starts, ``options={"start": [x, y]}`` a
-    position, and ``options={"world": j}`` the world.
+    position, and ``options={"world": j}`` the world. Positions given (an array of starts,
+    ``[x, y]``) are in the world file's units and coordinates, as the file's own starts are.
     """
 
     def __init__(self, starts: Any, worlds: Sequence[World]):
@@ -198,7 +234,7 @@ class StartChooser:
                 raise UserError(f"starts must be an (S, 2) array of points, got shape {arr.shape}")
             self.kind, self.points = "array", arr
         # per world: the list starts are drawn from, or None for the free cells away from the targets
-        self._lists = [self.points if self.kind == "array" else
+        self._lists = [points_to_steps(world.frame, self.points) if self.kind == "array" else
                        np.asarray(world.starts, float) if self.kind == "world" and len(world.starts) else None
                        for world in self.worlds]
         self._cells = [world.start_cells() if listed is None else None
@@ -248,10 +284,11 @@ class StartChooser:
                     raise UserError(f"options['start'] = {int(start)}: there are "
                                     f"{0 if listed is None else len(listed)} starts to choose from")
                 return w, listed[int(start)].copy()
-            start = start.reshape(2)
+            given = start.reshape(2)
+            start = points_to_steps(world.frame, given)
             if not world.is_free(start[None])[0]:
-                raise UserError(f"options['start'] = {start.tolist()}: a robot of radius {world.robot_radius:g} "
-                                f"does not fit there in {world.label}")
-            return w, start.copy()
+                raise UserError(f"options['start'] = {given.tolist()}: a robot of radius "
+                                f"{show_length(world.frame, world.robot_radius)} does not fit there in {world.label}")
+            return w, start
         _, starts = self.draw(np.concatenate([[(w + 0.5) / len(self.worlds)], u[1:]]))
         return w, starts[0]

@@ -13,7 +13,7 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 
 from apf_physics.control.shield import ACTIONS
-from apf_physics.envs.options import observer_config, resolve_worlds
+from apf_physics.envs.options import FileUnits, observer_config, resolve_worlds
 from apf_physics.envs.reward import TERMS, reward_weights
 from apf_physics.envs.task import FormationsTask, TrapOption
 from apf_physics.sensing.observation import ObserverConfig
@@ -64,6 +64,10 @@ class FormationsParallelEnv(ParallelEnv):
     ``world`` (a world file with ``formations:``, a bundled name, or a World), ``agents``,
     ``obs_size``, ``reward``, ``resolution``, ``memory``, ``obs_scale``, ``observer``,
     ``max_episode_steps`` (100), ``trap`` (default None), ``render_mode``.
+
+    ``infos[agent]`` holds its ``position``, ``formation``, ``world``, ``distance`` (to its
+    formation's target) and ``units``: positions and lengths in the world file's units and
+    coordinates, as ``Navigate-v0``'s.
     """
 
     metadata = {"name": "apf_physics_formations_v0", "render_modes": ["rgb_array"], "render_fps": 10}
@@ -83,6 +87,7 @@ class FormationsParallelEnv(ParallelEnv):
         self.render_mode = render_mode
         self._action_space = spaces.Discrete(len(ACTIONS))
         self._index = {name: a for a, name in enumerate(self.possible_agents)}
+        self._units = FileUnits([self.world])   # (every formation's world is this world with its own target)
         self.np_random, _ = seeding.np_random(None)
 
     def observation_space(self, agent: str) -> spaces.Space:
@@ -125,8 +130,10 @@ class FormationsParallelEnv(ParallelEnv):
         f, r = self.task.members[a]
         position = self.task.stepper.positions[f, r]
         world = self.task.formations.worlds[f]
-        return {"position": position.copy(), "formation": f, "world": self.world.name,
-                "distance": float(world.distance_to_target(position[None])[0])}
+        units = self._units
+        return {"position": units.points(position, 0), "formation": f, "world": self.world.name,
+                "distance": float(units.lengths(world.distance_to_target(position[None])[0], 0)),
+                "units": units.names[0]}
 
     def render(self):
         if self.render_mode != "rgb_array":

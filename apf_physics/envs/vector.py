@@ -27,7 +27,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from apf_physics.envs.options import StartChooser, WorldSpec, observer_config, resolve_worlds, robot_options
+from apf_physics.envs.options import FileUnits, StartChooser, WorldSpec, observer_config, resolve_worlds, robot_options
 from apf_physics.envs.reward import TERMS, reward_weights
 from apf_physics.envs.task import NavigationTask, TrapOption
 from apf_physics.errors import UserError
@@ -100,6 +100,8 @@ class NavigateVectorEnv(VectorEnv):
         self._trail: list[np.ndarray] = []
         self._all = np.ones(self.num_envs, bool)
         self._names = np.array([w.name for w in self.worlds], dtype=object)
+        self._units = FileUnits(self.worlds)
+        self._unit_names = np.array(self._units.names, dtype=object)
 
     def _uniforms_for(self, slots: np.ndarray) -> np.ndarray:
         """Four uniforms per slot from each copy's own generator: the same numbers, in the same
@@ -186,9 +188,11 @@ class NavigateVectorEnv(VectorEnv):
         return after
 
     def _info(self) -> dict:
-        info = {"position": self.task.positions[:, 0].copy(), "_position": self._all,
-                "world": self._names[self.task.world_of], "_world": self._all,
-                "distance": self.task.distance(), "_distance": self._all}
+        world_of = self.task.world_of
+        info = {"position": self._units.points(self.task.positions[:, 0], world_of), "_position": self._all,
+                "world": self._names[world_of], "_world": self._all,
+                "distance": self._units.lengths(self.task.distance(), world_of), "_distance": self._all,
+                "units": self._unit_names[world_of], "_units": self._all}
         if self.robot.unicycle is not None:
             info["heading"], info["_heading"] = self.task.stepper.headings[:, 0].copy(), self._all
         return info

@@ -13,6 +13,7 @@ from apf_physics.planners.base import Planner
 from apf_physics.common.safefile import check_writable, write_text
 from apf_physics.experiments.rollout import Episode, kinematics_option, rollout, rollout_formations
 from apf_physics.world.core import World
+from apf_physics.world.io.units import same_units
 
 
 @dataclass(frozen=True)
@@ -99,9 +100,18 @@ class Evaluation:
     episodes: list[Episode]
 
     def summary(self, episodes: Sequence[Episode] | None = None) -> dict:
+        """The figures of ``episodes`` (default: all). Lengths (``mean_path_length``,
+        ``min_robot_distance``) are in the world files' units, named by ``units`` (None when the
+        files name none); over worlds in different units they are None (``units``: ``"mixed"``).
+        ``mean_steps`` counts control steps."""
         eps = self.episodes if episodes is None else list(episodes)
         n = len(eps)
         score = figures(eps)
+        frame = same_units([e.frame for e in eps]) if eps else None
+        scale = frame.unit if frame is not None else None
+
+        def length(value: float | None, digits: int) -> float | None:
+            return None if value is None or scale is None else round(value * scale, digits)
         extra = {}
         formations = [e.formation for e in eps if e.formation is not None]
         if formations and len(formations) == n:  # formations: link and robot–robot figures
@@ -109,11 +119,12 @@ class Evaluation:
             links = [np.asarray(f.link_in_range, float) for f in formations]
             in_range = sum(float(np.sum(share) * s) for share, s in zip(links, steps))
             link_steps = sum(len(share) * s for share, s in zip(links, steps))
+            closest = [f.min_robot_distance for f in formations if f.min_robot_distance is not None]
             extra = {
                 "links_in_range": round(in_range / link_steps, 4) if link_steps else 1.0,
                 "episodes_all_links_99": int(sum(share.min(initial=1.0) >= 0.99 for share in links)),
                 "robot_robot_collisions": int(sum(f.robot_robot_collisions for f in formations)),
-                "min_robot_distance": round(float(min(f.min_robot_distance for f in formations)), 4),
+                "min_robot_distance": length(float(min(closest)), 4) if closest else None,   # None: robots alone
             }
             if len({len(share) for share in links}) == 1:   # the same formation everywhere: per link
                 shares = np.array(links).reshape(n, -1)
@@ -131,13 +142,14 @@ class Evaluation:
                     deadlocks=int(sum(f.deadlocks for f in formations)),
                 )
         return {
+            "units": (frame.name or None) if frame is not None else ("mixed" if eps else None),
             "episodes": n,
             "successes": score.successes,
             "success_rate": round(score.success_rate, 4),
             "collision_rate": round(score.collision_rate, 4),
             "trapped_rate": round(score.trapped_rate, 4),
             "mean_steps": None if score.mean_steps is None else round(score.mean_steps, 2),
-            "mean_path_length": None if score.mean_path_length is None else round(score.mean_path_length, 3),
+            "mean_path_length": length(score.mean_path_length, 3),
             **extra,
         }
 
@@ -179,16 +191,23 @@ def evaluate(planner: Planner, worlds: Sequence[World], starts: dict[str, np.nda
 
 
 def format_table(evaluations: Sequence[Evaluation]) -> str:
-    """One row per planner and world, then a total row per planner."""
-    header = f"{'planner':<20} {'world':<28} {'eps':>5} {'success':>9} {'collide':>8} {'trapped':>8} {'steps':>7} {'length':>8}"
+    """One row per planner and world, then a total row per planner.
+
+    ``steps``: the mean control steps of the successes; ``length``: their mean path length in the
+    world file's units (named after it when the file names its unit; ``-`` over worlds in
+    different units)."""
+    header = (f"{'planner':<20} {'world':<28} {'eps':>5} {'success':>9} {'collide':>8} {'trapped':>8} {'steps':>7} "
+              f"{'length':>10}")
     lines = [header, "-" * len(header)]
 
     def row(planner: str, world: str, summary: dict) -> str:
         steps = "-" if summary["mean_steps"] is None else f"{summary['mean_steps']:.1f}"
-        length = "-" if summary["mean_path_length"] is None else f"{summary['mean_path_length']:.2f}"
+        units = summary["units"] if summary["units"] not in (None, "mixed") else ""
+        length = ("-" if summary["mean_path_length"] is None
+                  else f"{summary['mean_path_length']:.2f}" + (f" {units}" if units else ""))
         return (f"{planner:<20} {world:<28} {summary['episodes']:>5} "
                 f"{summary['successes']:>4}/{summary['episodes']:<4} {summary['collision_rate']:>8.1%} "
-                f"{summary['trapped_rate']:>8.1%} {steps:>7} {length:>8}")
+                f"{summary['trapped_rate']:>8.1%} {steps:>7} {length:>10}")
 
     notes = []
     for ev in evaluations:
@@ -199,11 +218,17 @@ def format_table(evaluations: Sequence[Evaluation]) -> str:
             lines.append(row(ev.planner, "(all)", ev.summary()))
         summary = ev.summary()
         if "links_in_range" in summary:
-            shares = (", ".join(f"{v:.1%}" for v in summary["link_in_range"]) if "link_in_range" in summary
-                      else f"{summary['links_in_range']:.1%} (all links)")
-            notes.append(f"{ev.planner}: steps each link in range {shares}; episodes with every link >= 99%: "
-                         f"{summary['episodes_all_links_99']}/{summary['episodes']}; robot-robot collisions "
-                         f"{summary['robot_robot_collisions']}; closest robots {summary['min_robot_distance']:.2f}")
+            parts = []
+            if summary.get("link_in_range") != []:   # (robots alone have no links)
+                shares = (", ".join(f"{v:.1%}" for v in summary["link_in_range"]) if "link_in_range" in summary
+                          else f"{summary['links_in_range']:.1%} (all links)")
+                parts += [f"steps each link in range {shares}", f"episodes with every link >= 99%: "
+                          f"{summary['episodes_all_links_99']}/{summary['episodes']}"]
+            parts.append(f"robot-robot collisions {summary['robot_robot_collisions']}")
+            if summary["min_robot_distance"] is not None:
+                units = summary["units"] if summary["units"] not in (None, "mixed") else ""
+                parts.append(f"closest robots {summary['min_robot_distance']:.2f}" + (f" {units}" if units else ""))
+            notes.append(f"{ev.planner}: " + "; ".join(parts))
         if "worlds" in summary:
             notes.append(f"{ev.planner}: worlds where every formation arrived {summary['worlds_all_arrived']}/"
                          f"{summary['worlds']}; robot-robot collisions between formations {summary['between_collisions']}, "

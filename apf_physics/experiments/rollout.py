@@ -32,7 +32,8 @@ from apf_physics.world.kinematics import KINEMATICS, UnicycleLimits, arc_points
 from apf_physics.planners.base import Planner
 from apf_physics.control.tracking import (CHECK_SAMPLES, UnicycleFollowers, detour_arcs, give_way, leader_caps, team_drive,
                                           track_safely)
-from apf_physics.world.core import World
+from apf_physics.world.core import Frame, World
+from apf_physics.world.io.units import length_to_file, points_to_file
 
 UNICYCLE_TRAP_FACTOR = 2
 """A unicycle's trap window is this many times the planner's: each change of direction can cost it
@@ -72,11 +73,12 @@ class FormationRecord:
     headings: np.ndarray | None = None
 
     @property
-    def min_robot_distance(self) -> float:
+    def min_robot_distance(self) -> float | None:
+        """The least distance between two of its robots over the episode; None for a robot alone."""
         p = self.positions
         n = p.shape[1]
         if n < 2:
-            return float("inf")
+            return None
         diff = p[:, :, None, :] - p[:, None, :, :]
         d = np.sqrt(np.sum(diff * diff, axis=-1))
         return float(d[:, ~np.eye(n, dtype=bool)].min())
@@ -105,6 +107,8 @@ class Episode:
         formation: The formation's record, for a formation's episode.
         headings: ``(steps + 1,)`` the (leader's) heading [rad] at each position of :attr:`path`
             (unicycles; None for holonomic robots).
+        frame: The world file's units and coordinates (:attr:`World.frame`): positions and lengths
+            here are in steps, :meth:`to_dict` gives them in the file's.
     """
 
     world: str
@@ -115,6 +119,7 @@ class Episode:
     contacts: list[str] = field(default_factory=list)
     formation: FormationRecord | None = None
     headings: np.ndarray | None = None
+    frame: Frame = Frame()
 
     @property
     def success(self) -> bool:
@@ -127,17 +132,21 @@ class Episode:
         return float(np.sum(np.hypot(*np.diff(self.path, axis=0).T))) if len(self.path) > 1 else 0.0
 
     def to_dict(self) -> dict:
+        """The episode as JSON: positions and lengths in the world file's units and coordinates
+        (``units``: the unit's name, or None when the file names none); ``steps`` counts control steps."""
+        frame = self.frame
         data = {
             "world": self.world,
-            "start": [float(v) for v in self.start],
+            "units": frame.name or None,
+            "start": [round(float(v), 9) for v in points_to_file(frame, self.start)],
             "success": self.success,
             "collision": self.outcome == "collision",
             "collision_with": list(self.contacts),
             "trapped": self.outcome == "trapped",
             "outcome": self.outcome,
             "steps": int(self.steps),
-            "path_length": round(self.path_length, 4),
-            "final_position": [round(float(v), 4) for v in self.path[-1]],
+            "path_length": round(length_to_file(frame, self.path_length), 4),
+            "final_position": [round(float(v), 4) for v in points_to_file(frame, self.path[-1])],
         }
         if self.headings is not None:
             data["final_heading"] = round(float(self.headings[-1]), 4)
@@ -148,13 +157,14 @@ class Episode:
             roles = ["leader"] + [f"follower{i + 1}" for i in range(len(f.followed))]
             data["robots"] = [
                 {"role": role, "success": reached if k == 0 else reached and links[k - 1],
-                 "final_position": [round(float(v), 4) for v in f.positions[-1, k]]}
+                 "final_position": [round(float(v), 4) for v in points_to_file(frame, f.positions[-1, k])]}
                 for k, role in enumerate(roles)]
-            data["min_robot_distance"] = round(f.min_robot_distance, 4)
+            closest = f.min_robot_distance
+            data["min_robot_distance"] = None if closest is None else round(length_to_file(frame, closest), 4)
             data["robot_robot_collisions"] = f.robot_robot_collisions
             data["robot_obstacle_collisions"] = f.robot_obstacle_collisions
             data["link_in_range"] = [round(v, 4) for v in f.link_in_range]
-            data["trajectory"] = np.round(f.positions, 4).tolist()
+            data["trajectory"] = np.round(points_to_file(frame, f.positions), 4).tolist()
             if f.headings is not None:
                 data["headings"] = np.round(f.headings, 4).tolist()
             if f.crowd is not None:
@@ -312,7 +322,7 @@ def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | 
                                      headings=None if theta is None else theta.copy())
         episodes.append(Episode(world.name, starts[i], Outcome(stepper.outcome[i]).label, steps,
                                 positions[:, 0].copy(), trace.contacts[i], record,
-                                headings=None if theta is None else theta[:, 0].copy()))
+                                headings=None if theta is None else theta[:, 0].copy(), frame=world.frame))
     return episodes
 
 
@@ -431,7 +441,7 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
                                  deadlocks=int(formations.deadlocks[f]), headings=theta)
         episodes.append(Episode(world.name, formations.tasks[f].start, Outcome(stepper.outcome[f]).label, steps,
                                 positions[:, 0].copy(), trace.contacts[f], record,
-                                headings=None if theta is None else theta[:, 0].copy()))
+                                headings=None if theta is None else theta[:, 0].copy(), frame=world.frame))
     return episodes
 
 

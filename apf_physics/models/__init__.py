@@ -22,9 +22,11 @@ from apf_physics.world.core import World
 
 MODELS = Path(__file__).resolve().parent
 SHIPPED = {"thesis-fixed": MODELS / "fixed20.pt", "thesis-general": MODELS / "map.pt"}
-"""The default learned planner's model (planner ``dqn``), by the world's field preset: the fixed world's Q-network
-for Table 3's field; the map network (which generalises to rooms, mazes and bigger maps) for
-Table 4's. The other shipped files (``general.pt``, ``moving.pt``) are chosen by name."""
+"""The default learned planner's model (planner ``dqn``), by the world's field preset, for single
+robots and for the leaders of formations alike: the fixed world's Q-network for Table 3's field;
+the map network (which generalises to rooms, mazes, warehouses and bigger maps, and goes round
+other formations' robots: :class:`~apf_physics.models.policy.MapPolicy`) for Table 4's. The other
+shipped files (``general.pt``, ``moving.pt``) are chosen by name."""
 
 
 def resolve_model(model: str | Path) -> Path:
@@ -34,16 +36,6 @@ def resolve_model(model: str | Path) -> Path:
     if not path.exists() and path.parent == Path(".") and (MODELS / f"{path.stem}.pt").is_file():
         return MODELS / f"{path.stem}.pt"
     return path
-
-
-SHIPPED_FORMATION = {"thesis-general": MODELS / "general.pt"}
-"""Where it differs, the default model for the leader of a formation (a world with ``formation``,
-e.g. one of several formations crossing): the window network, which sees the other formations'
-robots in its window, rather than the map network, whose values are those of the static map and
-leave meeting robots to the right of way. Chosen on a validation set of crossing formations
-(``generate --family crossing --count 60 --seed 8``): every formation arrived in 60/60 worlds
-with ``general.pt`` leaders, 56/60 with ``map.pt``. A lone formation on Table 4's field (no other
-robots to see) gets it too, as a leader: that case was not compared."""
 
 
 SHIPPED_NETWORKS = {
@@ -58,8 +50,7 @@ NETWORKS = {"window": "the window Q-network (the thesis's DQN)", "map": "the map
 
 def shipped_model_for(world: World, network: str | None = None) -> Path:
     """The shipped model whose training field equals the world's field: the best of any kind
-    (:data:`SHIPPED`; for a formation's leader :data:`SHIPPED_FORMATION` first), or of the kind
-    ``network`` (``"window"`` or ``"map"``, :data:`SHIPPED_NETWORKS`).
+    (:data:`SHIPPED`), or of the kind ``network`` (``"window"`` or ``"map"``, :data:`SHIPPED_NETWORKS`).
 
     Raises:
         ModelError: No shipped model (of that kind) was trained for this field.
@@ -70,13 +61,12 @@ def shipped_model_for(world: World, network: str | None = None) -> Path:
                 return path
         raise ModelError(f"{world.label}: no shipped {NETWORKS[network]} for its field {world.field.as_dict()}; "
                          f"train one with `apf-physics train` and pass --model")
-    table = {**SHIPPED, **SHIPPED_FORMATION} if world.formation is not None else SHIPPED
-    for preset, path in table.items():
+    for preset, path in SHIPPED.items():
         if world.field.equals_preset(preset) and path.exists():
             return path
     raise ModelError(f"{world.label}: no shipped model for its field {world.field.as_dict()}; "
                      f"train one with `apf-physics train` and pass --model")
 
 
-__all__ = ["resolve_model", "DQNPolicy", "MapNetwork", "MapPolicy", "load_policy", "FORMAT_VERSION", "MODELS", "NETWORKS", "QNetwork", "SHIPPED", "SHIPPED_FORMATION", "SHIPPED_NETWORKS", "SavedModel", "load_model", "model_meta",
+__all__ = ["resolve_model", "DQNPolicy", "MapNetwork", "MapPolicy", "load_policy", "FORMAT_VERSION", "MODELS", "NETWORKS", "QNetwork", "SHIPPED", "SHIPPED_NETWORKS", "SavedModel", "load_model", "model_meta",
            "save_model", "shipped_model_for"]

@@ -36,6 +36,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from apf_physics.common.compiled import kernel
 from apf_physics.world.search import shortest_paths
 
 MAP_FEATURES = 2
@@ -129,6 +130,67 @@ class MapNetwork(nn.Module):
             x = F.leaky_relu(layer(x), self.negative_slope)
         rest = move_features[..., [1, 3, 4]]
         return F.softplus(self.value_weight) * dv + self.linear(rest)[..., 0] + self.head(x)[..., 0]
+
+
+def replan(network: MapNetwork, features: torch.Tensor, free: torch.Tensor, held: torch.Tensor,
+           values: torch.Tensor, extra_cost: torch.Tensor | float = 0.0) -> torch.Tensor:
+    """V over a patch of the grid in which something changed (other robots stand in it), the
+    patch's edge held at the values of the whole map.
+
+    Value iteration over the patch alone: the network's cost map from the patch's ``features``
+    (plus ``extra_cost``), the nodes in ``held`` (the patch's edge, and its target nodes) keeping
+    their ``values``, the others settled by Bellman updates (:func:`_settle`, compiled) until nothing
+    changes: the fixed point of :func:`_bellman_update`, to the bit. A node's value is then the best of
+    going to the patch's edge (and on from there as the map's values say) or to a target within
+    it, around what is blocked in the patch.
+
+    Args:
+        network: The map network.
+        features: (F, R, C) the patch's node features.
+        free: (R, C) bool: the patch's nodes where the robot fits.
+        held: (R, C) bool: nodes whose value is kept.
+        values: (R, C) the map's V over the patch (read at ``held``).
+        extra_cost: Added to the learned cost per unit length, per node ((R, C) or a number).
+
+    Returns:
+        (R, C) float32 V over the patch (:data:`UNREACHED` where no way leads).
+    """
+    with torch.no_grad():
+        kappa = network.cost(features) + extra_cost
+        neighbours = _neighbours(network.resolution)
+        costs = torch.stack([w * 0.5 * (kappa + _shift(kappa, dr, dc, float("inf"))) for dr, dc, w in neighbours])
+        held = (held & free).numpy()
+        v = np.where(held, values.numpy(), np.float32(UNREACHED)).astype(np.float32)
+        _settle(v, held, free.numpy(), costs.numpy().astype(np.float32),
+                np.array([(dr, dc) for dr, dc, _ in neighbours], np.intp))
+        return torch.from_numpy(v)
+
+
+@kernel
+def _settle(v, held, free, costs, steps):
+    """Bellman updates ``v(x) ← max(v(x), v(x + n) − cost_n(x))`` of the free nodes not ``held``, in
+    place, in forward and backward passes over the grid in turn until nothing changes
+    (``costs[k]``: the edge to the neighbour ``steps[k]``)."""
+    rows, cols = v.shape
+    changed = True
+    while changed:
+        changed = False
+        for backwards in range(2):
+            for i in range(rows * cols):
+                flat = rows * cols - 1 - i if backwards else i
+                r, c = flat // cols, flat % cols
+                if held[r, c] or not free[r, c]:
+                    continue
+                best = v[r, c]
+                for k in range(steps.shape[0]):
+                    nr, nc = r + steps[k, 0], c + steps[k, 1]
+                    if 0 <= nr < rows and 0 <= nc < cols:
+                        offer = v[nr, nc] - costs[k, r, c]
+                        if offer > best:
+                            best = offer
+                if best > v[r, c]:
+                    v[r, c] = best
+                    changed = True
 
 
 def _shift(x: torch.Tensor, dr: int, dc: int, fill: float) -> torch.Tensor:

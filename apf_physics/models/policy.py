@@ -12,11 +12,12 @@ import torch
 
 from apf_physics.control.shield import MOVE_SETS, SAFETY, move_clearance
 from apf_physics.models.files import SavedModel, load_model, observer_of
-from apf_physics.models.mapnet import MapNetwork, move_features, sample_values
+from apf_physics.models.mapnet import MapNetwork, move_features, replan, sample_values
 from apf_physics.models.network import QNetwork
 from apf_physics.sensing.mapview import MapView
 from apf_physics.sensing.observation import ObserverConfig
 from apf_physics.common.transforms import signed_log
+from apf_physics.world.field import Grid
 from apf_physics.world.core import Moment, World
 
 
@@ -142,6 +143,23 @@ class MapValues:
         return entry[1]
 
 
+MAP_MARGIN = 0.05
+"""Clearance beyond its radius a robot needs at a node of its map view (:meth:`MapView.of`'s margin)."""
+OTHERS_PATCH = 6.0
+"""Half-side [units] of the square around a robot over which a map policy plans its values again
+among other robots (a world's :attr:`~apf_physics.world.World.others`: other formations' robots);
+beyond it the values are the static map's."""
+OTHERS_ROOM = 0.5
+"""Beyond touching, how far around another robot [units] passing costs :data:`OTHERS_COST` more."""
+OTHERS_COST = 8.0
+"""Extra cost per unit length of passing within :data:`OTHERS_ROOM` of another robot (the learned
+cost map's are about 1 in the open): a robot goes round another where going round is short, and
+passes it where the way round is long (a warehouse's aisle). :data:`OTHERS_PATCH`, :data:`OTHERS_ROOM`
+and this were chosen on a validation set of crossing formations (``generate --family crossing
+--count 60 --seed 8``) and warehouse-like maps (``tools/bench_warehouse.py``); BENCHMARKS.md has
+the figures."""
+
+
 class MapPolicy:
     """Action values of a :class:`~apf_physics.models.mapnet.MapNetwork` for robots in a world.
 
@@ -149,6 +167,13 @@ class MapPolicy:
     only on the world's static obstacles and targets, so they are computed once per world
     (kept with the world, :class:`MapValues`) and every step only samples them at the
     robots' moves.
+
+    Among other robots (a world's :attr:`~apf_physics.world.World.others`: the robots of other
+    formations, as one leader sees them), each robot's values over the square of :data:`OTHERS_PATCH` around it are planned
+    again (:func:`~apf_physics.models.mapnet.replan`) with the other robots' discs blocking and
+    the ring of :data:`OTHERS_ROOM` around them costing :data:`OTHERS_COST` more, the square's edge
+    held at the map's values: the robot goes round the others as the window network does, where
+    the static values alone would lead it into them.
 
     Args:
         network: The map network; it is put in eval mode.
@@ -170,7 +195,7 @@ class MapPolicy:
     def values(self, world: World) -> tuple[MapView, torch.Tensor]:
         """The world's map view and the network's V over it (kept with the world: :class:`MapValues`)."""
         def build():
-            view = MapView.of(world, self.network.resolution)
+            view = MapView.of(world, self.network.resolution, MAP_MARGIN)
             with _threads_for(1), torch.inference_mode():
                 v = self.network.values(torch.from_numpy(view.features), torch.from_numpy(view.free),
                                         torch.from_numpy(view.goal))
@@ -181,7 +206,7 @@ class MapPolicy:
         """(N, M) action values of robots at ``positions`` for :attr:`moves`.
 
         Args:
-            world: The world.
+            world: The world (with other robots in it: each robot's values planned again among them).
             positions: (N, 2) robot centres.
             room: (N, M) clearance along each move beyond the robot's radius and the safety margin.
             du: (N, M) signed-log change of U over each move (:func:`potential_change`).
@@ -189,7 +214,50 @@ class MapPolicy:
         view, v = self.values(world)
         positions = np.asarray(positions, float).reshape(-1, 2)
         with _threads_for(1), torch.inference_mode():
-            return map_scores(self.network, view, v, positions, self.moves, room, du).numpy()
+            if not len(world.others):
+                return map_scores(self.network, view, v, positions, self.moves, room, du).numpy()
+            out = np.empty((len(positions), len(self.moves)))
+            for i, position in enumerate(positions):
+                patch, patch_v = self.among_others(world, view, v, position)
+                out[i] = map_scores(self.network, patch, patch_v, position[None], self.moves, room[i:i + 1],
+                                    du[i:i + 1]).numpy()[0]
+            return out
+
+    def among_others(self, world: World, view: MapView, v: torch.Tensor,
+                    position: np.ndarray) -> tuple[MapView, torch.Tensor]:
+        """The map view and values over the square of :data:`OTHERS_PATCH` around ``position``,
+        planned again among the world's other robots (see the class); the whole map's when none is
+        near."""
+        r = world.robot_radius
+        others = world.others
+        others = others[np.max(np.abs(others - position), axis=1) < OTHERS_PATCH + 2 * r + OTHERS_ROOM]
+        if not len(others):
+            return view, v
+        grid = view.grid
+        rows, cols = grid.shape
+        c0, r0 = np.floor(grid.to_index(position)).astype(int)
+        half = int(np.ceil(OTHERS_PATCH * grid.resolution))
+        cs = slice(max(0, c0 - half), min(cols, c0 + half + 2))
+        rs = slice(max(0, r0 - half), min(rows, r0 + half + 2))
+        patch_grid = Grid(tuple(grid.to_world((cs.start, rs.start)).tolist()), grid.resolution,
+                          (rs.stop - rs.start, cs.stop - cs.start))
+        nodes = patch_grid.node_points()
+        gap = np.full(len(nodes), np.inf)      # from each node to the nearest other robot's disc
+        for centre in others:
+            gap = np.minimum(gap, np.hypot(nodes[:, 0] - centre[0], nodes[:, 1] - centre[1]) - r)
+        gap = gap.reshape(patch_grid.shape)
+        # the discs enter the clearance feature as obstacles do, block where the robot would touch them,
+        # and cost more within OTHERS_ROOM beyond that
+        clearance = np.minimum(view.clearance[rs, cs], np.clip((gap - r) / 2.0, -0.5, 1.0)).astype(np.float32)
+        free = view.free[rs, cs] & (gap >= r + MAP_MARGIN)
+        goal = view.goal[rs, cs] & free
+        patch = MapView(patch_grid, clearance, free, goal)
+        held = np.zeros(patch_grid.shape, bool)
+        held[[0, -1], :] = held[:, [0, -1]] = True
+        extra = torch.from_numpy(np.where(gap < r + OTHERS_ROOM, OTHERS_COST, 0.0).astype(np.float32))
+        patch_v = replan(self.network, torch.from_numpy(patch.features), torch.from_numpy(free),
+                         torch.from_numpy(held | goal), v[rs, cs], extra)
+        return patch, patch_v
 
 
 def move_inputs(where: Moment | World, positions: np.ndarray, moves: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -9,6 +9,10 @@ Two steps, so that a video costs one background and many cheap frames:
   each robot's trail and disc, and lines of overlay text. It is a pure function of its two
   arguments; no model object draws itself.
 
+The text goes beside the map, never over it: by default in a band below the map, one row per
+line (frames with text are taller than the map by the band; :func:`caption_height`), or, by
+option (:attr:`FieldImage.caption`), over the map's top-left corner as before, or not at all.
+
 Colours follow the thesis: a single robot is a blue disc with a yellow path (Fig. 1, 22,
 23); in a formation the leader is yellow, follower 1 blue and follower 2 black (§6.4);
 further followers get other distinct colours. Every disc and trail has a thin halo of a
@@ -70,6 +74,11 @@ ROLES = ("single", "leader", "follower1", "follower2", "follower")
 _ROLE_PATTERN = re.compile(r"^(single|leader|follower\d*)$")
 
 SHADE_SAMPLES = 101        # points of the shade → potential table (the colour bar's scale)
+
+CAPTIONS = ("below", "over", "off")
+"""Where a frame's text goes (:attr:`FieldImage.caption`): in a band below the map (the default: it
+never hides the map), over the map's top-left corner, or nowhere."""
+CAPTION_BAND: RGB = (32, 32, 32)
 
 _SHIFT = 4                 # fractional bits for cv2 drawing: sub-pixel positions, smooth motion
 _ONE = 1 << _SHIFT
@@ -147,8 +156,8 @@ class Snapshot:
             ``"follower2"``, ``"followerN"`` or ``"follower"``.
         trails: Per robot, the ``(n_i, 2)`` points it has visited (oldest first), or empty
             for no trails at all.
-        overlay: Lines of text drawn in the top-left corner, e.g. ``"step 12/40"``,
-            ``"planner gradient"``, ``"outcome success"``.
+        overlay: Lines of text drawn beside the map (:attr:`FieldImage.caption`), e.g.
+            ``"step 12/40"``, ``"planner gradient"``, ``"outcome success"``.
         t: The control step shown: where the world's moving obstacles are drawn.
         families: One formation number per robot (several formations: each in a colour
             family of its own), or empty.
@@ -206,6 +215,8 @@ class FieldImage:
         moving: The world's moving obstacles, drawn on every frame where the snapshot's step
             puts them (empty when they are drawn into the background at one step).
         obstacle_px: Smallest radius of a drawn point obstacle in pixels.
+        caption: Where frames' text goes (:data:`CAPTIONS`): ``"below"`` the map in a band of
+            its own, ``"over"`` the map's top-left corner, or ``"off"``.
     """
 
     background: np.ndarray
@@ -222,10 +233,11 @@ class FieldImage:
     levels: int
     moving: tuple = ()
     obstacle_px: float = 3.0
+    caption: str = "below"
 
     @property
     def shape(self) -> tuple[int, int, int]:
-        """``(H, W, 3)`` of every frame."""
+        """``(H, W, 3)`` of the map (a frame with text below it is :func:`caption_height` taller)."""
         return self.background.shape  # type: ignore[return-value]
 
     @classmethod
@@ -239,6 +251,7 @@ class FieldImage:
         scaling: str = "log",
         min_radius: float = 3.0,
         t: float | None = None,
+        caption: str = "below",
     ) -> FieldImage:
         """Render the world's static picture.
 
@@ -260,9 +273,13 @@ class FieldImage:
                 field and obstacles and the moving obstacles' routes as faint lines (the
                 obstacles are drawn on each frame at the frame's step); a step, the field and
                 every obstacle as they are at that step.
+            caption: Where frames' text goes: ``"below"`` (default), ``"over"`` or ``"off"``
+                (:data:`CAPTIONS`).
         """
         if long_side < 16:
             raise ValueError(f"long_side must be at least 16 pixels, got {long_side}")
+        if caption not in CAPTIONS:
+            raise ValueError(f"caption must be one of {', '.join(CAPTIONS)}, got {caption!r}")
         width, height = (float(world.size[0]), float(world.size[1]))
         scale = long_side / max(width, height)
         cols, rows = max(1, round(width * scale)), max(1, round(height * scale))
@@ -291,7 +308,7 @@ class FieldImage:
         targets.setflags(write=False)
         moving = tuple(world.obstacles[i] for i in world.moving) if t is None else ()
         mapping = cls(image_cv, scale, (width, height), robot_px, line_width, halo_width, 0.45 * unit,
-                      targets, robot_px, scaling, shade_potential, levels, moving, min_px)
+                      targets, robot_px, scaling, shade_potential, levels, moving, min_px, caption)
         for obstacle in moving:
             mapping._draw_route(image_cv, obstacle)
         mapping._draw_obstacles(image_cv, shown, min_px)
@@ -424,14 +441,25 @@ class FieldImage:
             cv2.line(image, tuple(int(v) for v in a), tuple(int(v) for v in b), (20, 20, 20),
                      max(1, self.line_width), cv2.LINE_AA, _SHIFT)
 
-    def draw_text(self, image: np.ndarray, lines: Sequence[str]) -> None:
-        """Write lines of text in the top-left corner of ``image`` in place, white on a dimmed box."""
-        if not lines:
-            return
+    def draw_text(self, image: np.ndarray, lines: Sequence[str]) -> np.ndarray:
+        """``image`` with lines of text where :attr:`caption` puts them: a new array with a band of
+        the lines below the map (``"below"``), or ``image`` itself with the lines written in its
+        top-left corner, white on a dimmed box (``"over"``), or untouched (``"off"``)."""
+        if not lines or self.caption == "off":
+            return image
         thickness = max(1, round(self.font_scale / 0.45))
+        line_height, pad = _line_height(self.font_scale, thickness), 4 * thickness
+        if self.caption == "below":
+            band = np.empty((caption_height(self, len(lines)), image.shape[1], 3), np.uint8)
+            band[...] = CAPTION_BAND
+            for i, line in enumerate(lines):
+                width = cv2.getTextSize(line, _FONT, self.font_scale, thickness)[0][0]
+                # a line wider than the band is written smaller rather than cut
+                scale = self.font_scale * min(1.0, (image.shape[1] - 2 * pad) / max(width, 1))
+                y = pad + (i + 1) * line_height - line_height // 3
+                cv2.putText(band, line, (pad, y), _FONT, scale, WHITE, thickness, cv2.LINE_AA)
+            return np.concatenate([image, band])
         sizes = [cv2.getTextSize(line, _FONT, self.font_scale, thickness) for line in lines]
-        line_height = max(h + base for (_, h), base in sizes) + 3 * thickness
-        pad = 4 * thickness
         box_w = min(image.shape[1], max(w for (w, _), _ in sizes) + 2 * pad)
         box_h = min(image.shape[0], line_height * len(lines) + pad)
         # Darken the box so the text reads on any background (cheap: a small region only).
@@ -440,6 +468,24 @@ class FieldImage:
         for i, line in enumerate(lines):
             y = pad + (i + 1) * line_height - line_height // 3
             cv2.putText(image, line, (pad, y), _FONT, self.font_scale, WHITE, thickness, cv2.LINE_AA)
+        return image
+
+
+def _line_height(font_scale: float, thickness: int) -> int:
+    """Pixels from one line of text to the next (the tallest glyphs and their descent, and a gap)."""
+    (_, height), base = cv2.getTextSize("Ag", _FONT, font_scale, thickness)
+    return height + base + 3 * thickness
+
+
+def caption_height(image: FieldImage, lines: int) -> int:
+    """Rows of the band below the map that holds ``lines`` lines of text (an even number, as video
+    encoders want): what a frame with that many lines adds to :attr:`FieldImage.shape`; 0 when
+    the text goes over the map or nowhere."""
+    if lines <= 0 or image.caption != "below":
+        return 0
+    thickness = max(1, round(image.font_scale / 0.45))
+    rows = _line_height(image.font_scale, thickness) * lines + 4 * thickness
+    return rows + rows % 2
 
 
 def _shade(raster, world: World, scale: float, rows: int, cols: int,
@@ -549,18 +595,17 @@ def draw_frame(field_image: FieldImage, snapshot: Snapshot) -> np.ndarray:
     colours = robot_colours(snapshot.roles, snapshot.families)
     for trail, (_, trail_colour) in zip(snapshot.trails, colours):
         field_image.draw_path(frame, trail, trail_colour)
-    _draw_robots(frame, field_image, snapshot, colours)
-    return frame
+    return _draw_robots(frame, field_image, snapshot, colours)
 
 
-def _draw_robots(frame: np.ndarray, field_image: FieldImage, snapshot: Snapshot, colours) -> None:
+def _draw_robots(frame: np.ndarray, field_image: FieldImage, snapshot: Snapshot, colours) -> np.ndarray:
     # Targets again on top of the trails that end on them, then the robots, then the text.
     field_image.draw_targets(frame)
     for position, (disc_colour, _) in zip(snapshot.positions, colours):
         field_image.draw_disc(frame, position, disc_colour)
     if snapshot.headings is not None:
         field_image.draw_headings(frame, snapshot.positions, snapshot.headings)
-    field_image.draw_text(frame, snapshot.overlay)
+    return field_image.draw_text(frame, snapshot.overlay)
 
 
 class TrailLayer:
@@ -602,16 +647,15 @@ class TrailLayer:
         """A new frame: this layer's trails (not the snapshot's), the snapshot's robots and text."""
         frame = self.canvas.copy()
         self.field_image.draw_moving(frame, snapshot.t)
-        _draw_robots(frame, self.field_image, snapshot, self.colours)
-        return frame
+        return _draw_robots(frame, self.field_image, snapshot, self.colours)
 
 
 _CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def field_image(world: World, long_side: int = 512) -> FieldImage:
+def field_image(world: World, long_side: int = 512, caption: str = "below") -> FieldImage:
     """The world's :class:`FieldImage` at ``long_side`` pixels, built on first use and cached per world."""
     per_world = _CACHE.setdefault(world, {})
-    if long_side not in per_world:
-        per_world[long_side] = FieldImage.from_world(world, long_side)
-    return per_world[long_side]
+    if (long_side, caption) not in per_world:
+        per_world[(long_side, caption)] = FieldImage.from_world(world, long_side, caption=caption)
+    return per_world[(long_side, caption)]

@@ -9,23 +9,31 @@ from typing import Iterator, Sequence
 import numpy as np
 
 from apf_physics.render.drawing import FieldImage, formation_roles
+from apf_physics.world.core import Frame
+from apf_physics.world.io.units import points_to_file
 from apf_physics.render.video import render_trajectory, stack_headings, stack_paths, write_png, write_video
 
 
 def write_episode_video(world, episodes: Sequence, out: str | Path, png: str | Path | None = None, fps: float = 10.0,
                         size: int = 512, hold: float = 1.0, overlay: tuple[str, ...] = (), formation: bool = False,
-                        start_index: int | None = None, codec: str | None = None, progress: bool = True) -> int:
+                        start_index: int | None = None, codec: str | None = None, progress: bool = True,
+                        caption: str = "below") -> int:
     """Render rollout episodes of one world to a video (and the last frame to a PNG).
 
     Single robots from several starts share one clip (all move at once); each formation
     episode is a clip of its own. ``codec`` is a name from
     :data:`~apf_physics.render.video.CODECS` (default: the extension's); ``progress`` shows
     a bar of frames on stderr when it is a terminal. Unicycles' episodes (with ``headings``)
-    draw each robot's heading. Returns the number of frames written.
+    draw each robot's heading. The text goes where ``caption`` says
+    (:data:`~apf_physics.render.drawing.CAPTIONS`: below the map by default, never over it unless
+    asked), positions in it in the world file's units. Returns the number of frames written.
     """
-    image = FieldImage.from_world(world, size)
+    image = FieldImage.from_world(world, size, caption=caption)
     hold_frames = max(0, int(round(hold * fps)))
-    clips = list(zip(episode_clips(episodes, overlay, formation, start_index), clip_members(episodes, formation)))
+    clips = list(zip(episode_clips(episodes, overlay, formation, start_index, world.frame),
+                     clip_members(episodes, formation)))
+    # every frame of the video has the most lines any clip shows (one size for the whole video)
+    rows = max(1 + len(lines) + len(collision_events(members)) + len(final) for (_, _, lines, final, _), members in clips)
     total = sum(len(clip[0]) + hold_frames for clip, _ in clips)
     last: list[np.ndarray] = []
 
@@ -33,7 +41,8 @@ def write_episode_video(world, episodes: Sequence, out: str | Path, png: str | P
         frame = None
         for (trajectory, roles, lines, final, families), members in clips:
             for frame in render_trajectory(world, trajectory, roles, overlay=lines, final_overlay=final, families=families,
-                                           hold=hold_frames, image=image, events=collision_events(members),
+                                           hold=hold_frames, image=image,
+                                           events=collision_events(members, world.frame), caption_lines=rows,
                                            headings=clip_headings(members, trajectory)):
                 yield frame
         last.append(frame)
@@ -44,14 +53,15 @@ def write_episode_video(world, episodes: Sequence, out: str | Path, png: str | P
     return written
 
 
-def episode_clips(episodes: Sequence, overlay: tuple[str, ...], formation: bool,
-                  start_index: int | None) -> Iterator[tuple[np.ndarray, tuple[str, ...], tuple[str, ...],
-                                                             tuple[str, ...], tuple[int, ...]]]:
+def episode_clips(episodes: Sequence, overlay: tuple[str, ...], formation: bool, start_index: int | None,
+                  frame: Frame = Frame()) -> Iterator[tuple[np.ndarray, tuple[str, ...], tuple[str, ...],
+                                                            tuple[str, ...], tuple[int, ...]]]:
     """``(trajectory (T, R, 2), roles, overlay, final overlay, families)`` per clip of the video.
 
     Single robots from several starts share one clip (all move at once); each formation
     episode is a clip of its own, one after another; the formations of a world with several
-    share one clip, each in its colour family.
+    share one clip, each in its colour family. Positions in the text are in the world file's
+    units and coordinates (``frame``); the trajectories are the world's.
     """
     crowds = _crowds(episodes)
     if crowds:
@@ -72,7 +82,7 @@ def episode_clips(episodes: Sequence, overlay: tuple[str, ...], formation: bool,
         if len(episodes) == 1:
             episode = episodes[0]
             where = f"start {start_index} " if start_index is not None else ""
-            lines = (*overlay, f"{where}({episode.start[0]:g}, {episode.start[1]:g})")
+            lines = (*overlay, f"{where}{_place(frame, episode.start)}")
             final = (f"outcome {episode.outcome} after {episode.steps} steps",)
         else:
             lines = (*overlay, f"{len(episodes)} starts")
@@ -82,7 +92,7 @@ def episode_clips(episodes: Sequence, overlay: tuple[str, ...], formation: bool,
     for i, (episode, path) in enumerate(zip(episodes, paths)):
         trajectory = path if path.ndim == 3 else path[:, None, :]
         where = f"start {start_index} " if start_index is not None else ""
-        lines = (*overlay, f"formation, {where}({episode.start[0]:g}, {episode.start[1]:g})")
+        lines = (*overlay, f"formation, {where}{_place(frame, episode.start)}")
         yield (trajectory, formation_roles(trajectory.shape[1]), lines,
                (f"outcome {episode.outcome} after {episode.steps} steps",), ())
 
@@ -123,8 +133,15 @@ def _crowds(episodes: Sequence) -> dict[str, list]:
     return crowds
 
 
-def collision_events(episodes: Sequence) -> list[tuple[int, str]]:
-    """``(step, text)`` for each episode that ended in a collision: the frame of that step on says so."""
+def _place(frame: Frame, point: np.ndarray, digits: int = 4) -> str:
+    """``(6.5, -0.5)``: a point of the world in the file's coordinates, for a caption."""
+    x, y = (round(float(v), digits) for v in points_to_file(frame, point))
+    return f"({x:g}, {y:g})"
+
+
+def collision_events(episodes: Sequence, frame: Frame = Frame()) -> list[tuple[int, str]]:
+    """``(step, text)`` for each episode that ended in a collision: the frame of that step on says so
+    (where, in the world file's coordinates: ``frame``)."""
     out = []
     for k, episode in enumerate(episodes):
         if episode.outcome == "collision":
@@ -132,7 +149,7 @@ def collision_events(episodes: Sequence) -> list[tuple[int, str]]:
             what = ", ".join(getattr(episode, "contacts", []) or ["something"])
             who = f"robot {k} " if len(episodes) > 1 else ""
             out.append((int(episode.steps), f"COLLISION at step {episode.steps}: {who}hit {what} at "
-                                           f"({where[0]:.1f}, {where[1]:.1f})"))
+                                           f"{_place(frame, where, 2)}"))
     return sorted(out)
 
 

@@ -3,8 +3,9 @@
 Paths are yellow, each start a blue robot disc, the targets red dots and the obstacles
 white; a path that did not end at a target (trapped, collided) ends in a blue ring, so the
 traps stand out. As a figure (:func:`field_figure`, what ``plot-field`` writes) the map gets
-a title above it and, beside it, a colour bar with the potential's scale and a legend, so
-that nothing covers the map.
+a title above it, axes along its left and bottom edges in the world file's units and
+coordinates (the unit named: ``x [m]``), and, beside it, a colour bar with the potential's scale
+and a legend, so that nothing covers the map.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from apf_physics.render.drawing import (
     heatmap,
 )
 from apf_physics.render.video import write_png
+from apf_physics.world.io.units import points_to_file, points_to_steps
 
 if TYPE_CHECKING:
     from apf_physics.world.core import World
@@ -91,7 +93,8 @@ def field_figure(
     long_side: int = 512,
     image: FieldImage | None = None,
 ) -> np.ndarray:
-    """The field plot as a figure: title lines above the map, colour bar and legend beside it.
+    """The field plot as a figure: title lines above the map, axes in the world file's units along
+    its left and bottom edges, colour bar and legend beside it.
 
     Arguments as :func:`draw_field_plot`, and ``title``: lines of text above the map.
 
@@ -102,20 +105,82 @@ def field_figure(
     plot = draw_field_plot(world, paths, reached=reached, image=image)
     unit = _unit(image)
     header = _header_height(len(title), unit)
+    left, below = _axis_margins(unit)
     panel = _SidePanel(image, unit, top=header)
-    rows = header + max(plot.shape[0], panel.height)
-    cols = plot.shape[1] + panel.width
+    rows = header + max(plot.shape[0] + below, panel.height)
+    cols = left + plot.shape[1] + panel.width
     figure = np.full((rows, cols, 3), PAPER, np.uint8)
-    figure[header: header + plot.shape[0], : plot.shape[1]] = plot
+    figure[header: header + plot.shape[0], left: left + plot.shape[1]] = plot
     for i, line in enumerate(title):
         _text(figure, line, (round(6 * unit), round((22 * i + 18) * unit)), unit, scale=1.15 if i == 0 else 1.0)
-    panel.draw(figure, left=plot.shape[1])
+    _draw_axes(figure, world, image, (header, left), unit)
+    panel.draw(figure, left=left + plot.shape[1])
     return figure
 
 
 def figure_map_origin(title_lines: int, image: FieldImage) -> tuple[int, int]:
     """``(row, col)`` of the map's top-left pixel in a :func:`field_figure` with that many title lines."""
-    return _header_height(title_lines, _unit(image)), 0
+    unit = _unit(image)
+    return _header_height(title_lines, unit), _axis_margins(unit)[0]
+
+
+AXIS_TICKS = 6
+"""About how many labelled ticks each axis of a field figure has."""
+
+
+def axis_label(world: World, axis: str) -> str:
+    """``x [m]``: an axis of a field figure in the world file's units; ``x [steps]`` for a file that names
+    no unit and moves a unit a step, else ``x [file units]``."""
+    frame = world.frame
+    unit = frame.name or ("steps" if frame.unit == 1.0 else "file units")
+    return f"{axis} [{unit}]"
+
+
+def nice_ticks(lo: float, hi: float, count: int = AXIS_TICKS) -> np.ndarray:
+    """Round tick values (1, 2, 2.5 or 5 times a power of ten apart) within ``[lo, hi]``, about ``count`` of them."""
+    span = max(hi - lo, 1e-12)
+    raw = span / max(count - 1, 1)
+    power = 10.0 ** np.floor(np.log10(raw))
+    step = min((m * power for m in (1, 2, 2.5, 5, 10) if m * power >= raw), default=10 * power)
+    first = np.ceil(lo / step - 1e-9) * step
+    ticks = np.arange(first, hi + step * 1e-9, step)
+    return np.round(ticks, 10)
+
+
+def _tick_text(value: float) -> str:
+    return f"{value:.6g}" if abs(value) >= 1e-9 else "0"
+
+
+def _axis_margins(unit: float) -> tuple[int, int]:
+    """``(left, below)`` pixels the axes' tick labels and names take beside and below the map."""
+    return round(62 * unit), round(40 * unit)
+
+
+def _draw_axes(figure: np.ndarray, world: World, image: FieldImage, origin: tuple[int, int], unit: float) -> None:
+    """Ticks and labels in the world file's coordinates along the map's left and bottom edges."""
+    top, left = origin
+    height, width = image.shape[:2]
+    frame = world.frame
+    lo, hi = points_to_file(frame, [0.0, 0.0]), points_to_file(frame, world.size)
+    tick = max(3, round(5 * unit))
+    cv2.line(figure, (left - 1, top), (left - 1, top + height), INK, 1)
+    cv2.line(figure, (left - 1, top + height), (left + width, top + height), INK, 1)
+    for value in nice_ticks(lo[0], hi[0]):
+        x = left + int(round(image.to_pixels(points_to_steps(frame, [value, lo[1]]))[0, 0]))
+        cv2.line(figure, (x, top + height), (x, top + height + tick), INK, 1)
+        text = _tick_text(value)
+        w = cv2.getTextSize(text, _FONT, 0.45 * unit, max(1, round(unit)))[0][0]
+        _text(figure, text, (x - w // 2, top + height + tick + round(13 * unit)), unit)
+    for value in nice_ticks(lo[1], hi[1]):
+        y = top + int(round(image.to_pixels(points_to_steps(frame, [lo[0], value]))[0, 1]))
+        cv2.line(figure, (left - 1 - tick, y), (left - 1, y), INK, 1)
+        text = _tick_text(value)
+        w = cv2.getTextSize(text, _FONT, 0.45 * unit, max(1, round(unit)))[0][0]
+        _text(figure, text, (left - tick - 4 - w, y + round(5 * unit)), unit)
+    name = axis_label(world, "x")
+    w = cv2.getTextSize(name, _FONT, 0.45 * unit, max(1, round(unit)))[0][0]
+    _text(figure, name, (left + (width - w) // 2, top + height + tick + round(31 * unit)), unit)
+    _text(figure, axis_label(world, "y"), (round(4 * unit), top - round(6 * unit)), unit)
 
 
 def _unit(image: FieldImage) -> float:
@@ -124,7 +189,8 @@ def _unit(image: FieldImage) -> float:
 
 
 def _header_height(lines: int, unit: float) -> int:
-    return round((22 * lines + 8) * unit) if lines else 0
+    """Rows above the map: the title's lines, then room for the y axis's name."""
+    return round((22 * lines + 8) * unit) + round(16 * unit)
 
 
 def _text(figure: np.ndarray, text: str, origin: tuple[int, int], unit: float, scale: float = 1.0,

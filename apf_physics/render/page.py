@@ -175,7 +175,8 @@ def write_page(folder: str | Path, title: str, evaluations: Sequence, sections: 
 
 
 def results_table(evaluations: Sequence) -> str:
-    """The results as an HTML table: a row per planner and world, and a total row per planner."""
+    """The results as an HTML table: a row per planner and world, and a total row per planner (mean
+    steps in control steps, mean lengths in the world files' units)."""
     header = ("planner", "world", "episodes", "reached", "collisions", "trapped", "mean steps", "mean length")
     rows = []
     notes = []
@@ -189,7 +190,8 @@ def results_table(evaluations: Sequence) -> str:
             cells = (ev.planner, name, summary["episodes"], f"{summary['successes']}/{summary['episodes']}",
                      f"{summary['collision_rate']:.1%}", f"{summary['trapped_rate']:.1%}",
                      "-" if summary["mean_steps"] is None else f"{summary['mean_steps']:.1f}",
-                     "-" if summary["mean_path_length"] is None else f"{summary['mean_path_length']:.2f}")
+                     "-" if summary["mean_path_length"] is None else f"{summary['mean_path_length']:.2f}"
+                     + (f" {summary['units']}" if summary["units"] not in (None, "mixed") else ""))
             total = ' class="total"' if name == "(all)" else ""
             rows.append(f"<tr{total}>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in cells) + "</tr>")
         summary = ev.summary()

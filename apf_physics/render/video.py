@@ -357,6 +357,7 @@ def trajectory_snapshots(
     families: Sequence[int] = (),
     events: Sequence[tuple[int, str]] = (),
     headings: np.ndarray | None = None,
+    caption_lines: int = 0,
 ) -> Iterator[Snapshot]:
     """One :class:`Snapshot` per time step of a trajectory.
 
@@ -373,6 +374,9 @@ def trajectory_snapshots(
             at the step it happened).
         headings: ``(T, R)`` each robot's heading [rad] at each step (``(T,)`` for one robot;
             unicycles: drawn as a line from the centre to the rim), or None (holonomic robots).
+        caption_lines: Every snapshot has at least this many lines of text (padded with empty
+            ones), and at least as many as the longest of this trajectory's: the frames of a
+            video, their text in a band below the map, share one size.
     """
     trajectory = np.asarray(trajectory, dtype=float)
     if trajectory.ndim == 2:
@@ -384,10 +388,12 @@ def trajectory_snapshots(
     if headings is not None:
         headings = np.asarray(headings, dtype=float).reshape(steps, robots)
     per_robot = np.ascontiguousarray(trajectory.transpose(1, 0, 2))  # (R, T, 2): trails are slices
+    rows = max(caption_lines, 1 + len(overlay) + len(events) + len(final_overlay))
     for t in range(steps):
         lines = (f"step {t}/{steps - 1}", *overlay, *(text for step, text in events if t >= step))
         if t == steps - 1:
             lines = (*lines, *final_overlay)
+        lines = (*lines, *("",) * (rows - len(lines)))
         snapshot = Snapshot(trajectory[t], roles, tuple(per_robot[:, : t + 1]) if trails else (), lines, t,
                             tuple(families), None if headings is None else headings[t])
         yield snapshot
@@ -410,6 +416,7 @@ def render_trajectory(
     families: Sequence[int] = (),
     events: Sequence[tuple[int, str]] = (),
     headings: np.ndarray | None = None,
+    caption_lines: int = 0,
 ) -> Iterator[np.ndarray]:
     """Frames of robots moving through ``world``, one per time step (see :func:`trajectory_snapshots`).
 
@@ -427,16 +434,18 @@ def render_trajectory(
         families: One formation number per robot (several formations), or empty.
         events: ``(step, text)`` lines shown from that step on (see :func:`trajectory_snapshots`).
         headings: ``(T, R)`` robots' headings [rad] (unicycles), or None (see :func:`trajectory_snapshots`).
+        caption_lines: The least lines of text of every frame (see :func:`trajectory_snapshots`).
 
     Yields:
-        ``(H, W, 3)`` uint8 RGB frames.
+        ``(H, W, 3)`` uint8 RGB frames: the map, and below it the band of text (the image's
+        :attr:`~apf_physics.render.drawing.FieldImage.caption`).
     """
     image = image if image is not None else field_image(world, long_side)
     layer: TrailLayer | None = None
     # Trails grow by one segment a step on a persistent layer: constant cost per frame.
     for snapshot in trajectory_snapshots(trajectory, roles, overlay=overlay, final_overlay=final_overlay,
                                          trails=False, hold=hold, families=families, events=events,
-                                         headings=headings):
+                                         headings=headings, caption_lines=caption_lines):
         if not trails:
             frame = draw_frame(image, snapshot)
         else:

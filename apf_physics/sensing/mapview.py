@@ -23,28 +23,41 @@ class MapView:
     features: the robot's clearance there beyond its radius (``(clearance − radius) / 2``,
     clipped to ``[−0.5, 1]``) and whether a target is within reach (the goal tolerance).
 
+    What depends on the map alone (the clearance feature, where the robot fits) is built once
+    per map and shared by the views of all its targets (the worlds of a world's formations, or
+    of scenarios on one map: :meth:`World.with_task`); a view of another target adds only its
+    goal nodes.
+
     Attributes:
         grid: The nodes.
-        features: (2, rows, cols) float32 node features.
-        free: (rows, cols) bool: the robot fits there with ``margin`` to spare.
+        clearance: (rows, cols) float32, the clearance feature (shared by the map's targets).
+        free: (rows, cols) bool: the robot fits there with ``margin`` to spare (shared likewise).
         goal: (rows, cols) bool: free nodes within ``0.9 ×`` the goal tolerance of a target.
     """
 
     grid: Grid
-    features: np.ndarray
+    clearance: np.ndarray
     free: np.ndarray
     goal: np.ndarray
+
+    @property
+    def features(self) -> np.ndarray:
+        """(2, rows, cols) float32 node features: the clearance feature and the goal nodes (a new array)."""
+        return np.stack([self.clearance, self.goal.astype(np.float32)])
 
     @classmethod
     def of(cls, world: World, resolution: int = 2, margin: float = 0.05) -> "MapView":
         """The (cached) map view of ``world``'s static obstacles."""
-        def build() -> MapView:
-            grid = Grid.covering((0.0, 0.0), world.size, resolution)
-            points = grid.node_points()
+        grid = Grid.covering((0.0, 0.0), world.size, resolution)
+
+        def static() -> tuple[np.ndarray, np.ndarray]:
             clearance = world.node_clearance(resolution)
-            free = clearance >= world.robot_radius + margin
+            feature = np.clip((clearance - world.robot_radius) / 2.0, -0.5, 1.0).astype(np.float32)
+            return feature, clearance >= world.robot_radius + margin
+
+        def build() -> MapView:
+            feature, free = world.cached(("map_view_static", int(resolution), float(margin)), static, static=True)
+            points = grid.node_points()
             goal = (world.distance_to_target(points).reshape(grid.shape) <= 0.9 * world.goal_tolerance) & free
-            features = np.stack([np.clip((clearance - world.robot_radius) / 2.0, -0.5, 1.0),
-                                 goal.astype(float)]).astype(np.float32)
-            return cls(grid, features, free, goal)
+            return cls(grid, feature, free, goal)
         return world.cached(("map_view", int(resolution), float(margin)), build)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from apf_physics.errors import UserError
+from apf_physics.world.io.units import show_point
 from apf_physics.world.core import World
 
 
@@ -31,7 +32,7 @@ def separate(world: World, positions: np.ndarray, t: float, robots: np.ndarray) 
     clearance = world.clearance(p, t)
     if np.any(clearance <= 0):
         k = int(np.argmin(clearance))
-        raise UserError(f"{world.label}: robot {int(robots[k])} placed at {np.round(p[k], 4).tolist()} has its "
+        raise UserError(f"{world.label}: robot {int(robots[k])} placed at {show_point(world.frame, p[k])} has its "
                         f"centre inside an obstacle or outside the map")
     need = 2 * r + 1e-6
     for _ in range(200):

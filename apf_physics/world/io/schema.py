@@ -66,8 +66,10 @@ MAX_COUNTED = 1000
 """Problems counted in one file before the check stops (a file of a million bad entries is
 not read to its end)."""
 
-_TOP_KEYS = {"name", "size", "grid", "robot", "robot_radius", "goal_tolerance", "field", "obstacles", "targets", "starts",
-             "formation", "formations"}
+_TOP_KEYS = {"name", "units", "size", "grid", "robot", "robot_radius", "goal_tolerance", "field", "obstacles", "targets",
+             "starts", "formation", "formations"}
+MAX_UNIT_CHARS = 16
+"""Longest name of the file's unit (``units:``) [characters]."""
 _GRID_KEYS = {"image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh", "mode", "map", "movingai", "cell"}
 
 
@@ -82,6 +84,17 @@ def _did_you_mean(word: Any, choices: Sequence[str]) -> str:
     else ``""``."""
     close = closest_match(word, choices)
     return f"did you mean {close!r}? " if close is not None else ""
+
+
+def obstacle_place(index: int, name: str | None) -> str:
+    """How messages name obstacle ``index`` of the file: ``obstacles[2]``, or ``obstacles[2] 'pillar'``
+    when it has a name."""
+    return f"obstacles[{index}]" + (f" {name!r}" if name is not None else "")
+
+
+def join_key(key: str, part: str) -> str:
+    """``key.part``; after a named obstacle (:func:`obstacle_place`) ``key: part``."""
+    return f"{key}: {part}" if key.endswith("'") else f"{key}.{part}"
 
 
 class Invalid(Exception):
@@ -181,12 +194,12 @@ class Checker:
             raise self.bad(key, f"expected a mapping, got {_kind(value)}")
         for name in value:
             if not (isinstance(name, str) and name in allowed):
-                where = f"{key}.{key_text(name)}" if key else key_text(name)
+                where = join_key(key, key_text(name)) if key else key_text(name)
                 hint = _did_you_mean(name, sorted(allowed))
                 self.bad(where, f"unknown key ({hint or ''}allowed: {', '.join(sorted(allowed))})")
         for name in required:
             if name not in value:
-                self.bad(f"{key}.{name}" if key else name, "missing")
+                self.bad(join_key(key, name) if key else name, "missing")
         return value
 
 
@@ -211,6 +224,15 @@ def _parse_name(check: Checker, value: Any, key: str = "name") -> str:
         raise check.bad(key, f"at most {MAX_NAME_CHARS} characters, got {len(value):,}")
     if not value.isprintable():
         raise check.bad(key, f"must be printable on one line, got {shortened(value)}")
+    return value
+
+
+def _parse_units(check: Checker, value: Any) -> str:
+    """The name of the file's unit of length (shown after lengths and on axes)."""
+    if not isinstance(value, str) or not value or len(value) > MAX_UNIT_CHARS or not value.isprintable() \
+            or value != value.strip():
+        raise check.bad("units", f"expected the name of a unit of length, such as m or cm (at most {MAX_UNIT_CHARS} "
+                                 f"printable characters), got {_kind(value)}")
     return value
 
 
@@ -276,21 +298,25 @@ def _parse_motion(check: Checker, value: Any, key: str) -> Motion:
     return Motion(path, speed, loop, phase)
 
 
-def _parse_obstacle(check: Checker, value: Any, key: str, box: tuple[np.ndarray, np.ndarray] | None) -> Obstacle:
+def _parse_obstacle(check: Checker, value: Any, index: int, box: tuple[np.ndarray, np.ndarray] | None) -> Obstacle:
+    """Obstacle ``index`` of the file; every problem names it by its name when it has one (:func:`obstacle_place`)."""
     problems = len(check.problems)
+    given = value.get("name") if isinstance(value, Mapping) else None
+    known = given if isinstance(given, str) and given and len(given) <= MAX_NAME_CHARS and given.isprintable() else None
+    key = obstacle_place(index, known)
     body = check.mapping(value, key, {"polygon", "circle", "motion", "name"})
-    name = check.attempt(_parse_name, check, body["name"], f"{key}.name") if "name" in body else None
+    name = check.attempt(_parse_name, check, body["name"], join_key(key, "name")) if "name" in body else None
     shapes = [k for k in ("polygon", "circle") if k in body]
     if len(shapes) != 1:
         if len(check.problems) == problems:
             check.bad(key, "each obstacle is exactly one of 'polygon: [[x, y], ...]' or 'circle: {center, radius}' "
                            "(and an optional 'motion')")
         raise Invalid
-    motion = check.attempt(_parse_motion, check, body["motion"], f"{key}.motion") if "motion" in body else None
+    motion = check.attempt(_parse_motion, check, body["motion"], join_key(key, "motion")) if "motion" in body else None
     # the box it sweeps along its route (the route starts where it is written)
     reach = motion.reach if motion is not None else (np.zeros(2), np.zeros(2))
     if "polygon" in body:
-        k = f"{key}.polygon"
+        k = join_key(key, "polygon")
         vertices = check.points(body["polygon"], k, at_least=3, at_most=MAX_POLYGON_VERTICES, what="vertices")
         if not geometry.polygon_is_simple(vertices):
             raise check.bad(k, "polygon crosses itself or repeats a vertex (it must be a simple polygon)")
@@ -303,7 +329,7 @@ def _parse_obstacle(check: Checker, value: Any, key: str, box: tuple[np.ndarray,
         if len(check.problems) > problems:
             raise Invalid
         return PolygonObstacle(vertices if area > 0 else vertices[::-1].copy(), motion, name)
-    k = f"{key}.circle"
+    k = join_key(key, "circle")
     circle = check.mapping(body["circle"], k, {"center", "radius"}, required=("center", "radius"))
     center = check.attempt(check.point, circle["center"], f"{k}.center") if "center" in circle else None
     radius = check.attempt(check.number, circle["radius"], f"{k}.radius", nonnegative=True) if "radius" in circle else None
@@ -327,7 +353,7 @@ def _parse_obstacles(check: Checker, value: Any, box: tuple[np.ndarray, np.ndarr
                    if isinstance(o, Mapping) and isinstance(o.get("polygon"), (list, tuple)))
     if vertices > MAX_VERTICES:
         raise check.bad("obstacles", f"at most {MAX_VERTICES:,} polygon vertices in all, got {vertices:,}")
-    parsed = [check.attempt(_parse_obstacle, check, o, f"obstacles[{i}]", box) for i, o in enumerate(value)]
+    parsed = [check.attempt(_parse_obstacle, check, o, i, box) for i, o in enumerate(value)]
     first: dict[str, int] = {}
     for i, o in enumerate(value):   # a name picks out one obstacle in messages: no two alike
         name = o.get("name") if isinstance(o, Mapping) else None
@@ -565,7 +591,10 @@ def parse_world(check: Checker, data: Any, source: str, confine: bool = False) -
     default_name = Path(source).stem if source != "<dict>" else "world"
     name = check.attempt(_parse_name, check, data.get("name", default_name))
     robot_radius, step, unicycle = _parse_robot(check, data)
-    frame = Frame((float(offset[0]), float(offset[1])), float(step if step is not None else 1.0))
+    units = check.attempt(_parse_units, check, data["units"]) if "units" in data else None
+    if units is None and has_grid and isinstance(data["grid"], Mapping) and "movingai" not in data["grid"]:
+        units = "m"   # a ROS map's resolution and origin are in metres
+    frame = Frame((float(offset[0]), float(offset[1])), float(step if step is not None else 1.0), units or "")
     if grid is not None and step is not None and not all(MIN_SIDE <= side / step <= MAX_SIDE for side in grid.size):
         rows, cols = grid.occupied.shape
         check.bad("grid", f"the map is {size[0] / step:.6g} x {size[1] / step:.6g} steps of {step:g} ({cols:,} x {rows:,} "

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import replace
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
@@ -32,18 +31,20 @@ import yaml
 from apf_physics.world.bundled import resolve_world
 from apf_physics.errors import UserError, WorldError
 from apf_physics.world.field import FieldParams
-from apf_physics.world.obstacles import CircleObstacle, GridObstacle, Motion, Obstacle, PolygonObstacle
+from apf_physics.world.obstacles import GridObstacle, Motion
 from apf_physics.common.safefile import MAX_FILE_BYTES, open_regular_file, read_regular_file  # noqa: F401 (public here too)
 from apf_physics.common.safefile import paths_confined, write_text
 from apf_physics.common.safeyaml import MAX_DEPTH, MAX_NODES, MAX_SCALAR_CHARS  # noqa: F401 (public here too)
 from apf_physics.common.safeyaml import read_yaml_file, shortened
-from apf_physics.world.core import FormationSpec, FormationTask, World
+from apf_physics.world.core import Frame, FormationTask, World
+from apf_physics.world.io.units import (formation_to_steps, obstacle_to_steps, points_to_steps, show_length,
+                                        show_point, unit_suffix, world_to_file)
 from apf_physics.world.io.schema import (MAX_FOLLOWERS, MAX_FORMATIONS, MAX_NAME_CHARS,  # noqa: F401 (public here too)
                                      MAX_OBSTACLES, MAX_POLYGON_VERTICES, MAX_PROBLEMS, MAX_ROUTE_POINTS, MAX_SIDE,
                                      MAX_STARTS, MAX_TARGETS, MAX_VERTICES, MIN_SIDE)
 from apf_physics.world.kinematics import HOLONOMIC_SPEED, MAX_SUBSTEPS, physics_substeps
 from apf_physics.world.io.schema import (MAX_POTENTIAL, MIN_GOAL_TOLERANCE, MIN_ROBOT_RADIUS, Checker, TooMany,
-                                     parse_world)
+                                     join_key, obstacle_place, parse_world)
 
 # -- limits that depend on several values (docs/world-files.md) ---------------------------
 
@@ -63,6 +64,15 @@ run on it (the physics indexes static shapes, :mod:`apf_physics.sim.swept`, and 
 RASTER_BYTES_PER_TARGET = 1_500
 """Further peak bytes per square unit per target: U is computed from a column per target
 (measured 370 at the default 4 nodes per unit; 1,500 covers a model's observer at 8)."""
+RASTER_BYTES_PER_FORMATION = 300
+"""Further bytes per square unit per formation of a world's ``formations:``: each formation plans
+in a world of its own target, which keeps its own rasters while the evaluation runs. Measured
+(``tools/bench_warehouse.py``, BENCHMARKS.md "Many formations in a warehouse"): the map network
+(the default leader) keeps its values and goal nodes, about 20 (its map view's clearance is
+shared by every formation); the window network ``general.pt`` its observation raster of U at 4
+nodes per unit, about 130. A model observing at 8 nodes per unit keeps four times that: raise
+the budget for many formations of one. What depends on the map alone (the obstacles' index,
+clearance) is shared and counted once, in :data:`RASTER_BYTES_PER_UNIT2`."""
 
 
 def memory_budget() -> int:
@@ -86,26 +96,31 @@ def memory_budget() -> int:
     return int(value)
 
 
-def raster_memory(size: Sequence[float], targets: int) -> float:
+def raster_memory(size: Sequence[float], targets: int, formations: int = 0) -> float:
     """Estimated peak memory [bytes] of the rasters an evaluation of a world builds.
 
     The potential and observation rasters and the A* grid (4 nodes per unit) over the map and
     :data:`RASTER_MARGIN` beyond
     it: :data:`RASTER_BYTES_PER_UNIT2` plus :data:`RASTER_BYTES_PER_TARGET` per target, per
-    square unit (measured peaks, rounded up).
+    square unit (measured peaks, rounded up); with ``formations`` (a world's ``formations:``,
+    each planning to its own target: ``targets`` is then 1), :data:`RASTER_BYTES_PER_FORMATION`
+    per formation.
     """
     area = (float(size[0]) + 2 * RASTER_MARGIN) * (float(size[1]) + 2 * RASTER_MARGIN)
-    return area * (RASTER_BYTES_PER_UNIT2 + RASTER_BYTES_PER_TARGET * int(targets))
+    return area * (RASTER_BYTES_PER_UNIT2 + RASTER_BYTES_PER_TARGET * int(targets)
+                   + RASTER_BYTES_PER_FORMATION * int(formations))
 
 
-def raster_memory_problem(size: Sequence[float], targets: int) -> str | None:
-    """What to say when the rasters of a map of ``size`` with ``targets`` targets exceed :func:`memory_budget`, else None."""
-    need, budget = raster_memory(size, targets), memory_budget()
+def raster_memory_problem(size: Sequence[float], targets: int, formations: int = 0) -> str | None:
+    """What to say when the rasters of a map of ``size`` with ``targets`` targets (or ``formations``
+    formations, each with its own) exceed :func:`memory_budget`, else None."""
+    need, budget = raster_memory(size, targets, formations), memory_budget()
     if need <= budget:
         return None
     if not math.isfinite(need):
-        return f"a {size[0]:g} x {size[1]:g} map is too large for any memory budget"
-    return (f"a {size[0]:g} x {size[1]:g} map with {targets} target(s) needs about {_gib(need)} of rasters "
+        return f"a map of {size[0]:g} x {size[1]:g} steps is too large for any memory budget"
+    what = f"{formations} formations" if formations else f"{targets} target(s)"
+    return (f"a map of {size[0]:g} x {size[1]:g} steps with {what} needs about {_gib(need)} of rasters "
             f"(the planners' at 4 nodes per unit), over the budget of {_gib(budget)}; "
             f"use a smaller map, or set {MEMORY_BUDGET_VARIABLE} (e.g. {math.ceil(need / 2**30)}G) on a machine "
             f"with that much memory")
@@ -136,18 +151,26 @@ def _field_bounds(params: FieldParams, size: tuple[float, float], targets: int,
         }
 
 
-def _check_together(check: Checker, size, robot_radius, goal_tolerance, params, obstacles, targets) -> None:
-    """The limits that depend on several values (each checked when its values are valid)."""
+def _check_together(check: Checker, size, robot_radius, goal_tolerance, params, obstacles, targets,
+                    formations: int = 0, frame: Frame = Frame(), radius_key: str = "robot.radius") -> None:
+    """The limits that depend on several values (each checked when its values are valid); the values
+    are in steps, the messages in the file's units (``frame``), naming the radius as the file gave it."""
+    def file(length: float) -> str:
+        return show_length(frame, length)
+
     if size is not None:
+        sides = f"{file(size[0])} x {file(size[1])}"
         if robot_radius is not None and robot_radius >= min(size) / 2:
-            check.bad("robot_radius", f"{robot_radius:g} does not fit in the {size[0]:g} x {size[1]:g} map "
-                                      "(it must be less than half its shorter side)")
+            check.bad(radius_key, f"{file(robot_radius)} does not fit in the {sides} map "
+                                  "(it must be less than half its shorter side)")
         half_diagonal = math.hypot(*size) / 2
         if goal_tolerance is not None and goal_tolerance >= half_diagonal:
-            check.bad("goal_tolerance", f"{goal_tolerance:g} is not less than half the map's diagonal "
-                                        f"({half_diagonal:.4g}): nearly every point would count as reached")
+            check.bad("goal_tolerance", f"{file(goal_tolerance)} is not less than half the map's diagonal "
+                                        f"({half_diagonal * frame.unit:.4g}{unit_suffix(frame)}): nearly every point would count "
+                                        "as reached")
     if size is not None and targets is not None:
-        problem = raster_memory_problem(size, len(targets))
+        # formations plan each to its own target, in worlds of their own
+        problem = raster_memory_problem(size, 1, formations) if formations else raster_memory_problem(size, len(targets))
         if problem:
             check.bad("size", problem)
     if size is not None and targets is not None and params is not None and obstacles is not None:
@@ -161,11 +184,13 @@ def _check_together(check: Checker, size, robot_radius, goal_tolerance, params, 
                                    f"it must stay below {MAX_POTENTIAL:.0e}")
                 break
     if robot_radius is not None and robot_radius < MIN_ROBOT_RADIUS:
-        check.bad("robot_radius", f"must be at least {MIN_ROBOT_RADIUS:g} (smaller robots need more than 256 physics "
-                                  f"substeps per step), got {robot_radius:g}")
+        step = "" if frame.unit == 1.0 else f", {MIN_ROBOT_RADIUS:g} of a step of {file(1.0)}"
+        check.bad(radius_key, f"must be at least {file(MIN_ROBOT_RADIUS)}{step} (smaller robots need more than 256 "
+                              f"physics substeps per step), got {file(robot_radius)}")
     if goal_tolerance is not None and goal_tolerance < MIN_GOAL_TOLERANCE:
-        check.bad("goal_tolerance", f"must be at least {MIN_GOAL_TOLERANCE:g} (the A* grid's spacing), "
-                                    f"got {goal_tolerance:g}")
+        step = "" if frame.unit == 1.0 else f", {MIN_GOAL_TOLERANCE:g} of a step of {file(1.0)}"
+        check.bad("goal_tolerance", f"must be at least {file(MIN_GOAL_TOLERANCE)}{step} (the A* grid's spacing), "
+                                    f"got {file(goal_tolerance)}")
 
 
 def _check_placement(check: Checker, world: World, index: Mapping[str, Sequence[int]] | None = None) -> None:
@@ -179,7 +204,7 @@ def _check_placement(check: Checker, world: World, index: Mapping[str, Sequence[
 
 
 def _place(check: Checker, world: World, index: Mapping[str, Sequence[int]]) -> None:
-    size, radius = world.size, world.robot_radius
+    size, radius, frame = world.size, world.robot_radius, world.frame
     for key, pts, margin in (("targets", world.targets, 0.0), ("starts", world.starts, radius)):
         if not len(pts):
             continue
@@ -192,22 +217,22 @@ def _place(check: Checker, world: World, index: Mapping[str, Sequence[int]]) -> 
                    else np.zeros(len(pts), bool))
         for i in np.flatnonzero((edge < margin) | (inside < margin) | (inside <= 0) | reached).tolist():
             where = f"{key}[{index[key][i] if key in index else i}]"
-            at = [round(v, 9) for v in world.frame.to_file(pts[i]).tolist()]
+            at = show_point(frame, pts[i], 9)
             if not np.all(np.isfinite(pts[i])):
-                lo, hi = world.frame.to_file([0.0, 0.0]), world.frame.to_file(size)
+                lo, hi = frame.to_file([0.0, 0.0]), frame.to_file(size)
                 check.bad(where, f"the point is far outside the map [{lo[0]:g}, {hi[0]:g}] x [{lo[1]:g}, {hi[1]:g}]")
             elif edge[i] < 0:
-                lo, hi = world.frame.to_file([0.0, 0.0]), world.frame.to_file(size)
+                lo, hi = frame.to_file([0.0, 0.0]), frame.to_file(size)
                 check.bad(where, f"{at} is outside the map [{lo[0]:g}, {hi[0]:g}] x [{lo[1]:g}, {hi[1]:g}]")
             elif edge[i] < margin:
-                check.bad(where, f"{at} is closer than the robot radius {radius * world.frame.unit:g} to the map's edge")
+                check.bad(where, f"{at} is closer than the robot radius {show_length(frame, radius)} to the map's edge")
             elif inside[i] <= 0:
                 check.bad(where, f"{at} is inside {_nearest_obstacle(world, pts[i], index.get('obstacles'))}")
             elif inside[i] < margin:
-                check.bad(where, f"{at} is closer than the robot radius {radius * world.frame.unit:g} to "
+                check.bad(where, f"{at} is closer than the robot radius {show_length(frame, radius)} to "
                                  f"{_nearest_obstacle(world, pts[i], index.get('obstacles'))}")
             else:
-                check.bad(where, f"{at} is already within goal_tolerance {world.goal_tolerance * world.frame.unit:g} "
+                check.bad(where, f"{at} is already within goal_tolerance {show_length(frame, world.goal_tolerance)} "
                                  "of a target")
 
 
@@ -220,8 +245,7 @@ def _nearest_obstacle(world: World, point: np.ndarray, index: Sequence[int] | No
     k = int(np.argmin(distances))
     if isinstance(placed[k], GridObstacle):
         return "the grid map's occupied cells"
-    name = getattr(world.obstacles[k], "name", None)
-    return f"obstacles[{index[k] if index is not None else k}]" + (f" {name!r}" if name is not None else "")
+    return obstacle_place(index[k] if index is not None else k, getattr(world.obstacles[k], "name", None))
 
 
 def _check_formations(check: Checker, world: World) -> None:
@@ -233,11 +257,12 @@ def _check_formations(check: Checker, world: World) -> None:
         for what, point, margin in (("target", task.target, 0.0), ("start", task.start, r)):
             clear = float(world.clearance(point[None])[0])
             if clear < margin or clear <= 0:
-                check.bad(f"formations[{i}].{what}", f"{point.tolist()} is "
+                check.bad(f"formations[{i}].{what}", f"{show_point(world.frame, point, 9)} is "
                           + ("not clear of the obstacles and the map's edge by the robot radius" if what == "start"
                              else "inside an obstacle or outside the map"))
         if np.hypot(*(task.start - task.target)) <= world.goal_tolerance:
-            check.bad(f"formations[{i}].start", f"already within goal_tolerance {world.goal_tolerance:g} of its target")
+            check.bad(f"formations[{i}].start", f"already within goal_tolerance "
+                                                f"{show_length(world.frame, world.goal_tolerance)} of its target")
         for j in range(i):
             if np.hypot(*(task.start - world.formations[j].start)) < 2 * r:
                 check.bad(f"formations[{i}].start", f"overlaps the leader of formations[{j}]")
@@ -248,8 +273,9 @@ def _check_routes(check: Checker, world: World) -> None:
     for i in world.moving:
         obstacle = world.obstacles[i]
         motion = obstacle.motion
+        where = join_key(obstacle_place(i, getattr(obstacle, "name", None)), "motion")
         if motion.length <= 1e-9:
-            check.bad(f"obstacles[{i}].motion.path", "the route has no length (every offset is [0, 0])")
+            check.bad(f"{where}.path", "the route has no length (every offset is [0, 0])")
             continue
         # where the obstacle is along its route, at most 0.05 apart (it moves in straight legs)
         travel = np.linspace(0.0, motion.period, max(2, int(np.ceil(motion.period / 0.05)) + 1))
@@ -257,7 +283,7 @@ def _check_routes(check: Checker, world: World) -> None:
         for k, target in enumerate(world.targets):
             d, _ = obstacle.signed_distance(target[None] - offsets)
             if d.min() <= 0:
-                check.bad(f"obstacles[{i}].motion", f"the obstacle sweeps over targets[{k}] {target.tolist()}")
+                check.bad(where, f"the obstacle sweeps over targets[{k}] {show_point(world.frame, target, 9)}")
 
 
 def _build(check: Checker, data: Any, source: str, confine: bool = False) -> World | None:
@@ -267,30 +293,32 @@ def _build(check: Checker, data: Any, source: str, confine: bool = False) -> Wor
         return None
     # everything in steps, from the map's lower-left corner (docs/real-maps.md: units)
     frame, grid = parts.frame, parts.grid
-    offset, u = np.asarray(frame.offset, float), frame.unit
 
     def to_world(pts: Any) -> np.ndarray:
         with np.errstate(over="ignore"):   # a point ~1e308 away in a file of small steps: outside the map (reported)
-            return (np.asarray(pts, float) - offset) / u
-    size = None if parts.size is None else (parts.size[0] / u, parts.size[1] / u)
-    robot_radius = None if parts.robot_radius is None else parts.robot_radius / u
-    goal_tolerance = None if parts.goal_tolerance is None else parts.goal_tolerance / u
+            return points_to_steps(frame, pts)
+    size = None if parts.size is None else (parts.size[0] / frame.unit, parts.size[1] / frame.unit)
+    robot_radius = None if parts.robot_radius is None else parts.robot_radius / frame.unit
+    goal_tolerance = None if parts.goal_tolerance is None else parts.goal_tolerance / frame.unit
     targets = None if parts.targets is None else to_world(parts.targets)
     starts = None if parts.starts is None else to_world(parts.starts).reshape(-1, 2)
     obstacles = parts.obstacles
     if obstacles is not None:
-        obstacles = tuple(_obstacle_to_world(o, offset, u) for o in obstacles)
+        obstacles = tuple(obstacle_to_steps(frame, o) for o in obstacles)
         if grid is not None:
-            obstacles += (GridObstacle(grid.occupied, grid.cell / u, (0.0, 0.0), spec=_grid_spec(data["grid"], source)),)
-    formation = None if parts.formation is None else _formation_to_world(parts.formation, u)
-    formations = tuple(FormationTask(to_world(t.start), to_world(t.target), _formation_to_world(t.spec, u))
+            obstacles += (GridObstacle(grid.occupied, grid.cell / frame.unit, (0.0, 0.0),
+                                       spec=_grid_spec(data["grid"], source)),)
+    formation = None if parts.formation is None else formation_to_steps(frame, parts.formation)
+    formations = tuple(FormationTask(to_world(t.start), to_world(t.target), formation_to_steps(frame, t.spec))
                        for t in parts.formations or ())
-    _check_together(check, size, robot_radius, goal_tolerance, parts.params, obstacles, targets)
+    radius_key = "robot_radius" if isinstance(data, Mapping) and "robot_radius" in data else "robot.radius"
+    _check_together(check, size, robot_radius, goal_tolerance, parts.params, obstacles, targets, len(formations),
+                    frame, radius_key)
     if check.problems:
         _check_what_parsed(check, parts, size, robot_radius, goal_tolerance, obstacles, targets, starts, to_world,
                            (data.get("grid") if isinstance(data, Mapping) else None), source)
         return None
-    unicycle = None if parts.unicycle is None else parts.unicycle.scaled(u)
+    unicycle = None if parts.unicycle is None else parts.unicycle.scaled(frame.unit)
     world = World(parts.name, size, robot_radius, goal_tolerance, parts.params, obstacles, targets, starts, formation,
                   source, formations, frame=frame, unicycle=unicycle)
     _check_substeps(check, world)
@@ -331,7 +359,7 @@ def _check_what_parsed(check: Checker, parts: Any, size, robot_radius, goal_tole
             return
         kept, index["obstacles"] = check.partial["obstacles"]
         frame = parts.frame
-        obstacles = tuple(_obstacle_to_world(o, np.asarray(frame.offset, float), frame.unit) for o in kept)
+        obstacles = tuple(obstacle_to_steps(frame, o) for o in kept)
         if parts.grid is not None:
             obstacles += (GridObstacle(parts.grid.occupied, parts.grid.cell / frame.unit, (0.0, 0.0),
                                        spec=_grid_spec(grid_value, source)),)
@@ -356,24 +384,6 @@ def _grid_spec(value: Mapping[str, Any], source: str) -> dict[str, Any]:
     """The ``grid:`` mapping with its file names made absolute (so a world saved elsewhere still finds them)."""
     folder = Path(source).parent if source != "<dict>" else Path.cwd()
     return {k: (os.path.realpath(folder / v) if k in ("image", "map", "movingai") else v) for k, v in value.items()}
-
-
-def _obstacle_to_world(obstacle: Obstacle, offset: np.ndarray, unit: float) -> Obstacle:
-    if unit == 1.0 and not offset.any():
-        return obstacle
-    motion = obstacle.motion
-    if motion is not None:
-        motion = Motion(np.asarray(motion.path, float) / unit, motion.speed / unit, motion.loop, motion.phase / unit)
-    if isinstance(obstacle, CircleObstacle):
-        return CircleObstacle((obstacle.center - offset) / unit, obstacle.radius / unit, motion)
-    return PolygonObstacle((obstacle.vertices - offset) / unit, motion)
-
-
-def _formation_to_world(spec: FormationSpec, unit: float) -> FormationSpec:
-    if unit == 1.0:
-        return spec
-    return replace(spec, comm_range=spec.comm_range / unit, spacing=spec.spacing / unit,
-                   offsets=tuple((a / unit, b / unit) for a, b in spec.offsets))
 
 
 def world_from_dict(data: Any, source: str = "<dict>", confine: bool | None = None) -> World:
@@ -411,6 +421,13 @@ def load_world(path: str | Path, confine: bool | None = None) -> World:
             the contract (every problem, one line each).
     """
     path = resolve_world(path)
+    if _is_image(path):
+        beside = Path(path).with_suffix(".yaml")
+        ros = (f"; {beside.name} beside it looks like its ROS map YAML: write 'grid: {{map: {beside.name}}}' instead"
+               if beside.is_file() else "")
+        raise WorldError(f"{path}: an image alone is not a world (it has no scale, origin or target): write a world "
+                         f"file with 'grid: {{image: {Path(path).name}, resolution: R, origin: [x, y, 0]}}' (R: map "
+                         f"units per pixel), robot: {{radius, step}}, a field and targets{ros}")
     if Path(path).suffix.lower() == ".map":
         raise WorldError(f"{path}: a MovingAI map alone has no target: evaluate its scenarios with "
                          f"`apf-physics eval {path} --scen {path}.scen`, or write a world file with "
@@ -420,6 +437,30 @@ def load_world(path: str | Path, confine: bool | None = None) -> World:
         raise WorldError(f"{path}: a ROS map alone has no target: write a world file with "
                          f"'grid: {{map: {Path(path).name}}}', robot: {{radius, step}}, a field and targets")
     return world_from_dict(data, str(path), confine)
+
+
+IMAGE_SUFFIXES = (".pgm", ".pbm", ".ppm", ".png", ".bmp", ".jpg", ".jpeg", ".gif", ".tif", ".tiff", ".webp")
+IMAGE_SIGNATURES = (b"\x89PNG", b"\xff\xd8\xff", b"GIF8", b"II*\x00", b"MM\x00*", b"P5\n", b"P5 ", b"P2\n", b"P2 ",
+                    b"P5\r", b"P2\r", b"BM")
+"""How images start (PNG, JPEG, GIF, TIFF, PGM binary and plain, BMP)."""
+
+
+def _is_image(path: Path) -> bool:
+    """Whether ``path`` is an image (by its name, or by how it starts), not a world file."""
+    if Path(path).suffix.lower() in IMAGE_SUFFIXES:
+        return True
+    try:
+        with open_regular_file(path, "world", WorldError) as (fd, _):
+            head = os.read(fd, 8)
+    except (WorldError, OSError):   # (reported by the YAML reader, which opens it again)
+        return False
+    if head.startswith(b"BM"):   # a bitmap's header is binary; a world file starting "BM" is text
+        try:
+            head.decode("ascii")
+            return False
+        except UnicodeDecodeError:
+            return True
+    return head.startswith(IMAGE_SIGNATURES)
 
 
 class _WorldDumper(yaml.SafeDumper):
@@ -456,7 +497,7 @@ _WorldDumper.add_representer(dict, _represent_dict)
 
 def dump_world_yaml(world: World) -> str:
     """The world as YAML text in the world-file contract."""
-    return yaml.dump(_tidy(world.to_dict()), Dumper=_WorldDumper, sort_keys=False, width=120)
+    return yaml.dump(_tidy(world_to_file(world)), Dumper=_WorldDumper, sort_keys=False, width=120)
 
 
 def save_world(world: World, path: str | Path) -> None:
