@@ -30,7 +30,7 @@ from apf_physics.experiments.movingai import parse_buckets, scenario_trials
 from apf_physics.errors import UserError
 from apf_physics.world import obstacles as obstacles_module
 from apf_physics.world.io import mapfiles
-from apf_physics.world.io.mapfiles import (MAX_PROBLEMS, read_image, read_movingai_map, read_ros_map, read_scenarios,
+from apf_physics.world.io.mapfiles import (MAX_PROBLEMS, read_image, read_ros_map, read_scenarios,
                                            write_pgm)
 from apf_physics.world.kinematics import LIMIT_BOUNDS, MAX_SUBSTEPS, UnicycleLimits, arc_points, physics_substeps
 from apf_physics.world.obstacles import GridObstacle
@@ -272,7 +272,7 @@ def test_paths_may_leave_the_folder_unless_confined(tmp_path, capsys, monkeypatc
     free_map(folder / "sub")
     (folder / "link.yaml").symlink_to(outside / "m.yaml")
     escaping = folder / "sub" / "escape.yaml"                 # a map YAML inside whose image is outside
-    escaping.write_text(f"image: ../../maps/m.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n")
+    escaping.write_text("image: ../../maps/m.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n")
     names = {"relative": "../maps/m.yaml", "absolute": str(outside / "m.yaml"), "link": "link.yaml",
              "image outside": "sub/escape.yaml"}
     world = folder / "world.yaml"

@@ -63,6 +63,11 @@ def shortened(value: Any, limit: int = 60) -> str:
     return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
+def described(value: Any) -> str:
+    """``list [1, 2, ...]``: the type and the shortened value (``null`` for an empty YAML value)."""
+    return "null" if value is None else f"{type(value).__name__} {shortened(value)}"
+
+
 def key_text(key: Any) -> str:
     """A mapping key as messages show it: plain if it is a short printable string."""
     if isinstance(key, str) and key.isprintable() and 0 < len(key) <= 40:

@@ -25,7 +25,6 @@ import math
 import numbers
 import os
 import re
-import reprlib
 import struct
 import sys
 from dataclasses import dataclass, field
@@ -36,7 +35,7 @@ import numpy as np
 
 from apf_physics.errors import WorldError, closest_match, did_you_mean
 from apf_physics.common.safefile import NamedFileError, named_file, read_regular_file
-from apf_physics.common.safeyaml import read_yaml_file
+from apf_physics.common.safeyaml import described, read_yaml_file, shortened
 
 MAX_MAP_CELLS = 16_000_000
 """Largest grid read [cells] (rows × cols; 4000 × 4000), checked from the header before decoding."""
@@ -98,25 +97,6 @@ class OccupancyMap:
 
 
 # -- messages ----------------------------------------------------------------------------
-
-_REPR = reprlib.Repr()
-_REPR.maxlevel, _REPR.maxlist, _REPR.maxdict, _REPR.maxstring, _REPR.maxlong, _REPR.maxother = 2, 4, 4, 40, 24, 40
-
-
-def _short(value: Any, limit: int = 60) -> str:
-    """``value`` for a message: one line of at most ``limit`` characters, whatever it is."""
-    try:
-        text = _REPR.repr(value)
-    except Exception:  # a huge integer, or a repr that fails: say what it is
-        text = f"<{type(value).__name__}>"
-    text = text.replace("\n", " ")
-    return text if len(text) <= limit else text[:limit - 3] + "..."
-
-
-def _kind(value: Any) -> str:
-    """``list [1, 2, ...]``: the type and the shortened value (``null`` for an empty YAML value)."""
-    return "null" if value is None else f"{type(value).__name__} {_short(value)}"
-
 
 def _check_cells(source: str, rows: int, cols: int, what: str) -> None:
     """Refuse a grid that is empty or over :data:`MAX_MAP_CELLS` (read from the module at call time)."""
@@ -443,7 +423,7 @@ def ros_map_from_dict(spec: dict, source: str, folder: str | Path, within: str |
             YAML that a world file names).
     """
     problems: list[str] = []
-    kind = _kind if quote else _type_name
+    kind = described if quote else _type_name
 
     def bad(key: str, problem: str) -> None:
         problems.append(f"{source}: {key}: {problem}")
@@ -451,7 +431,7 @@ def ros_map_from_dict(spec: dict, source: str, folder: str | Path, within: str |
     unknown = [key for key in spec if key not in ROS_KEYS]
     for key in unknown if quote else unknown[:1]:
         if quote:
-            name = key if isinstance(key, str) and key.isprintable() and len(key) <= 40 else _short(key, 40)
+            name = key if isinstance(key, str) and key.isprintable() and len(key) <= 40 else shortened(key, 40)
             bad(name, f"unknown key{did_you_mean(key, ROS_KEYS)}; a ROS map has {', '.join(ROS_KEYS)}")
         else:
             close = sorted({c for c in (closest_match(k, ROS_KEYS) for k in unknown) if c is not None})
@@ -555,7 +535,7 @@ def read_movingai_map(path: str | Path, cell: float = 1.0) -> OccupancyMap:
     """
     source = str(path)
     if isinstance(cell, bool) or not isinstance(cell, numbers.Real) or not (math.isfinite(cell) and cell > 0):
-        raise WorldError(f"{source}: the cell size must be a positive finite number, got {_short(cell)}")
+        raise WorldError(f"{source}: the cell size must be a positive finite number, got {shortened(cell)}")
     data = read_regular_file(path, "MovingAI map", WorldError, limit=MAX_MAP_FILE_BYTES)
 
     header: dict[str, int] = {}

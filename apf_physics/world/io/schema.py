@@ -28,7 +28,7 @@ from apf_physics.world.field import FIELD_PRESETS, FieldParams
 from apf_physics.world.kinematics import KINEMATICS, LIMIT_BOUNDS, LIMIT_KEYS, UnicycleLimits
 from apf_physics.world.obstacles import CircleObstacle, Motion, Obstacle, PolygonObstacle
 from apf_physics.common.safefile import NamedFileError, named_file
-from apf_physics.common.safeyaml import key_text, shortened
+from apf_physics.common.safeyaml import described, key_text, shortened
 from apf_physics.world.core import FormationSpec, FormationTask, Frame
 
 T = TypeVar("T")
@@ -74,11 +74,6 @@ _GRID_KEYS = {"image", "resolution", "origin", "negate", "occupied_thresh", "fre
 
 
 # -- messages ----------------------------------------------------------------------------
-def _kind(value: Any) -> str:
-    """``list [1, 2, ...]``: the type and the shortened value (``null`` for an empty YAML value)."""
-    return "null" if value is None else f"{type(value).__name__} {shortened(value)}"
-
-
 def _did_you_mean(word: Any, choices: Sequence[str]) -> str:
     """``"did you mean 'x'? "`` for the choice most like ``word`` (:func:`~apf_physics.errors.closest_match`),
     else ``""``."""
@@ -152,7 +147,7 @@ class Checker:
 
     def number(self, value: Any, key: str, *, positive: bool = False, nonnegative: bool = False) -> float:
         if isinstance(value, bool) or not isinstance(value, numbers.Real):
-            raise self.bad(key, f"expected a number, got {_kind(value)}")
+            raise self.bad(key, f"expected a number, got {described(value)}")
         try:
             number = float(value)
         except OverflowError:
@@ -167,7 +162,7 @@ class Checker:
 
     def point(self, value: Any, key: str) -> tuple[float, float]:
         if not isinstance(value, (list, tuple)) or len(value) != 2:
-            raise self.bad(key, f"expected a point [x, y], got {_kind(value)}")
+            raise self.bad(key, f"expected a point [x, y], got {described(value)}")
         x = self.attempt(self.number, value[0], f"{key}[0]")
         y = self.attempt(self.number, value[1], f"{key}[1]")
         if x is None or y is None:
@@ -177,7 +172,7 @@ class Checker:
     def points(self, value: Any, key: str, *, at_least: int = 0, at_most: int, what: str = "points") -> np.ndarray:
         """A list of points, its length checked before any point is."""
         if not isinstance(value, (list, tuple)):
-            raise self.bad(key, f"expected a list of points [[x, y], ...], got {_kind(value)}")
+            raise self.bad(key, f"expected a list of points [[x, y], ...], got {described(value)}")
         if len(value) < at_least:
             raise self.bad(key, f"needs at least {at_least} point{'s' if at_least > 1 else ''}, got {len(value)}")
         if len(value) > at_most:
@@ -191,7 +186,7 @@ class Checker:
     def mapping(self, value: Any, key: str, allowed: set[str], required: Sequence[str] = ()) -> Mapping[str, Any]:
         """``value`` if it is a mapping; its unknown and missing keys are recorded (and skipped by the caller)."""
         if not isinstance(value, Mapping):
-            raise self.bad(key, f"expected a mapping, got {_kind(value)}")
+            raise self.bad(key, f"expected a mapping, got {described(value)}")
         for name in value:
             if not (isinstance(name, str) and name in allowed):
                 where = join_key(key, key_text(name)) if key else key_text(name)
@@ -206,7 +201,7 @@ class Checker:
 # -- the parts of a world ------------------------------------------------------------------
 def _parse_size(check: Checker, value: Any) -> tuple[float, float]:
     if not isinstance(value, (list, tuple)) or len(value) != 2:
-        raise check.bad("size", f"expected [width, height], got {_kind(value)}")
+        raise check.bad("size", f"expected [width, height], got {described(value)}")
     sides = [check.attempt(check.number, v, f"size[{i}]", positive=True) for i, v in enumerate(value)]
     for i, side in enumerate(sides):
         if side is not None and not MIN_SIDE <= side <= MAX_SIDE:
@@ -219,7 +214,7 @@ def _parse_size(check: Checker, value: Any) -> tuple[float, float]:
 
 def _parse_name(check: Checker, value: Any, key: str = "name") -> str:
     if not isinstance(value, str) or not value:
-        raise check.bad(key, f"expected a non-empty string, got {_kind(value)}")
+        raise check.bad(key, f"expected a non-empty string, got {described(value)}")
     if len(value) > MAX_NAME_CHARS:
         raise check.bad(key, f"at most {MAX_NAME_CHARS} characters, got {len(value):,}")
     if not value.isprintable():
@@ -232,7 +227,7 @@ def _parse_units(check: Checker, value: Any) -> str:
     if not isinstance(value, str) or not value or len(value) > MAX_UNIT_CHARS or not value.isprintable() \
             or value != value.strip():
         raise check.bad("units", f"expected the name of a unit of length, such as m or cm (at most {MAX_UNIT_CHARS} "
-                                 f"printable characters), got {_kind(value)}")
+                                 f"printable characters), got {described(value)}")
     return value
 
 
@@ -291,7 +286,7 @@ def _parse_motion(check: Checker, value: Any, key: str) -> Motion:
         check.bad(f"{key}.speed", f"at most 1 unit per control step, got {speed:g}")
     loop = body.get("loop", False)
     if not isinstance(loop, bool):
-        check.bad(f"{key}.loop", f"expected true or false, got {_kind(loop)}")
+        check.bad(f"{key}.loop", f"expected true or false, got {described(loop)}")
     phase = check.attempt(check.number, body.get("phase", 0.0), f"{key}.phase", nonnegative=True)
     if len(check.problems) > problems:
         raise Invalid
@@ -346,7 +341,7 @@ def _parse_obstacles(check: Checker, value: Any, box: tuple[np.ndarray, np.ndarr
     if value is None:
         return ()
     if not isinstance(value, list):
-        raise check.bad("obstacles", f"expected a list, got {_kind(value)}")
+        raise check.bad("obstacles", f"expected a list, got {described(value)}")
     if len(value) > MAX_OBSTACLES:
         raise check.bad("obstacles", f"at most {MAX_OBSTACLES:,} obstacles, got {len(value):,}")
     vertices = sum(len(o["polygon"]) for o in value
@@ -375,7 +370,7 @@ MAX_FORMATIONS = 64
 
 def _parse_formations(check: Checker, value: Any) -> tuple[FormationTask, ...]:
     if not isinstance(value, list) or not value:
-        check.bad("formations", f"expected a non-empty list of formations, got {_kind(value)}")
+        check.bad("formations", f"expected a non-empty list of formations, got {described(value)}")
         raise Invalid
     if len(value) > MAX_FORMATIONS:
         check.bad("formations", f"at most {MAX_FORMATIONS} formations, got {len(value):,}")
@@ -407,7 +402,7 @@ def _parse_formation(check: Checker, value: Any, key: str = "formation") -> Form
     default = FormationSpec()
     followers = body.get("followers", default.followers)
     if isinstance(followers, bool) or not isinstance(followers, int) or not 0 <= followers <= MAX_FOLLOWERS:
-        check.bad(f"{key}.followers", f"expected a whole number from 0 to {MAX_FOLLOWERS}, got {_kind(followers)}")
+        check.bad(f"{key}.followers", f"expected a whole number from 0 to {MAX_FOLLOWERS}, got {described(followers)}")
         followers = None
     comm_range = check.attempt(check.number, body.get("comm_range", default.comm_range), f"{key}.comm_range",
                                positive=True)
@@ -416,7 +411,7 @@ def _parse_formation(check: Checker, value: Any, key: str = "formation") -> Form
         check.bad(f"{key}.spacing", f"spacing {spacing:g} exceeds comm_range {comm_range:g}")
     shape = body.get("shape", default.shape)
     if shape not in ("line", "wedge", "offsets"):
-        check.bad(f"{key}.shape", f"expected 'line', 'wedge' or 'offsets', got {_kind(shape)}")
+        check.bad(f"{key}.shape", f"expected 'line', 'wedge' or 'offsets', got {described(shape)}")
     offsets: tuple[tuple[float, float], ...] = ()
     if shape == "offsets":
         if "offsets" not in body:
@@ -574,7 +569,7 @@ def parse_world(check: Checker, data: Any, source: str, confine: bool = False) -
         TooMany: :data:`MAX_COUNTED` problems are found.
     """
     if not isinstance(data, Mapping):
-        check.bad("", f"a world file must be a mapping of keys, got {_kind(data)}")
+        check.bad("", f"a world file must be a mapping of keys, got {described(data)}")
         return None
     several = data.get("formations") is not None
     has_grid = data.get("grid") is not None
