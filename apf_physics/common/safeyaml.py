@@ -117,6 +117,47 @@ class _Open:
     has_key: bool = False
     merges: list | None = None         # mappings merged in with ``<<``
 
+    def closed(self) -> list | dict:
+        """The value, with the mappings merged with ``<<`` under its own keys (explicit keys win, then
+        the first merged mapping, then the next)."""
+        if self.merges:
+            merged: dict = {}
+            for source in reversed(self.merges):
+                merged.update(source)
+            merged.update(self.value)
+            self.value.clear()
+            self.value.update(merged)
+        return self.value
+
+    def add(self, value: Any, size: int, where: str) -> None:
+        """Put ``value`` (``size`` values, aliases expanded) in: a list item, a key, or the waiting key's value."""
+        self.size += size
+        if isinstance(self.value, list):
+            self.value.append(value)
+        elif not self.has_key:
+            if value is _MERGE:
+                if self.merges is not None:
+                    raise _YamlLimit(f"{where}: key '<<' appears twice in one mapping")
+                self.merges = []
+            else:
+                try:
+                    hash(value)
+                except TypeError:
+                    raise _YamlLimit(f"{where}: a {type(value).__name__} as a mapping key") from None
+                if value in self.value:
+                    raise _YamlLimit(f"{where}: key {shortened(value)} appears twice in one mapping",
+                                     f"{where}: a key appears twice in one mapping")
+            self.key, self.has_key = value, True
+        else:
+            if self.key is _MERGE:
+                sources = [value] if isinstance(value, dict) else value
+                if not isinstance(sources, list) or not all(isinstance(m, dict) for m in sources):
+                    raise _YamlLimit(f"{where}: '<<' merges a mapping or a list of mappings")
+                self.merges.extend(sources)
+            else:
+                self.value[self.key] = value
+            self.has_key = False
+
 
 def _scalar(event: yaml.ScalarEvent) -> Any:
     """The Python value of a scalar, by the safe loader's rules for its tag."""
@@ -168,14 +209,7 @@ def _load_yaml(text: str) -> Any:
             continue
         if isinstance(event, yaml.CollectionEndEvent):
             frame = stack.pop()
-            value, size, count = frame.value, frame.size, 1   # its contents are counted already
-            if frame.merges:  # explicit keys win, then the first merged mapping, then the next
-                merged: dict = {}
-                for source in reversed(frame.merges):
-                    merged.update(source)
-                merged.update(value)
-                value.clear()
-                value.update(merged)
+            value, size, count = frame.closed(), frame.size, 1   # its contents are counted already
             if frame.anchor:
                 anchors[frame.anchor] = (value, size)
                 unfinished.discard(frame.anchor)
@@ -206,33 +240,7 @@ def _load_yaml(text: str) -> Any:
         if not stack:
             document = value
             continue
-        parent = stack[-1]
-        parent.size += size
-        if isinstance(parent.value, list):
-            parent.value.append(value)
-        elif not parent.has_key:
-            if value is _MERGE:
-                if parent.merges is not None:
-                    raise _YamlLimit(f"{where}: key '<<' appears twice in one mapping")
-                parent.merges = []
-            else:
-                try:
-                    hash(value)
-                except TypeError:
-                    raise _YamlLimit(f"{where}: a {type(value).__name__} as a mapping key") from None
-                if value in parent.value:
-                    raise _YamlLimit(f"{where}: key {shortened(value)} appears twice in one mapping",
-                                     f"{where}: a key appears twice in one mapping")
-            parent.key, parent.has_key = value, True
-        else:
-            if parent.key is _MERGE:
-                sources = [value] if isinstance(value, dict) else value
-                if not isinstance(sources, list) or not all(isinstance(m, dict) for m in sources):
-                    raise _YamlLimit(f"{where}: '<<' merges a mapping or a list of mappings")
-                parent.merges.extend(sources)
-            else:
-                parent.value[parent.key] = value
-            parent.has_key = False
+        stack[-1].add(value, size, where)
     return document
 
 
