@@ -524,6 +524,8 @@ class World:
             data["grid"] = dict(grids[0].spec)
         else:
             data["size"] = [self.size[0] * u, self.size[1] * u]
+            if any(frame.offset):
+                data["origin"] = list(frame.offset)
         data.update({
             "robot": self._robot_to_file(),
             "goal_tolerance": self.goal_tolerance * u,
