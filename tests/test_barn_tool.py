@@ -81,16 +81,17 @@ def test_the_tool_runs_and_writes_metres_and_seconds(barn, tmp_path, capsys):
     text = capsys.readouterr().out
     assert "astar" in text and "1/1" in text
     result = json.loads(out.read_text())
-    (episode,) = result["planners"][0]["episodes"]
+    (episode,) = result["runs"][0]["episodes"]
     assert episode["outcome"] == "reached" and episode["time_s"] == pytest.approx(episode["steps"] * 0.21)
     assert episode["score"] == pytest.approx(0.25)
     assert math.hypot(episode["final_position_m"][0] + 2, episode["final_position_m"][1] - 13) <= 1.0
-    assert load_world(tmp_path / "worlds" / "barn_0.yaml").frame.unit == 0.42
+    assert load_world(tmp_path / "worlds" / "barn_0_0.42.yaml").frame.unit == 0.42
 
 
 @pytest.mark.parametrize("argv, words", [
     (["--worlds", "0"], ["no world_0.world"]),
     (["--worlds", "dev", "--step", "-1"], ["--step"]),
+    (["--worlds", "dev", "--kinematics", "diff"], ["--kinematics"]),
     (["--worlds", "300"], ["0 to 299"]),
     (["--worlds", "a-b"], ["--worlds"]),
 ])

@@ -34,6 +34,7 @@ Usage::
 
     python tools/barn.py --barn DIR --worlds dev --step 0.15 --planner dqn,astar \\
         [--kinematics unicycle] [--model M] [--json out.json] [--write-worlds DIR]
+    python tools/barn.py --barn DIR --worlds dev --step 0.15,0.07,0.42 --kinematics holonomic,unicycle   # the table
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -55,7 +57,7 @@ from apf_physics.evaluate import evaluate  # noqa: E402
 from apf_physics.planners import make_planner  # noqa: E402
 from apf_physics.safefile import check_writable, read_regular_file, write_text  # noqa: E402
 from apf_physics.sdfworld import read_sdf_obstacles  # noqa: E402
-from apf_physics.worldfile import dump_world_yaml, world_from_dict  # noqa: E402
+from apf_physics.worldfile import world_from_dict  # noqa: E402
 
 WORLDS = 300
 """BARN's worlds: ``world_0`` to ``world_299``."""
@@ -166,34 +168,40 @@ def world_indices(text: str) -> list[int]:
     return sorted(set(out))
 
 
-def run(args: argparse.Namespace) -> int:
-    if not (args.step > 0 and math.isfinite(args.step)):
-        raise UserError(f"--step: must be a positive number of metres, got {args.step:g}")
-    if not (args.radius > 0 and math.isfinite(args.radius)):
-        raise UserError(f"--radius: must be a positive number of metres, got {args.radius:g}")
-    if args.json:
-        check_writable(args.json, create_parent=True)
-    indices = world_indices(args.worlds)
-    folder = barn_folder(Path(args.barn))
-    names = [n.strip() for n in args.planner.split(",") if n.strip()]
-    planners = [make_planner(n, model=args.model) for n in names]
-    worlds, optimal = [], {}
-    for i in indices:
-        data = world_dict(folder / f"world_{i}.world", i, args.radius, args.step)
-        world = world_from_dict(data, str(folder / f"world_{i}.world"))
-        if args.write_worlds:
-            write_text(check_writable(Path(args.write_worlds) / f"barn_{i}.yaml", create_parent=True),
-                       dump_world_yaml(world))
-        worlds.append(world)
-        optimal[world.name] = optimal_time(read_path(folder / "path_files" / f"path_{i}.npy"))
-    seconds_per_step = args.step / TOP_SPEED
+def parse_steps(text: str) -> list[float]:
+    """``--step``: one step length or several, separated by commas [m]."""
+    out = []
+    for part in text.split(","):
+        try:
+            value = float(part)
+        except ValueError:
+            value = math.nan
+        if not (value > 0 and math.isfinite(value)):
+            raise UserError(f"--step: expected positive lengths in metres separated by commas, got {part!r}")
+        out.append(value)
+    return out
+
+
+def parse_kinds(text: str) -> list[str]:
+    """``--kinematics``: ``holonomic``, ``unicycle``, or both separated by a comma."""
+    kinds = [k.strip() for k in text.split(",") if k.strip()]
+    bad = [k for k in kinds if k not in ("holonomic", "unicycle")]
+    if bad or not kinds:
+        raise UserError(f"--kinematics: expected holonomic, unicycle or both (holonomic,unicycle), got {text!r}")
+    return kinds
+
+
+def run_one(worlds: list, optimal: dict, names: list[str], model: str | None, step: float, kind: str) -> list[dict]:
+    """Every planner on ``worlds`` at one step length and robot kind: one result per planner."""
+    seconds_per_step = step / TOP_SPEED
     max_steps = math.ceil(TIMEOUT / seconds_per_step)
-    results, episodes_of = [], {}
-    for name, planner in zip(names, planners):
+    results, lengths = [], {}
+    for name in names:
+        planner = make_planner(name, model=model)
         start = time.perf_counter()
-        ev = evaluate(planner, worlds, max_steps=max_steps, kinematics=args.kinematics)
+        ev = evaluate(planner, worlds, max_steps=max_steps, kinematics=kind)
         elapsed = time.perf_counter() - start
-        episodes_of[name] = {e.world: e for e in ev.episodes}
+        lengths[name] = {e.world: (e.success, e.path_length) for e in ev.episodes}
         rows = []
         for world, e in zip(worlds, ev.episodes):
             at = e.steps * seconds_per_step
@@ -202,44 +210,73 @@ def run(args: argparse.Namespace) -> int:
                 "collision_with": list(e.contacts), "steps": int(e.steps), "time_s": round(at, 3),
                 "optimal_time_s": round(optimal[world.name], 4),
                 "score": round(score(e.success, at, optimal[world.name]), 5),
-                "path_length_m": round(e.path_length * args.step, 4),
+                "path_length_m": round(e.path_length * step, 4),
                 "final_position_m": [round(float(v), 3) for v in world.frame.to_file(e.path[-1])]})
-        results.append({"planner": name, "seconds": round(elapsed, 1), "episodes": rows})
-    reference = episodes_of.get("astar")
-    header = (f"{'planner':<16} {'worlds':>6} {'success':>9} {'collide':>8} {'trapped':>8} {'timeout':>8} "
-              f"{'score':>7} {'path/A*':>8} {'s':>7}")
-    lines = [f"BARN {args.worlds}: {len(worlds)} worlds, step {args.step:g} m, robot radius {args.radius:g} m "
-             f"({args.radius / args.step:.2f} steps), {args.kinematics or 'holonomic'}; a step takes "
-             f"{seconds_per_step:g} s, timeout {max_steps} steps", header, "-" * len(header)]
-    failures = []
+        results.append({"planner": name, "step_m": step, "kinematics": kind, "seconds_per_step": seconds_per_step,
+                        "max_steps": max_steps, "seconds": round(elapsed, 1), "episodes": rows})
+    reference = lengths.get("astar")
     for result in results:
         rows = result["episodes"]
         count = {k: sum(r["outcome"] == k for r in rows) for k in ("reached", "collision", "trapped", "timeout")}
         ratios = []
         if reference is not None:
             for world, r in zip(worlds, rows):
-                ref = reference[world.name]
-                if r["success"] and ref.success and ref.path_length > 0:
-                    ratios.append(episodes_of[result["planner"]][world.name].path_length / ref.path_length)
-        mean_score = float(np.mean([r["score"] for r in rows]))
+                ok, length = reference[world.name]
+                if r["success"] and ok and length > 0:
+                    ratios.append(lengths[result["planner"]][world.name][1] / length)
         result["summary"] = {"worlds": len(rows), "successes": count["reached"], "collisions": count["collision"],
                              "trapped": count["trapped"], "timeouts": count["timeout"],
-                             "mean_score": round(mean_score, 4),
+                             "mean_score": round(float(np.mean([r["score"] for r in rows])), 4),
                              "path_over_astar": round(float(np.mean(ratios)), 4) if ratios else None,
                              "path_over_astar_worlds": len(ratios)}
-        ratio = f"{np.mean(ratios):.3f}" if ratios else "-"
-        lines.append(f"{result['planner']:<16} {len(rows):>6} {count['reached']:>4}/{len(rows):<4} "
-                     f"{count['collision']:>8} {count['trapped']:>8} {count['timeout']:>8} {mean_score:>7.4f} "
-                     f"{ratio:>8} {result['seconds']:>7.1f}")
-        failures += [f"  {result['planner']}: world {r['world']}: {r['outcome']}"
-                     + (f" ({', '.join(r['collision_with'])})" if r["collision_with"] else "")
-                     + f" at {r['final_position_m']} after {r['steps']} steps" for r in rows if not r["success"]]
+    return results
+
+
+def run(args: argparse.Namespace) -> int:
+    steps = parse_steps(args.step)
+    kinds = parse_kinds(args.kinematics)
+    if not (args.radius > 0 and math.isfinite(args.radius)):
+        raise UserError(f"--radius: must be a positive number of metres, got {args.radius:g}")
+    if args.json:
+        check_writable(args.json, create_parent=True)
+    indices = world_indices(args.worlds)
+    folder = barn_folder(Path(args.barn))
+    names = [n.strip() for n in args.planner.split(",") if n.strip()]
+    for name in names:
+        make_planner(name, model=args.model)          # an unknown planner or model: said before any work
+    header = (f"{'step':>6} {'r/step':>6} {'kind':<9} {'planner':<16} {'worlds':>6} {'success':>9} {'collide':>8} "
+              f"{'trapped':>8} {'timeout':>8} {'score':>7} {'path/A*':>8} {'s':>7}")
+    lines = [f"BARN {args.worlds}: {len(indices)} worlds, robot radius {args.radius:g} m; a control step takes "
+             "step / 2 s (the Jackal's 2 m/s); timeout 100 s", header, "-" * len(header)]
+    failures, runs = [], []
+    for step in steps:
+        worlds, optimal = [], {}
+        for i in indices:
+            data = world_dict(folder / f"world_{i}.world", i, args.radius, step)
+            world = world_from_dict(data, str(folder / f"world_{i}.world"))
+            if args.write_worlds:
+                write_text(check_writable(Path(args.write_worlds) / f"barn_{i}_{step:g}.yaml", create_parent=True),
+                           yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120))
+            worlds.append(world)
+            optimal[world.name] = optimal_time(read_path(folder / "path_files" / f"path_{i}.npy"))
+        for kind in kinds:
+            for result in run_one(worlds, optimal, names, args.model, step, kind):
+                runs.append(result)
+                summary, n = result["summary"], result["summary"]["worlds"]
+                ratio = "-" if summary["path_over_astar"] is None else f"{summary['path_over_astar']:.3f}"
+                lines.append(f"{step:>6g} {args.radius / step:>6.2f} {kind:<9} {result['planner']:<16} {n:>6} "
+                             f"{summary['successes']:>4}/{n:<4} {summary['collisions']:>8} {summary['trapped']:>8} "
+                             f"{summary['timeouts']:>8} {summary['mean_score']:>7.4f} {ratio:>8} {result['seconds']:>7.1f}")
+                failures += [f"  {step:g} m {kind} {result['planner']}: world {r['world']}: {r['outcome']}"
+                             + (f" ({', '.join(r['collision_with'])})" if r["collision_with"] else "")
+                             + f" at {r['final_position_m']} after {r['steps']} steps"
+                             for r in result["episodes"] if not r["success"]]
     print("\n".join(lines + (["failures:"] + failures if failures else [])))
     if args.json:
-        meta = {"worlds": args.worlds, "indices": indices, "step_m": args.step, "robot_radius_m": args.radius,
-                "kinematics": args.kinematics or "holonomic", "model": args.model,
-                "seconds_per_step": seconds_per_step, "max_steps": max_steps}
-        write_text(args.json, json.dumps({"barn": meta, "planners": results}, indent=1))
+        meta = {"worlds": args.worlds, "indices": indices, "robot_radius_m": args.radius, "model": args.model,
+                "steps_m": steps, "kinematics": kinds, "goal": list(GOAL), "start": list(START),
+                "goal_reach_m": GOAL_REACH, "top_speed_m_s": TOP_SPEED, "timeout_s": TIMEOUT}
+        write_text(args.json, json.dumps({"barn": meta, "runs": runs}, indent=1))
         print(f"wrote {args.json}")
     return 0
 
@@ -250,14 +287,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--barn", required=True, metavar="DIR",
                         help="nav-competition-icra2022's root, or its jackal_helper/worlds/BARN folder")
     parser.add_argument("--worlds", default="dev", help="dev (index divisible by 3), heldout, all, or 0,3,6 / 0-30")
-    parser.add_argument("--step", type=float, default=0.15, help="robot travel per control step [m] (default 0.15)")
+    parser.add_argument("--step", default="0.15",
+                        help="robot travel per control step [m], or several separated by commas (default 0.15)")
     parser.add_argument("--radius", type=float, default=0.21, help="robot radius [m] (default 0.21, a Jackal)")
     parser.add_argument("--planner", default="dqn,astar", help="planners, separated by commas (default dqn,astar)")
     parser.add_argument("--model", help="model file for the learned planners (default: the shipped one)")
-    parser.add_argument("--kinematics", choices=("holonomic", "unicycle"), default=None,
-                        help="robot kind (default holonomic); unicycles take the package's default limits, per step")
+    parser.add_argument("--kinematics", default="holonomic",
+                        help="holonomic (default), unicycle, or holonomic,unicycle; unicycles take the package's "
+                             "default limits, per step")
     parser.add_argument("--json", metavar="OUT", help="write every episode (in metres and seconds) and the summaries")
-    parser.add_argument("--write-worlds", metavar="DIR", help="also write the world files (barn_N.yaml) here")
+    parser.add_argument("--write-worlds", metavar="DIR", help="also write the world files (barn_N_STEP.yaml) here")
     args = parser.parse_args(argv)
     try:
         return run(args)
