@@ -218,7 +218,7 @@ def test_a_configuration_saves_to_yaml_and_loads_back(tmp_path):
     config = preset("map", hidden=(16, 16), total_steps=40)
     path = config.to_yaml(tmp_path / "config.yaml")
     text = path.read_text()
-    assert "imitation:\n" in text and "  map_moves: fine\n" in text and "network:\n" in text
+    assert "imitation:\n" in text and "  map_moves: nodes\n" in text and "network:\n" in text
     assert load_config(path) == config
     # a flat file (or an old model file's configuration) reads the same
     flat = tmp_path / "flat.yaml"

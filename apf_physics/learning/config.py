@@ -68,10 +68,10 @@ from typing import Any, Literal, Optional, Union
 
 import yaml
 
-from apf_physics.control.shield import MOVE_SETS
 from apf_physics.envs.reward import REWARD_PRESETS, RewardWeights
 from apf_physics.errors import UserError, did_you_mean
-from apf_physics.world.generate import FAMILIES, MOVING_FAMILIES, STRUCTURE_FAMILIES
+from apf_physics.world.generate import FAMILIES, MOVING_FAMILIES, SCALED_FAMILIES, STRUCTURE_FAMILIES
+from apf_physics.world.kinematics import MOVE_KINDS
 from apf_physics.models.network import OBS_TRANSFORMS
 from apf_physics.sensing.observation import SCALES, ObserverConfig
 from apf_physics.common.safefile import atomic_path, read_text_file
@@ -87,12 +87,12 @@ ObsScale = Literal[SCALES]
 ObsTransform = Literal[OBS_TRANSFORMS]
 Loss = Literal["mse", "huber"]
 TargetUpdate = Literal["none", "hard", "soft"]
-MoveSet = Literal[tuple(MOVE_SETS)]
+MoveSet = Literal[tuple(MOVE_KINDS)]
 EVAL_FIGURES = ("success", "trap_success", "collisions", "length_ratio", "spl", "random_success")
 """Figures of an evaluation that :attr:`EvalConfig.select` may name (see :mod:`apf_physics.learning.validation`)."""
 HELDOUT_SEED = 100
 """Seed of the project's held-out generated test set; training and validation never use it."""
-TRAIN_FAMILIES = FAMILIES + MOVING_FAMILIES + STRUCTURE_FAMILIES
+TRAIN_FAMILIES = FAMILIES + MOVING_FAMILIES + STRUCTURE_FAMILIES + SCALED_FAMILIES
 """Generator families a training pool may draw from (single-robot worlds)."""
 RESUMABLE = frozenset({"total_steps", "total_episodes", "time_limit", "target_success", "threads", "eval_every",
                        "checkpoint_every", "log_every", "save_buffer", "loss_limit"})
@@ -247,7 +247,12 @@ class ImitationConfig:
     map_channels: int = 8
     """Hidden channels of the map network's cost map."""
     map_moves: MoveSet = "fine"
-    """The network's move set (:data:`~apf_physics.control.shield.MOVE_SETS`)."""
+    """The network's moves (:data:`~apf_physics.world.kinematics.MOVE_KINDS`: a fixed set, or "nodes")."""
+    map_dv_clip: float = 4.0
+    """|ΔV| the map network's head reads is clipped to this (:attr:`~apf_physics.models.mapnet.MapNetwork.dv_clip`)."""
+    map_least_resolution: Optional[int] = None
+    """Moves onto nodes: the graph the network learns and plans on has at least this many nodes per
+    step (:func:`~apf_physics.sim.nodegraph.resolution_for`; None: ``map_resolution``)."""
     grad_iterations: int = 24
     """Value-iteration (Bellman) updates back-propagated through, after the fixed point."""
     demo_positions: int = 256
@@ -259,6 +264,9 @@ class ImitationConfig:
         _check([(1 <= self.map_resolution <= 8, "map_resolution must be 1 to 8"),
                 (self.map_channels >= 1 and self.demo_positions >= 1, "map_channels and demo_positions must be positive"),
                 (self.grad_iterations >= 0, "grad_iterations must not be negative"),
+                (0 < self.map_dv_clip <= 1e3, "map_dv_clip must be from 0 to 1,000"),
+                (self.map_least_resolution is None or 1 <= self.map_least_resolution <= 16,
+                 "map_least_resolution must be 1 to 16"),
                 (self.label_temperature > 0, "label_temperature must be positive")])
 
 
@@ -604,9 +612,9 @@ LAYERS: dict[str, tuple[str | None, dict[str, Any], str]] = {
                                        families=FAMILIES + MOVING_FAMILIES * len(FAMILIES), time_limit=2400.0),
                "general-revisit with the field a step earlier, half its pool moving: the shipped moving.pt"),
     "map": (None, dict(
-        method="imitation", reward="thesis-general", families=FAMILIES + STRUCTURE_FAMILIES,
-        map_sizes=(50.0, 100.0, 250.0), pool_size=48, refresh_every=600, learning_rate=3e-3, total_episodes=None,
-        total_steps=1_000, time_limit=1_800.0, eval_every=125, eval_shield=False,
+        method="imitation", reward="thesis-general", families=FAMILIES + STRUCTURE_FAMILIES + SCALED_FAMILIES,
+        map_sizes=(50.0, 100.0, 250.0), map_moves="nodes", map_dv_clip=8.0, pool_size=48, refresh_every=600,
+        learning_rate=3e-3, total_episodes=None, total_steps=1_250, time_limit=5_400.0, eval_every=125, eval_shield=False,
         select=("-collisions", "success", "spl"), validation_worlds=24, validation_starts=2, validation_seed=1,
         log_every=50, checkpoint_every=250, hidden=(32, 32), negative_slope=0.01),
         "the map network by imitation of A*: the shipped map.pt"),

@@ -294,7 +294,7 @@ class FieldImage:
         if world.moving:   # the field as the frames show it: at step t, or of the static obstacles
             grid = raster.grid
             nodes = grid.node_points()
-            values = apf.potential(nodes, world.targets, shown, world.field)
+            values = apf.potential(nodes, world.targets, shown, world.field, world.robot_radius)
             raster = apf.Raster(grid, values.reshape(grid.shape))
 
         shade, shade_potential = _shade(raster, world, scale, rows, cols, scaling, shown)

@@ -523,7 +523,7 @@ class Moment:
     def _field_set(self) -> ShapeSet | None:
         """:attr:`movers` indexed for the field (reach ``p0``); None when there are none."""
         if self._field_shapes is None and self.movers:
-            self._field_shapes = ShapeSet(self.movers, self.world.field.p0)
+            self._field_shapes = ShapeSet(self.movers, max(self.world.field.p0, self.world.robot_radius))
         return self._field_shapes
 
     # -- the field ---------------------------------------------------------------------
@@ -531,17 +531,19 @@ class Moment:
         """Total potential U at ``(N, 2)`` points (Model §1)."""
         points = np.asarray(points, float).reshape(-1, 2)
         world = self.world
-        u = apf.potential(points, world.targets, world.shapes, world.field)
+        r = world.robot_radius     # the cap where the robot touches (Model §1 as the README states it)
+        u = apf.potential(points, world.targets, world.shapes, world.field, r)
         movers = self._field_set()
-        return u + apf.repulsive(points, movers, world.field) if movers is not None else u
+        return u + apf.repulsive(points, movers, world.field, r) if movers is not None else u
 
     def gradient(self, points: np.ndarray) -> np.ndarray:
         """``∇U`` at ``(N, 2)`` points."""
         points = np.asarray(points, float).reshape(-1, 2)
         world = self.world
-        g = apf.gradient(points, world.targets, world.shapes, world.field)
+        r = world.robot_radius
+        g = apf.gradient(points, world.targets, world.shapes, world.field, r)
         movers = self._field_set()
-        return g + apf.repulsive_gradient(points, movers, world.field) if movers is not None else g
+        return g + apf.repulsive_gradient(points, movers, world.field, r) if movers is not None else g
 
     # -- geometry ----------------------------------------------------------------------
     def obstacle_distance(self, points: np.ndarray, static: bool = False, near: bool = False) -> np.ndarray:

@@ -245,7 +245,10 @@ def _nearest_obstacle(world: World, point: np.ndarray, index: Sequence[int] | No
     k = int(np.argmin(distances))
     if isinstance(placed[k], GridObstacle):
         return "the grid map's occupied cells"
-    return obstacle_place(index[k] if index is not None else k, getattr(world.obstacles[k], "name", None))
+    name = getattr(world.obstacles[k], "name", None)
+    if index is not None and k >= len(index):   # not one of the file's list: the SDF world's
+        return f"the SDF world's collision {name!r}"
+    return obstacle_place(index[k] if index is not None else k, name)
 
 
 def _check_formations(check: Checker, world: World) -> None:
@@ -302,7 +305,7 @@ def _build(check: Checker, data: Any, source: str, confine: bool = False) -> Wor
     goal_tolerance = None if parts.goal_tolerance is None else parts.goal_tolerance / frame.unit
     targets = None if parts.targets is None else to_world(parts.targets)
     starts = None if parts.starts is None else to_world(parts.starts).reshape(-1, 2)
-    obstacles = parts.obstacles
+    obstacles = None if parts.obstacles is None or parts.sdf is None else parts.obstacles + parts.sdf
     if obstacles is not None:
         obstacles = tuple(obstacle_to_steps(frame, o) for o in obstacles)
         if grid is not None:
@@ -322,7 +325,8 @@ def _build(check: Checker, data: Any, source: str, confine: bool = False) -> Wor
     world = World(parts.name, size, robot_radius, goal_tolerance, parts.params, obstacles, targets, starts, formation,
                   source, formations, frame=frame, unicycle=unicycle)
     _check_substeps(check, world)
-    _check_placement(check, world)
+    # with an SDF world, a placement problem tells the file's obstacles from the SDF world's
+    _check_placement(check, world, {"obstacles": list(range(len(parts.obstacles)))} if parts.sdf else None)
     _check_routes(check, world)
     _check_formations(check, world)
     return world
@@ -351,15 +355,15 @@ def _check_what_parsed(check: Checker, parts: Any, size, robot_radius, goal_tole
     obstacles that parsed, so one report lists every problem (each named by its index in the file)."""
     if size is None or robot_radius is None or goal_tolerance is None or parts.params is None or parts.formations:
         return
-    if check.keys & {"size", "robot", "robot_radius", "goal_tolerance", "field", "grid"}:
+    if check.keys & {"size", "origin", "robot", "robot_radius", "goal_tolerance", "field", "grid", "sdf"}:
         return                                  # the map or the robot itself is wrong: placement would mislead
-    index: dict[str, list[int]] = {}
+    index: dict[str, list[int]] = {"obstacles": list(range(len(parts.obstacles)))} if parts.sdf and parts.obstacles is not None else {}
     if obstacles is None:
         if "obstacles" not in check.partial:
             return
         kept, index["obstacles"] = check.partial["obstacles"]
         frame = parts.frame
-        obstacles = tuple(obstacle_to_steps(frame, o) for o in kept)
+        obstacles = tuple(obstacle_to_steps(frame, o) for o in tuple(kept) + tuple(parts.sdf or ()))
         if parts.grid is not None:
             obstacles += (GridObstacle(parts.grid.occupied, parts.grid.cell / frame.unit, (0.0, 0.0),
                                        spec=_grid_spec(grid_value, source)),)
