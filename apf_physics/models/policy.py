@@ -12,7 +12,7 @@ import torch
 
 from apf_physics.control.shield import MOVE_SETS, SAFETY, move_clearance
 from apf_physics.models.files import SavedModel, load_model, observer_of
-from apf_physics.models.mapnet import MapNetwork, move_features, replan, sample_values
+from apf_physics.models.mapnet import UNREACHED, MapNetwork, move_features, replan, sample_values
 from apf_physics.models.network import QNetwork
 from apf_physics.sensing.mapview import MapView
 from apf_physics.sensing.observation import ObserverConfig
@@ -222,6 +222,30 @@ class MapPolicy:
                 out[i] = map_scores(self.network, patch, patch_v, position[None], self.moves, room[i:i + 1],
                                     du[i:i + 1]).numpy()[0]
             return out
+
+    def node_values(self, world: World, goal: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """(K,) float32 V at ``points`` of the map's values toward a target at ``goal`` (:data:`UNREACHED`
+        where no way leads): a fleet robot's table (:mod:`apf_physics.control.fleet`). The values are
+        planned in a view of ``world`` with that target alone, dropped afterwards (what the map alone
+        determines stays shared)."""
+        view, v = self.values(world.with_task(np.asarray(goal, float).reshape(1, 2), np.zeros((0, 2))))
+        with _threads_for(1), torch.inference_mode():
+            sampled, found = sample_values(v, torch.from_numpy(view.free), view.grid.origin, view.grid.resolution,
+                                           torch.from_numpy(np.asarray(points, float)).to(v.dtype))
+        return np.where(found.numpy(), sampled.numpy(), UNREACHED).astype(np.float32)
+
+    def move_scores(self, here: np.ndarray, there: np.ndarray, moves: np.ndarray, room: np.ndarray,
+                    du: np.ndarray) -> np.ndarray:
+        """(N, M) action values from V sampled at the robots (``here``, (N,)) and at the ends of their
+        ``moves`` (``there``, (N, M); :data:`UNREACHED` where none was found): what :meth:`q_values`
+        computes from the map, for callers that read V from tables of their own (a fleet's)."""
+        with _threads_for(1), torch.inference_mode():
+            there_t = torch.from_numpy(np.asarray(there, np.float32))
+            features = move_features(torch.from_numpy(np.asarray(here, np.float32)), there_t, there_t > UNREACHED / 2,
+                                     torch.from_numpy(np.hypot(*np.asarray(moves, float).T)).float(),
+                                     torch.from_numpy(np.asarray(room, np.float32)),
+                                     torch.from_numpy(np.asarray(du, np.float32)))
+            return self.network.scores(features).numpy()
 
     def among_others(self, world: World, view: MapView, v: torch.Tensor,
                     position: np.ndarray) -> tuple[MapView, torch.Tensor]:

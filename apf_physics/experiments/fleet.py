@@ -1,0 +1,337 @@
+"""Fleets: many robots on one map, each to its own goal, all at once, through the engine.
+
+:func:`rollout_fleet` runs a :class:`~apf_physics.world.core.Fleet` (a world file's ``robots:``, or
+the first N lines of a MovingAI scenario file) as one crowd of single-robot slots of one
+:class:`~apf_physics.sim.engine.Stepper` (one pymunk space: robots meet). Each control step the
+planner scores every robot's nine unit moves toward its own goal
+(:meth:`~apf_physics.planners.base.Planner.fleet_values`) and the fleet's rule picks the moves
+(:func:`~apf_physics.control.fleet.fleet_moves`: priority inheritance under the shield among robots).
+
+**One-shot** (the MAPF benchmark's convention): the run ends when every robot stands on its goal
+at once, or at the step limit. A robot's cost is the step at which it last arrived on its goal
+(a robot on its goal may be pushed off it and come back; one that is not on it at the end costs
+every step of the run); the sum of costs and the makespan are over these. **Lifelong**: a robot
+that arrives is given its next goal at once, drawn from a seeded stream of its own (free nodes
+of its region, the same for every planner); the run lasts a fixed horizon and its throughput is
+the goals reached per step.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from apf_physics.control.fleet import STAY, Lattice, Priorities, fleet_moves, preferences
+from apf_physics.control.shield import ACTIONS, SAFETY
+from apf_physics.errors import UserError
+from apf_physics.experiments.rollout import Episode, default_max_steps
+from apf_physics.planners.base import Planner
+from apf_physics.sim.engine import Outcome, Stepper
+from apf_physics.world.core import Fleet, World
+from apf_physics.world.io.units import length_to_file, points_to_file, show_length, show_point
+
+
+@dataclass(frozen=True)
+class FleetNodes:
+    """A fleet placed on its lattice (:func:`place_fleet`).
+
+    Attributes:
+        lattice: The lattice the robots stand on.
+        starts: (N,) each robot's start node.
+        goals: (N,) each robot's goal node (the node nearest its target).
+    """
+
+    lattice: Lattice
+    starts: np.ndarray
+    goals: np.ndarray
+
+
+def place_fleet(world: World, fleet: Fleet, distinct_goals: bool = True) -> FleetNodes:
+    """The lattice through the first robot's start, and every robot's start and goal node on it.
+
+    Raises:
+        UserError: A start off the lattice or not on a free node, two robots starting on one node,
+            a target with no free node within the goal tolerance, or cut off from the robot's start,
+            two robots with one goal node (``distinct_goals``), or robots too large for one step
+            between neighbours.
+    """
+    where = world.label
+    frame = world.frame
+    if world.moving:
+        raise UserError(f"{where}: a fleet runs among static obstacles only (the world has moving ones)")
+    if 2 * world.robot_radius + SAFETY >= 1.0:
+        raise UserError(f"{where}: robot radius {show_length(frame, world.robot_radius)} is too large for a fleet: "
+                        f"neighbouring robots stand one step ({show_length(frame, 1.0)}) apart")
+    lattice = Lattice.of(world, fleet.starts[0])
+    starts = lattice.nearest(fleet.starts)
+    off = np.flatnonzero(~lattice.on_node(fleet.starts))
+    if len(off):
+        i = int(off[0])
+        raise UserError(f"{where}: {fleet.labels[i]}: start {show_point(frame, fleet.starts[i], 6)} is off the fleet's "
+                        f"lattice (nodes one step apart through the first robot's start; the nearest node is "
+                        f"{show_point(frame, lattice.points(starts[i:i + 1])[0], 6)})")
+    _refuse(where, fleet, ~lattice.free[starts], "start {p} is inside an obstacle, or nearer one than the robot "
+                                                 "radius and the safety margin")
+    _refuse_shared(where, fleet, starts, "start", frame, lattice)
+    goals = lattice.nearest(fleet.targets)
+    far = np.hypot(*(lattice.points(goals) - fleet.targets).T) > world.goal_tolerance
+    _refuse(where, fleet, far | ~lattice.free[goals], "target {t} has no free node of the fleet's lattice within "
+                                                      f"the goal tolerance {show_length(frame, world.goal_tolerance)}")
+    regions = lattice.regions()
+    _refuse(where, fleet, regions[starts] != regions[goals], "target {t} cannot be reached from its start {p}")
+    if distinct_goals:
+        _refuse_shared(where, fleet, goals, "goal", frame, lattice)
+    return FleetNodes(lattice, starts, goals)
+
+
+def _refuse(where: str, fleet: Fleet, bad: np.ndarray, message: str) -> None:
+    """Raise for the first robot marked ``bad``, ``message`` naming its start ``{p}`` and target ``{t}``."""
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise UserError(f"{where}: {fleet.labels[i]}: " + message.format(
+            p=list(np.round(fleet.starts[i], 6)), t=list(np.round(fleet.targets[i], 6))))
+
+
+def _refuse_shared(where: str, fleet: Fleet, nodes: np.ndarray, what: str, frame, lattice: Lattice) -> None:
+    """Raise when two robots share a start (or goal) node."""
+    _, first, counts = np.unique(nodes, return_index=True, return_counts=True)
+    if (counts > 1).any():
+        node = nodes[first[np.flatnonzero(counts > 1)[0]]]
+        i, j = np.flatnonzero(nodes == node)[:2].tolist()
+        raise UserError(f"{where}: {fleet.labels[j]}: its {what} is {fleet.labels[i]}'s (two robots on one cell, "
+                        f"{show_point(frame, lattice.points([node])[0], 6)})")
+
+
+class GoalStream:
+    """Each robot's stream of goals in lifelong runs: free nodes of its region, drawn from a generator of
+    its own (seeded by ``seed`` and the robot's index), so every planner meets the same goals."""
+
+    def __init__(self, lattice: Lattice, starts: np.ndarray, seed: int):
+        regions = lattice.regions()
+        self.region = regions[starts]
+        self.nodes = {int(r): np.flatnonzero(regions == r) for r in np.unique(self.region)}
+        self.rngs = [np.random.default_rng([int(seed), i]) for i in range(len(starts))]
+
+    def next(self, robot: int, now: int) -> int:
+        """Robot ``robot``'s next goal, other than ``now`` (where it stands)."""
+        choices = self.nodes[int(self.region[robot])]
+        while True:
+            goal = int(choices[self.rngs[robot].integers(len(choices))])
+            if goal != now or len(choices) == 1:
+                return goal
+
+
+@dataclass
+class FleetRun:
+    """What a fleet did (:func:`rollout_fleet`).
+
+    Attributes:
+        world: The map.
+        planner: The planner's name.
+        fleet: The robots (their starts and targets).
+        positions: ``(steps + 1, N, 2)`` every robot's position at every step.
+        goals: ``(steps + 1, N)`` each robot's goal node at every step (lifelong: it changes).
+        cost: (N,) one-shot: the step each robot last arrived on its goal (the run's steps if it is
+            not on it at the end); lifelong: the run's steps.
+        arrived: (N,) bool: on its goal at the end (one-shot); lifelong: reached at least one goal.
+        outcome: (N,) each robot's :class:`~apf_physics.sim.engine.Outcome` label.
+        robot_robot: Robot pairs that touched, summed over the steps.
+        robot_obstacle: Robots that touched an obstacle or the map's edge, summed over the steps.
+        reached: (N,) goals each robot reached (lifelong; one-shot: 1 if it arrived).
+        seconds: Wall time of the run, the planner's tables included.
+        lifelong: The run's horizon in lifelong mode, else None.
+        tables: ``(built, peak bytes)`` of the planner's per-goal tables.
+    """
+
+    world: World
+    planner: str
+    fleet: Fleet
+    positions: np.ndarray
+    goals: np.ndarray
+    cost: np.ndarray
+    arrived: np.ndarray
+    outcome: list[str]
+    robot_robot: int
+    robot_obstacle: int
+    reached: np.ndarray
+    seconds: float
+    lifelong: int | None = None
+    tables: tuple[int, int] = (0, 0)
+    lattice: Lattice | None = field(default=None, repr=False)
+
+    @property
+    def steps(self) -> int:
+        """Control steps the run took."""
+        return len(self.positions) - 1
+
+    def episodes(self) -> list[Episode]:
+        """One :class:`~apf_physics.experiments.rollout.Episode` per robot: its path up to its cost."""
+        out = []
+        for i in range(len(self.fleet)):
+            steps = int(self.cost[i])
+            out.append(Episode(self.world.name, self.fleet.starts[i], self.outcome[i], steps,
+                               self.positions[:steps + 1, i].copy(), frame=self.world.frame))
+        return out
+
+    def summary(self) -> dict:
+        """The run's figures (lengths in the world file's units; see :func:`fleet_summary`)."""
+        return fleet_summary(self)
+
+    def to_dict(self) -> dict:
+        """The run as JSON: per robot (success, collision, steps, path_length, ...) and the summary."""
+        frame = self.world.frame
+        robots = []
+        for i, episode in enumerate(self.episodes()):
+            data = episode.to_dict()
+            data.update(robot=i, label=self.fleet.labels[i],
+                        target=[round(float(v), 9) for v in points_to_file(frame, self.fleet.targets[i])])
+            if self.fleet.optimal is not None:
+                data["optimal"] = round(length_to_file(frame, float(self.fleet.optimal[i])), 4)
+            if self.lifelong is not None:
+                data["goals_reached"] = int(self.reached[i])
+            robots.append(data)
+        return {"world": self.world.name, "planner": self.planner, "robots": robots, "summary": self.summary()}
+
+
+def fleet_summary(run: FleetRun) -> dict:
+    """All arrived, the share arrived, makespan, sum of costs (steps, MAPF's convention: each robot's
+    last arrival), path lengths, robot–robot and robot–obstacle collisions, the time per robot-step
+    (wall time over robots × steps: every robot takes part in every step), the planner's tables; with
+    optimal lengths, the sums of costs and of path lengths over the sum of the optima; lifelong: goals
+    reached and the throughput in goals per step."""
+    n, frame = len(run.fleet), run.world.frame
+    paths = np.array([e.path_length for e in run.episodes()])
+    data = {"robots": n, "steps": run.steps, "units": frame.name or None,
+            "all_arrived": bool(run.arrived.all()), "arrived": int(run.arrived.sum()),
+            "arrived_share": round(float(run.arrived.mean()), 4) if n else 0.0,
+            "makespan": int(run.cost.max(initial=0)) if run.arrived.all() else None,
+            "sum_of_costs": int(run.cost.sum()), "path_length_sum": round(length_to_file(frame, float(paths.sum())), 3),
+            "robot_robot_collisions": int(run.robot_robot), "robot_obstacle_collisions": int(run.robot_obstacle),
+            "seconds": round(run.seconds, 2),
+            "ms_per_robot_step": round(1000 * run.seconds / max(n * run.steps, 1), 4),
+            "goal_tables_built": run.tables[0], "goal_tables_peak_bytes": run.tables[1]}
+    if run.fleet.optimal is not None:
+        best = float(np.sum(run.fleet.optimal))
+        data.update(optimal_sum=round(length_to_file(frame, best), 3),
+                    soc_over_optimal=round(float(run.cost.sum()) / best, 4) if best > 0 else None,
+                    path_over_optimal=round(float(paths.sum()) / best, 4) if best > 0 else None)
+    if run.lifelong is not None:
+        goals = int(run.reached.sum())
+        data.update(horizon=run.lifelong, goals_reached=goals, throughput=round(goals / max(run.steps, 1), 4))
+        for key in ("all_arrived", "arrived", "arrived_share", "makespan", "sum_of_costs"):
+            data.pop(key)
+    return data
+
+
+def rollout_fleet(world: World, planner: Planner, fleet: Fleet | None = None, max_steps: int | None = None,
+                  lifelong: int | None = None, seed: int = 0,
+                  progress: Callable[[int, int], None] | None = None) -> FleetRun:
+    """Run a fleet all at once through the engine (see the module docstring).
+
+    Args:
+        world: The map.
+        planner: Scores every robot's moves (:meth:`~apf_physics.planners.base.Planner.fleet_values`).
+        fleet: The robots (default: the world's ``robots:``).
+        max_steps: One-shot: the step limit (default :func:`~apf_physics.experiments.rollout.default_max_steps`).
+        lifelong: Run this many steps, a robot given its next goal as soon as it arrives (None: one-shot).
+        seed: The lifelong goal streams' seed, and PIBT's tie-break among equal priorities.
+        progress: Called with ``(step, robots on their goal)`` after each step.
+
+    Raises:
+        UserError: The fleet does not fit its lattice (:func:`place_fleet`), or the planner cannot drive a fleet.
+    """
+    fleet = world.robots if fleet is None else fleet
+    if fleet is None or not len(fleet):
+        raise UserError(f"{world.label}: no robots to run as a fleet")
+    clock = time.perf_counter()
+    placed = place_fleet(world, fleet, distinct_goals=lifelong is None)
+    lattice, n = placed.lattice, len(fleet)
+    limit = int(lifelong) if lifelong is not None else (default_max_steps(world) if max_steps is None else int(max_steps))
+    goals = placed.goals.copy()
+    stream = GoalStream(lattice, placed.starts, seed) if lifelong is not None else None
+    planner.reset(world, fleet.starts)
+    stepper = Stepper([world], n, 1, crowds=[0] * n, arrival="continue")
+    slots = np.arange(n)
+    stepper.start(slots, fleet.starts[:, None, :])
+    stepper.set_targets(slots, lattice.points(goals))
+    priorities = Priorities(n, seed)
+    nodes = placed.starts.copy()
+    at_goal = nodes == goals
+    cost = np.zeros(n, np.intp)
+    reached = np.zeros(n, np.intp)
+    trace, goal_trace = [fleet.starts.copy()], [goals.copy()]
+    robot_robot = robot_obstacle = 0
+    for step in range(1, limit + 1):
+        if lifelong is None and at_goal.all():
+            break
+        values = planner.fleet_values(lattice, nodes, goals)
+        prefs = preferences(values, lattice.ok[nodes])
+        moves = fleet_moves(lattice, nodes, prefs, priorities.order(), pinned=~stepper.running)
+        report = stepper.step(ACTIONS[moves][:, None, :])
+        robot_robot += _robot_pairs(report.contacts)
+        robot_obstacle += int(report.contacts.obstacle_or_edge.sum()) if report.contacts.touched else 0
+        nodes = lattice.nearest(report.positions[:, 0])
+        now = nodes == goals
+        cost = np.where(now & ~at_goal, step, cost)   # (re)arrived at this step
+        if stream is not None:
+            for i in np.flatnonzero(now).tolist():
+                reached[i] += 1
+                goals[i] = stream.next(i, int(nodes[i]))
+            stepper.set_targets(np.flatnonzero(now), lattice.points(goals[now]))
+            now = nodes == goals
+        at_goal = now
+        priorities.update(at_goal)
+        trace.append(report.positions[:, 0].copy())
+        goal_trace.append(goals.copy())
+        if progress is not None:
+            progress(step, int(at_goal.sum()))
+    steps = len(trace) - 1
+    if lifelong is not None:
+        cost[:] = steps
+        arrived = reached > 0
+    else:
+        cost = np.where(at_goal, cost, steps)
+        arrived = at_goal & stepper.running
+        reached = arrived.astype(np.intp)
+    stepper.finish(slots[arrived], Outcome.REACHED)
+    stepper.finish(slots, Outcome.TIMEOUT)
+    tables = planner.goal_tables(lattice) if type(planner).fleet_values is not Planner.fleet_values else None
+    return FleetRun(world, planner.name, fleet, np.stack(trace), np.stack(goal_trace), cost, arrived,
+                    [Outcome(o).label for o in stepper.outcome], robot_robot, robot_obstacle, reached,
+                    time.perf_counter() - clock, lifelong,
+                    (tables.built, tables.peak) if tables is not None else (0, 0), lattice)
+
+
+def _robot_pairs(contacts) -> int:
+    """Robot pairs touching in a step's contact log."""
+    if not contacts.touched:
+        return 0
+    rows = contacts.rows
+    robots = rows[rows[:, 1] == 2] if len(rows) else rows
+    if not len(robots):
+        return 0
+    return len({(min(a, b), max(a, b)) for a, b in zip(robots[:, 0].tolist(), robots[:, 2].tolist())})
+
+
+def format_fleet_table(runs: list[FleetRun]) -> str:
+    """One row per run: robots arrived, makespan, sum of costs (and over the optima), collisions, time."""
+    header = (f"{'planner':<10} {'world':<24} {'robots':>6} {'arrived':>12} {'makespan':>8} {'SoC':>8} "
+              f"{'SoC/opt':>7} {'r-r':>4} {'r-obst':>6} {'ms/robot-step':>13}")
+    lines = [header, "-" * len(header)]
+    for run in runs:
+        s = run.summary()
+        if run.lifelong is not None:
+            lines.append(f"{run.planner:<10} {run.world.name[:24]:<24} {s['robots']:>6} lifelong {s['horizon']} steps: "
+                         f"{s['goals_reached']} goals, {s['throughput']:.3f} per step; r-r {s['robot_robot_collisions']}, "
+                         f"r-obst {s['robot_obstacle_collisions']}, {s['ms_per_robot_step']:.3f} ms/robot-step")
+            continue
+        ratio = "-" if s.get("soc_over_optimal") is None else f"{s['soc_over_optimal']:.3f}"
+        makespan = "-" if s["makespan"] is None else str(s["makespan"])
+        arrived = f"{s['arrived']}/{s['robots']}"
+        lines.append(f"{run.planner:<10} {run.world.name[:24]:<24} {s['robots']:>6} {arrived:>12} {makespan:>8} "
+                     f"{s['sum_of_costs']:>8} {ratio:>7} {s['robot_robot_collisions']:>4} "
+                     f"{s['robot_obstacle_collisions']:>6} {s['ms_per_robot_step']:>13.3f}")
+    return "\n".join(lines)
