@@ -73,26 +73,28 @@ def place_fleet(world: World, fleet: Fleet, distinct_goals: bool = True) -> Flee
         raise UserError(f"{where}: {fleet.labels[i]}: start {show_point(frame, fleet.starts[i], 6)} is off the fleet's "
                         f"lattice (nodes one step apart through the first robot's start; the nearest node is "
                         f"{show_point(frame, lattice.points(starts[i:i + 1])[0], 6)})")
-    _refuse(where, fleet, ~lattice.free[starts], "start {p} is inside an obstacle, or nearer one than the robot "
-                                                 "radius and the safety margin")
+    _refuse(where, fleet, ~lattice.free[starts], "start {p} is inside an obstacle, or nearer one (or the map's "
+                                                 "edge) than the robot radius and the safety margin", frame)
     _refuse_shared(where, fleet, starts, "start", frame, lattice)
     goals = lattice.nearest(fleet.targets)
     far = np.hypot(*(lattice.points(goals) - fleet.targets).T) > world.goal_tolerance
     _refuse(where, fleet, far | ~lattice.free[goals], "target {t} has no free node of the fleet's lattice within "
-                                                      f"the goal tolerance {show_length(frame, world.goal_tolerance)}")
+                                                      f"the goal tolerance {show_length(frame, world.goal_tolerance)}",
+            frame)
     regions = lattice.regions()
-    _refuse(where, fleet, regions[starts] != regions[goals], "target {t} cannot be reached from its start {p}")
+    _refuse(where, fleet, regions[starts] != regions[goals], "target {t} cannot be reached from its start {p}", frame)
     if distinct_goals:
         _refuse_shared(where, fleet, goals, "goal", frame, lattice)
     return FleetNodes(lattice, starts, goals)
 
 
-def _refuse(where: str, fleet: Fleet, bad: np.ndarray, message: str) -> None:
-    """Raise for the first robot marked ``bad``, ``message`` naming its start ``{p}`` and target ``{t}``."""
+def _refuse(where: str, fleet: Fleet, bad: np.ndarray, message: str, frame=None) -> None:
+    """Raise for the first robot marked ``bad``, ``message`` naming its start ``{p}`` and target ``{t}``
+    (in the world file's units)."""
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         raise UserError(f"{where}: {fleet.labels[i]}: " + message.format(
-            p=list(np.round(fleet.starts[i], 6)), t=list(np.round(fleet.targets[i], 6))))
+            p=show_point(frame, fleet.starts[i], 6), t=show_point(frame, fleet.targets[i], 6)))
 
 
 def _refuse_shared(where: str, fleet: Fleet, nodes: np.ndarray, what: str, frame, lattice: Lattice) -> None:
