@@ -146,6 +146,9 @@ class FleetRun:
         seconds: Wall time of the run, the planner's tables included.
         lifelong: The run's horizon in lifelong mode, else None.
         tables: ``(built, peak bytes)`` of the planner's per-goal tables.
+        lattice: The lattice the robots stood on.
+        parts: Seconds spent in the planner's values (its per-goal tables built included), the fleet's
+            rule and the engine's step.
     """
 
     world: World
@@ -163,6 +166,7 @@ class FleetRun:
     lifelong: int | None = None
     tables: tuple[int, int] = (0, 0)
     lattice: Lattice | None = field(default=None, repr=False)
+    parts: dict = field(default_factory=dict)
 
     @property
     def steps(self) -> int:
@@ -214,7 +218,8 @@ def fleet_summary(run: FleetRun) -> dict:
             "robot_robot_collisions": int(run.robot_robot), "robot_obstacle_collisions": int(run.robot_obstacle),
             "seconds": round(run.seconds, 2),
             "ms_per_robot_step": round(1000 * run.seconds / max(n * run.steps, 1), 4),
-            "goal_tables_built": run.tables[0], "goal_tables_peak_bytes": run.tables[1]}
+            "goal_tables_built": run.tables[0], "goal_tables_peak_bytes": run.tables[1],
+            "seconds_by_part": {k: round(v, 2) for k, v in run.parts.items()}}
     if run.fleet.optimal is not None:
         best = float(np.sum(run.fleet.optimal))
         data.update(optimal_sum=round(length_to_file(frame, best), 3),
@@ -250,61 +255,83 @@ def rollout_fleet(world: World, planner: Planner, fleet: Fleet | None = None, ma
         raise UserError(f"{world.label}: no robots to run as a fleet")
     clock = time.perf_counter()
     placed = place_fleet(world, fleet, distinct_goals=lifelong is None)
-    lattice, n = placed.lattice, len(fleet)
     limit = int(lifelong) if lifelong is not None else (default_max_steps(world) if max_steps is None else int(max_steps))
-    goals = placed.goals.copy()
-    stream = GoalStream(lattice, placed.starts, seed) if lifelong is not None else None
-    planner.reset(world, fleet.starts)
-    stepper = Stepper([world], n, 1, crowds=[0] * n, arrival="continue")
-    slots = np.arange(n)
-    stepper.start(slots, fleet.starts[:, None, :])
-    stepper.set_targets(slots, lattice.points(goals))
-    priorities = Priorities(n, seed)
-    nodes = placed.starts.copy()
-    at_goal = nodes == goals
-    cost = np.zeros(n, np.intp)
-    reached = np.zeros(n, np.intp)
-    trace, goal_trace = [fleet.starts.copy()], [goals.copy()]
-    robot_robot = robot_obstacle = 0
+    planner.reset(world, np.zeros((0, 2)))   # the world, and no robot of its own: a fleet's are scored by fleet_values
+    state = _FleetState(world, placed, fleet, GoalStream(placed.lattice, placed.starts, seed) if lifelong else None,
+                        seed)
     for step in range(1, limit + 1):
-        if lifelong is None and at_goal.all():
+        if lifelong is None and state.at_goal.all():
             break
-        values = planner.fleet_values(lattice, nodes, goals)
-        prefs = preferences(values, lattice.ok[nodes])
-        moves = fleet_moves(lattice, nodes, prefs, priorities.order(), pinned=~stepper.running)
-        report = stepper.step(ACTIONS[moves][:, None, :])
-        robot_robot += _robot_pairs(report.contacts)
-        robot_obstacle += int(report.contacts.obstacle_or_edge.sum()) if report.contacts.touched else 0
-        nodes = lattice.nearest(report.positions[:, 0])
-        now = nodes == goals
-        cost = np.where(now & ~at_goal, step, cost)   # (re)arrived at this step
-        if stream is not None:
-            for i in np.flatnonzero(now).tolist():
-                reached[i] += 1
-                goals[i] = stream.next(i, int(nodes[i]))
-            stepper.set_targets(np.flatnonzero(now), lattice.points(goals[now]))
-            now = nodes == goals
-        at_goal = now
-        priorities.update(at_goal)
-        trace.append(report.positions[:, 0].copy())
-        goal_trace.append(goals.copy())
+        state.step(planner, step)
         if progress is not None:
-            progress(step, int(at_goal.sum()))
-    steps = len(trace) - 1
-    if lifelong is not None:
-        cost[:] = steps
-        arrived = reached > 0
-    else:
-        cost = np.where(at_goal, cost, steps)
-        arrived = at_goal & stepper.running
-        reached = arrived.astype(np.intp)
-    stepper.finish(slots[arrived], Outcome.REACHED)
-    stepper.finish(slots, Outcome.TIMEOUT)
-    tables = planner.goal_tables(lattice) if type(planner).fleet_values is not Planner.fleet_values else None
-    return FleetRun(world, planner.name, fleet, np.stack(trace), np.stack(goal_trace), cost, arrived,
-                    [Outcome(o).label for o in stepper.outcome], robot_robot, robot_obstacle, reached,
-                    time.perf_counter() - clock, lifelong,
-                    (tables.built, tables.peak) if tables is not None else (0, 0), lattice)
+            progress(step, int(state.at_goal.sum()))
+    return state.finish(planner, lifelong, time.perf_counter() - clock)
+
+
+class _FleetState:
+    """A fleet's run as it goes: the stepper, every robot's node, goal, cost and goals reached, the trace."""
+
+    def __init__(self, world: World, placed: FleetNodes, fleet: Fleet, stream: GoalStream | None, seed: int):
+        n = len(fleet)
+        self.world, self.lattice, self.fleet, self.stream = world, placed.lattice, fleet, stream
+        self.stepper = Stepper([world], n, 1, crowds=[0] * n, arrival="continue")
+        self.slots = np.arange(n)
+        self.stepper.start(self.slots, fleet.starts[:, None, :])
+        self.goals = placed.goals.copy()
+        self.stepper.set_targets(self.slots, self.lattice.points(self.goals))
+        self.priorities = Priorities(n, seed)
+        self.nodes = placed.starts.copy()
+        self.at_goal = self.nodes == self.goals
+        self.cost = np.zeros(n, np.intp)
+        self.reached = np.zeros(n, np.intp)
+        self.trace, self.goal_trace = [fleet.starts.copy()], [self.goals.copy()]
+        self.robot_robot = self.robot_obstacle = 0
+        self.seconds = {"values": 0.0, "rule": 0.0, "physics": 0.0}
+
+    def step(self, planner: Planner, step: int) -> None:
+        """One control step: the planner's values, the fleet's rule, the engine; arrivals (and new goals)."""
+        lattice, clock = self.lattice, time.perf_counter()
+        values = planner.fleet_values(lattice, self.nodes, self.goals)
+        now = time.perf_counter()
+        self.seconds["values"] += now - clock
+        prefs = preferences(values, lattice.ok[self.nodes])
+        moves = fleet_moves(lattice, self.nodes, prefs, self.priorities.order(), pinned=~self.stepper.running)
+        clock = time.perf_counter()
+        self.seconds["rule"] += clock - now
+        report = self.stepper.step(ACTIONS[moves][:, None, :])
+        self.seconds["physics"] += time.perf_counter() - clock
+        self.robot_robot += _robot_pairs(report.contacts)
+        self.robot_obstacle += int(report.contacts.obstacle_or_edge.sum()) if report.contacts.touched else 0
+        self.nodes = lattice.nearest(report.positions[:, 0])
+        arrived = self.nodes == self.goals
+        self.cost = np.where(arrived & ~self.at_goal, step, self.cost)   # (re)arrived at this step
+        if self.stream is not None and arrived.any():
+            for i in np.flatnonzero(arrived).tolist():
+                self.reached[i] += 1
+                self.goals[i] = self.stream.next(i, int(self.nodes[i]))
+            self.stepper.set_targets(np.flatnonzero(arrived), lattice.points(self.goals[arrived]))
+            arrived = self.nodes == self.goals
+        self.at_goal = arrived
+        self.priorities.update(arrived)
+        self.trace.append(report.positions[:, 0].copy())
+        self.goal_trace.append(self.goals.copy())
+
+    def finish(self, planner: Planner, lifelong: int | None, seconds: float) -> FleetRun:
+        """End every robot's episode (reached: on its goal, one-shot) and gather the run."""
+        steps, stepper = len(self.trace) - 1, self.stepper
+        if lifelong is not None:
+            cost, arrived, reached = np.full(len(self.fleet), steps), self.reached > 0, self.reached
+        else:
+            cost = np.where(self.at_goal, self.cost, steps)
+            arrived = self.at_goal & stepper.running
+            reached = arrived.astype(np.intp)
+        stepper.finish(self.slots[arrived], Outcome.REACHED)
+        stepper.finish(self.slots, Outcome.TIMEOUT)
+        tables = planner.goal_tables(self.lattice) if type(planner).fleet_values is not Planner.fleet_values else None
+        return FleetRun(self.world, planner.name, self.fleet, np.stack(self.trace), np.stack(self.goal_trace), cost,
+                        arrived, [Outcome(o).label for o in stepper.outcome], self.robot_robot, self.robot_obstacle,
+                        reached, seconds, lifelong, (tables.built, tables.peak) if tables is not None else (0, 0),
+                        self.lattice, dict(self.seconds))
 
 
 def _robot_pairs(contacts) -> int:
