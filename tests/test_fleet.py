@@ -11,8 +11,9 @@ from apf_physics.control.fleet import (STAY, GoalTables, Lattice, Priorities, fl
                                        preferences)
 from apf_physics.control.shield import ACTIONS, SAFETY, move_clearance
 from apf_physics.errors import UserError
-from apf_physics.experiments.fleet import place_fleet, rollout_fleet
-from apf_physics.experiments.movingai import draw_scenarios, map_world, scenario_fleet
+from apf_physics.control.fleet import place_fleet
+from apf_physics.experiments.fleet import rollout_fleet
+from apf_physics.experiments.movingai import draw_scenarios, scenario_fleet
 from apf_physics.models.policy import potential_change
 from apf_physics.planners import make_planner
 from apf_physics.sim.engine import Stepper
@@ -332,3 +333,49 @@ def test_map_world_and_fleet_first():
     fleet = Fleet([[0.5, 0.5], [1.5, 0.5]], [[3.5, 3.5], [2.5, 3.5]], optimal=np.array([3.0, 4.0]))
     assert len(fleet.first(1)) == 1 and fleet.first(1).optimal.tolist() == [3.0]
     assert fleet.labels == ("robots[0]", "robots[1]")
+
+
+# -- the multi-agent environment ----------------------------------------------------------------------
+
+def fleet_world(count=12, size=10):
+    rng = np.random.default_rng(0)
+    cells = rng.choice(size * size, 2 * count, replace=False)
+    points = np.column_stack([cells % size + 0.5, cells // size + 0.5])
+    return world_from_dict({"name": "env", "size": [size, size], "field": "thesis-general",
+                            "robots": [{"start": points[i].tolist(), "target": points[count + i].tolist()}
+                                       for i in range(count)]})
+
+
+@pytest.mark.parametrize("on_target", ["finish", "restart"])
+def test_the_fleet_env_passes_pettingzoos_parallel_api_test(on_target):
+    from pettingzoo.test import parallel_api_test
+    from apf_physics.envs import FleetParallelEnv
+    parallel_api_test(FleetParallelEnv(fleet_world(), on_target=on_target, max_episode_steps=40), num_cycles=60)
+
+
+def test_the_fleet_env_never_lets_robots_touch_and_rewards_arrivals():
+    from apf_physics.envs import FleetParallelEnv
+    env = FleetParallelEnv(fleet_world(20), max_episode_steps=200)
+    obs, infos = env.reset(seed=3)
+    assert obs["robot_0"].shape == (3, 11, 11) and obs["robot_0"][2].sum() == 1
+    total, refused = 0.0, 0
+    while env.agents:
+        actions = {a: env.action_space(a).sample() for a in env.agents}
+        before = env.task.lattice.points(env.task.nodes)
+        obs, rewards, terminated, truncated, infos = env.step(actions)
+        after = env.task.lattice.points(env.task.nodes)
+        assert least_gap(before, after) >= 2 * env.world.robot_radius + SAFETY - 1e-9
+        assert not any(info["collision"] for info in infos.values())
+        refused += sum(info["refused"] for info in infos.values())
+        total += sum(rewards.values())
+    assert refused > 0 and total == sum(1 for i in range(20) if env.task.done[i])
+
+
+def test_the_fleet_envs_random_starts_follow_the_seed():
+    from apf_physics.envs import FleetParallelEnv
+    a, b = FleetParallelEnv(fleet_world(), starts="random"), FleetParallelEnv(fleet_world(), starts="random")
+    oa, _ = a.reset(seed=7)
+    ob, _ = b.reset(seed=7)
+    assert all(np.array_equal(oa[k], ob[k]) for k in oa)
+    assert np.array_equal(a.task.nodes, b.task.nodes) and not np.array_equal(
+        a.task.nodes, a.task.lattice.nearest(a.world.robots.starts))

@@ -32,7 +32,6 @@ from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from apf_physics.common.safefile import write_text  # noqa: E402

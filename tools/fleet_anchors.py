@@ -37,7 +37,7 @@ import time
 import numpy as np
 
 from apf_physics.control.fleet import Lattice
-from apf_physics.experiments.fleet import GoalStream, place_fleet
+from apf_physics.control.fleet import GoalStream, place_fleet
 from apf_physics.experiments.movingai import scenario_fleet
 from apf_physics.common.geometry import occupancy_rectangles
 from apf_physics.world.io.mapfiles import read_movingai_map, read_movingai_scen

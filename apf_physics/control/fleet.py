@@ -42,8 +42,10 @@ import numpy as np
 
 from apf_physics.common.compiled import kernel
 from apf_physics.control.shield import ACTIONS, SAFETY, move_clearance
+from apf_physics.errors import UserError
 from apf_physics.world import field as apf
-from apf_physics.world.core import World
+from apf_physics.world.core import Fleet, World
+from apf_physics.world.io.units import show_length, show_point
 from apf_physics.world.search import node_distances
 
 GOAL_TABLE_BUDGET = 256 * 2**20
@@ -362,6 +364,98 @@ def _pibt(nodes, prefs, order, pinned, cols, count, steps, contact):
             depth -= 1
             result = 0
     return chosen
+
+
+@dataclass(frozen=True)
+class FleetNodes:
+    """A fleet placed on its lattice (:func:`place_fleet`).
+
+    Attributes:
+        lattice: The lattice the robots stand on.
+        starts: (N,) each robot's start node.
+        goals: (N,) each robot's goal node (the node nearest its target).
+    """
+
+    lattice: Lattice
+    starts: np.ndarray
+    goals: np.ndarray
+
+
+def place_fleet(world: World, fleet: Fleet, distinct_goals: bool = True) -> FleetNodes:
+    """The lattice through the first robot's start, and every robot's start and goal node on it.
+
+    Raises:
+        UserError: A start off the lattice or not on a free node, two robots starting on one node,
+            a target with no free node within the goal tolerance, or cut off from the robot's start,
+            two robots with one goal node (``distinct_goals``), or robots too large for one step
+            between neighbours.
+    """
+    where = world.label
+    frame = world.frame
+    if world.moving:
+        raise UserError(f"{where}: a fleet runs among static obstacles only (the world has moving ones)")
+    if 2 * world.robot_radius + SAFETY >= 1.0:
+        raise UserError(f"{where}: robot radius {show_length(frame, world.robot_radius)} is too large for a fleet: "
+                        f"neighbouring robots stand one step ({show_length(frame, 1.0)}) apart")
+    lattice = Lattice.of(world, fleet.starts[0])
+    starts = lattice.nearest(fleet.starts)
+    off = np.flatnonzero(~lattice.on_node(fleet.starts))
+    if len(off):
+        i = int(off[0])
+        raise UserError(f"{where}: {fleet.labels[i]}: start {show_point(frame, fleet.starts[i], 6)} is off the fleet's "
+                        f"lattice (nodes one step apart through the first robot's start; the nearest node is "
+                        f"{show_point(frame, lattice.points(starts[i:i + 1])[0], 6)})")
+    _refuse(where, fleet, ~lattice.free[starts], "start {p} is inside an obstacle, or nearer one (or the map's "
+                                                 "edge) than the robot radius and the safety margin", frame)
+    _refuse_shared(where, fleet, starts, "start", frame, lattice)
+    goals = lattice.nearest(fleet.targets)
+    far = np.hypot(*(lattice.points(goals) - fleet.targets).T) > world.goal_tolerance
+    _refuse(where, fleet, far | ~lattice.free[goals], "target {t} has no free node of the fleet's lattice within "
+                                                      f"the goal tolerance {show_length(frame, world.goal_tolerance)}",
+            frame)
+    regions = lattice.regions()
+    _refuse(where, fleet, regions[starts] != regions[goals], "target {t} cannot be reached from its start {p}", frame)
+    if distinct_goals:
+        _refuse_shared(where, fleet, goals, "goal", frame, lattice)
+    return FleetNodes(lattice, starts, goals)
+
+
+def _refuse(where: str, fleet: Fleet, bad: np.ndarray, message: str, frame=None) -> None:
+    """Raise for the first robot marked ``bad``, ``message`` naming its start ``{p}`` and target ``{t}``
+    (in the world file's units)."""
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise UserError(f"{where}: {fleet.labels[i]}: " + message.format(
+            p=show_point(frame, fleet.starts[i], 6), t=show_point(frame, fleet.targets[i], 6)))
+
+
+def _refuse_shared(where: str, fleet: Fleet, nodes: np.ndarray, what: str, frame, lattice: Lattice) -> None:
+    """Raise when two robots share a start (or goal) node."""
+    _, first, counts = np.unique(nodes, return_index=True, return_counts=True)
+    if (counts > 1).any():
+        node = nodes[first[np.flatnonzero(counts > 1)[0]]]
+        i, j = np.flatnonzero(nodes == node)[:2].tolist()
+        raise UserError(f"{where}: {fleet.labels[j]}: its {what} is {fleet.labels[i]}'s (two robots on one cell, "
+                        f"{show_point(frame, lattice.points([node])[0], 6)})")
+
+
+class GoalStream:
+    """Each robot's stream of goals in lifelong runs: free nodes of its region, drawn from a generator of
+    its own (seeded by ``seed`` and the robot's index), so every planner meets the same goals."""
+
+    def __init__(self, lattice: Lattice, starts: np.ndarray, seed: int):
+        regions = lattice.regions()
+        self.region = regions[starts]
+        self.nodes = {int(r): np.flatnonzero(regions == r) for r in np.unique(self.region)}
+        self.rngs = [np.random.default_rng([int(seed), i]) for i in range(len(starts))]
+
+    def next(self, robot: int, now: int) -> int:
+        """Robot ``robot``'s next goal, other than ``now`` (where it stands)."""
+        choices = self.nodes[int(self.region[robot])]
+        while True:
+            goal = int(choices[self.rngs[robot].integers(len(choices))])
+            if goal != now or len(choices) == 1:
+                return goal
 
 
 class GoalTables:
