@@ -379,3 +379,41 @@ def test_the_fleet_envs_random_starts_follow_the_seed():
     assert all(np.array_equal(oa[k], ob[k]) for k in oa)
     assert np.array_equal(a.task.nodes, b.task.nodes) and not np.array_equal(
         a.task.nodes, a.task.lattice.nearest(a.world.robots.starts))
+
+
+# -- formations among a fleet -------------------------------------------------------------------------
+
+def mixed_world(robots=40, seed=4):
+    rng = np.random.default_rng(seed)
+    width, height = 30, 20
+
+    def blocked(p):
+        return ((10 <= p[0] <= 12 and 4 <= p[1] <= 8) or (18 <= p[0] <= 20 and 12 <= p[1] <= 16)
+                or np.hypot(*(p - [2.5, 10.5])) < 3 or np.hypot(*(p - [27.5, 10.5])) < 3)
+
+    cells = rng.permutation(width * height)
+    points = np.array([p for p in np.column_stack([cells % width + 0.5, cells // width + 0.5]) if not blocked(p)])
+    return world_from_dict({
+        "name": "mix", "size": [width, height], "field": "thesis-general",
+        "obstacles": [{"polygon": [[10, 4], [12, 4], [12, 8], [10, 8]]}, {"polygon": [[18, 12], [20, 12], [20, 16], [18, 16]]}],
+        "robots": [{"start": points[i].tolist(), "target": points[robots + i].tolist()} for i in range(robots)],
+        "formations": [{"start": [2.5, 10.5], "target": [27.5, 10.2], "followers": 2},
+                       {"start": [27.5, 10.5], "target": [2.5, 10.2], "followers": 2}]})
+
+
+@pytest.mark.parametrize("planner", ["astar", "dqn"])
+def test_formations_cross_a_fleet_and_everyone_arrives_untouched(planner):
+    world = mixed_world()
+    run = rollout_fleet(world, make_planner(planner))
+    s = run.summary()
+    assert s["all_arrived"] and s["formations_arrived"] == 2
+    assert s["robot_robot_collisions"] == 0 and s["robot_obstacle_collisions"] == 0
+    steps = run.steps
+    everyone = [run.positions]
+    for episode in run.formations:   # formations stop at their targets: held there to the end
+        p = episode.formation.positions
+        everyone.append(np.concatenate([p, np.repeat(p[-1:], steps + 1 - len(p), axis=0)]))
+    positions = np.concatenate(everyone, axis=1)
+    for t in range(steps):
+        assert least_gap(positions[t], positions[t + 1]) >= 2 * world.robot_radius + SAFETY - 1e-6
+    assert "formations" in run.to_dict()

@@ -243,7 +243,8 @@ def preferences(values: np.ndarray, ok: np.ndarray) -> np.ndarray:
 
 
 def fleet_moves(lattice: Lattice, nodes: np.ndarray, prefs: np.ndarray, order: np.ndarray,
-                pinned: np.ndarray | None = None, contact: float | None = None) -> np.ndarray:
+                pinned: np.ndarray | None = None, contact: float | None = None,
+                movers: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """(N,) every robot's move (an index of :data:`~apf_physics.world.kinematics.ACTIONS`) this step:
     priority inheritance with backtracking under the shield among robots (see the module docstring).
 
@@ -254,22 +255,39 @@ def fleet_moves(lattice: Lattice, nodes: np.ndarray, prefs: np.ndarray, order: n
         order: Robot indices, the highest priority first.
         pinned: (N,) bool: robots that stay whatever happens (their episode has ended in a collision).
         contact: The least distance between two robots' centres (default ``2·radius + SAFETY``).
+        movers: ``(positions (K, 2), moves (K, 2))`` of other robots whose moves this step are decided
+            already (formations' robots among the fleet): every move is checked against them too.
     """
     nodes = np.ascontiguousarray(nodes, np.int64)
     n = len(nodes)
     if contact is None:
         contact = 2 * lattice.world.robot_radius + SAFETY
     pinned = np.zeros(n, np.bool_) if pinned is None else np.ascontiguousarray(pinned, np.bool_)
+    if movers is None:
+        movers = (np.zeros((0, 2)), np.zeros((0, 2)))
+    at = np.ascontiguousarray(np.asarray(movers[0], float).reshape(-1, 2) - np.asarray(lattice.origin))  # in nodes
     return _pibt(nodes, np.ascontiguousarray(prefs, np.int64), np.ascontiguousarray(order, np.int64), pinned,
-                 lattice.shape[1], lattice.count, np.ascontiguousarray(_OFFSETS, np.int64), float(contact))
+                 lattice.shape[1], lattice.count, np.ascontiguousarray(_OFFSETS, np.int64), float(contact),
+                 at, np.ascontiguousarray(np.asarray(movers[1], float).reshape(-1, 2)))
 
 
 @kernel
-def _clear(i, m, skip, nodes, chosen, occupant, cols, steps, contact):
+def _clear(i, m, skip, nodes, chosen, occupant, cols, steps, contact, movers, mover_moves):
     """Whether robot ``i``'s move ``m`` keeps ``contact`` from every robot within two nodes, each
-    along its decided move or standing (``skip``: the undecided robot it pushes out, or −1)."""
+    along its decided move or standing (``skip``: the undecided robot it pushes out, or −1), and from
+    every mover (positions in node coordinates) along its move."""
     u = nodes[i]
     r0, c0 = u // cols, u % cols
+    for k in range(movers.shape[0]):
+        px, py = movers[k, 0] - c0, movers[k, 1] - r0
+        vx, vy = mover_moves[k, 0] - float(steps[m, 0]), mover_moves[k, 1] - float(steps[m, 1])
+        a = vx * vx + vy * vy
+        t = 0.0
+        if a > 0:
+            t = min(1.0, max(0.0, -(px * vx + py * vy) / a))
+        qx, qy = px + t * vx, py + t * vy
+        if qx * qx + qy * qy < contact * contact:
+            return False
     rows = occupant.shape[0] // cols
     dx, dy = float(steps[m, 0]), float(steps[m, 1])
     for dr in range(-2, 3):
@@ -297,7 +315,7 @@ def _clear(i, m, skip, nodes, chosen, occupant, cols, steps, contact):
 
 
 @kernel
-def _pibt(nodes, prefs, order, pinned, cols, count, steps, contact):
+def _pibt(nodes, prefs, order, pinned, cols, count, steps, contact, movers, mover_moves):
     """PIBT over one step, iteratively (a stack of robots being pushed); see :func:`fleet_moves`."""
     n = nodes.shape[0]
     occupant = np.full(count, -1, np.int64)
@@ -341,7 +359,8 @@ def _pibt(nodes, prefs, order, pinned, cols, count, steps, contact):
                 if j >= 0 and chosen[j] >= 0 and target[j] == nodes[i]:
                     continue          # a swap: the robot there moves into this one's node
                 undecided = j >= 0 and chosen[j] < 0
-                if not _clear(i, m, j if undecided else -1, nodes, chosen, occupant, cols, steps, contact):
+                if not _clear(i, m, j if undecided else -1, nodes, chosen, occupant, cols, steps, contact, movers,
+                              mover_moves):
                     continue
                 chosen[i] = m
                 target[i] = v

@@ -18,6 +18,7 @@ the goals reached per step.
 
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -28,7 +29,8 @@ from apf_physics.control.fleet import (FleetNodes, GoalStream, Lattice, Prioriti
                                        preferences)
 from apf_physics.control.shield import ACTIONS
 from apf_physics.errors import UserError
-from apf_physics.experiments.rollout import Episode, default_max_steps
+from apf_physics.control.formation import Formations, links_in_range
+from apf_physics.experiments.rollout import Episode, FormationRecord, default_max_steps, leader_moves
 from apf_physics.planners.base import Planner
 from apf_physics.sim.engine import Outcome, Stepper
 from apf_physics.world.core import Fleet, World
@@ -58,6 +60,7 @@ class FleetRun:
         lattice: The lattice the robots stood on.
         parts: Seconds spent in the planner's values (its per-goal tables built included), the fleet's
             rule and the engine's step.
+        formations: The world's formations among the fleet, an episode each (None: it has none).
     """
 
     world: World
@@ -76,6 +79,7 @@ class FleetRun:
     tables: tuple[int, int] = (0, 0)
     lattice: Lattice | None = field(default=None, repr=False)
     parts: dict = field(default_factory=dict)
+    formations: list[Episode] | None = None
 
     @property
     def steps(self) -> int:
@@ -108,7 +112,10 @@ class FleetRun:
             if self.lifelong is not None:
                 data["goals_reached"] = int(self.reached[i])
             robots.append(data)
-        return {"world": self.world.name, "planner": self.planner, "robots": robots, "summary": self.summary()}
+        out = {"world": self.world.name, "planner": self.planner, "robots": robots, "summary": self.summary()}
+        if self.formations is not None:
+            out["formations"] = [e.to_dict() for e in self.formations]
+        return out
 
 
 def fleet_summary(run: FleetRun) -> dict:
@@ -134,6 +141,8 @@ def fleet_summary(run: FleetRun) -> dict:
         data.update(optimal_sum=round(length_to_file(frame, best), 3),
                     soc_over_optimal=round(float(run.cost.sum()) / best, 4) if best > 0 else None,
                     path_over_optimal=round(float(paths.sum()) / best, 4) if best > 0 else None)
+    if run.formations is not None:
+        data.update(formations=len(run.formations), formations_arrived=sum(e.success for e in run.formations))
     if run.lifelong is not None:
         goals = int(run.reached.sum())
         data.update(horizon=run.lifelong, goals_reached=goals, throughput=round(goals / max(run.steps, 1), 4))
@@ -167,9 +176,9 @@ def rollout_fleet(world: World, planner: Planner, fleet: Fleet | None = None, ma
     limit = int(lifelong) if lifelong is not None else (default_max_steps(world) if max_steps is None else int(max_steps))
     planner.reset(world, np.zeros((0, 2)))   # the world, and no robot of its own: a fleet's are scored by fleet_values
     state = _FleetState(world, placed, fleet, GoalStream(placed.lattice, placed.starts, seed) if lifelong else None,
-                        seed)
+                        seed, planner)
     for step in range(1, limit + 1):
-        if lifelong is None and state.at_goal.all():
+        if lifelong is None and state.done:
             break
         state.step(planner, step)
         if progress is not None:
@@ -178,14 +187,28 @@ def rollout_fleet(world: World, planner: Planner, fleet: Fleet | None = None, ma
 
 
 class _FleetState:
-    """A fleet's run as it goes: the stepper, every robot's node, goal, cost and goals reached, the trace."""
+    """A fleet's run as it goes: the stepper, every robot's node, goal, cost and goals reached, the trace.
 
-    def __init__(self, world: World, placed: FleetNodes, fleet: Fleet, stream: GoalStream | None, seed: int):
+    The fleet's robots are slots ``F, F + 1, ...`` of one crowd of the stepper, after the world's
+    formations (slots ``0 .. F − 1``, :class:`_Formations`), if it has any.
+    """
+
+    def __init__(self, world: World, placed: FleetNodes, fleet: Fleet, stream: GoalStream | None, seed: int,
+                 planner: Planner):
         n = len(fleet)
         self.world, self.lattice, self.fleet, self.stream = world, placed.lattice, fleet, stream
-        self.stepper = Stepper([world], n, 1, crowds=[0] * n, arrival="continue")
-        self.slots = np.arange(n)
-        self.stepper.start(self.slots, fleet.starts[:, None, :])
+        self.teams = _Formations(world, planner, fleet.starts) if world.formations else None
+        f, m = (self.teams.formations.count, self.teams.formations.robots) if self.teams else (0, 1)
+        self.first = f
+        self.stepper = Stepper(([] if self.teams is None else self.teams.formations.worlds) + [world], f + n, m,
+                               crowds=[0] * (f + n), arrival="continue")
+        initial, present = np.repeat(fleet.starts[:, None, :], m, axis=1), np.zeros((n, m), bool)
+        present[:, 0] = True
+        if self.teams is not None:
+            initial = np.concatenate([self.teams.initial, initial])
+            present = np.concatenate([self.teams.formations.present, present])
+        self.slots = np.arange(f, f + n)
+        self.stepper.start(np.arange(f + n), initial, world_ids=np.minimum(np.arange(f + n), f), present=present)
         self.goals = placed.goals.copy()
         self.stepper.set_targets(self.slots, self.lattice.points(self.goals))
         self.priorities = Priorities(n, seed)
@@ -197,32 +220,46 @@ class _FleetState:
         self.robot_robot = self.robot_obstacle = 0
         self.seconds = {"values": 0.0, "rule": 0.0, "physics": 0.0}
 
+    @property
+    def done(self) -> bool:
+        """One-shot: every robot on its goal, and no formation still on its way."""
+        return bool(self.at_goal.all()) and (self.teams is None or not self.stepper.running[:self.first].any())
+
     def step(self, planner: Planner, step: int) -> None:
-        """One control step: the planner's values, the fleet's rule, the engine; arrivals (and new goals)."""
-        lattice, clock = self.lattice, time.perf_counter()
+        """One control step: the formations' moves, the planner's values, the fleet's rule, the engine;
+        arrivals (and new goals)."""
+        lattice, clock, f = self.lattice, time.perf_counter(), self.first
+        commands = np.zeros(self.stepper.positions.shape)
+        movers = gave_up = None
+        if self.teams is not None:
+            commands[:f], gave_up, movers = self.teams.moves(self.stepper, step - 1)
         values = planner.fleet_values(lattice, self.nodes, self.goals)
         now = time.perf_counter()
         self.seconds["values"] += now - clock
         prefs = preferences(values, lattice.ok[self.nodes])
-        moves = fleet_moves(lattice, self.nodes, prefs, self.priorities.order(), pinned=~self.stepper.running)
+        moves = fleet_moves(lattice, self.nodes, prefs, self.priorities.order(), pinned=~self.stepper.running[f:],
+                            movers=movers)
+        commands[f:, 0] = ACTIONS[moves]
         clock = time.perf_counter()
         self.seconds["rule"] += clock - now
-        report = self.stepper.step(ACTIONS[moves][:, None, :])
+        report = self.stepper.step(commands, gave_up)
         self.seconds["physics"] += time.perf_counter() - clock
         self.robot_robot += _robot_pairs(report.contacts)
         self.robot_obstacle += int(report.contacts.obstacle_or_edge.sum()) if report.contacts.touched else 0
-        self.nodes = lattice.nearest(report.positions[:, 0])
+        if self.teams is not None:
+            self.teams.after(self.stepper, report, step)
+        self.nodes = lattice.nearest(report.positions[f:, 0])
         arrived = self.nodes == self.goals
         self.cost = np.where(arrived & ~self.at_goal, step, self.cost)   # (re)arrived at this step
         if self.stream is not None and arrived.any():
             for i in np.flatnonzero(arrived).tolist():
                 self.reached[i] += 1
                 self.goals[i] = self.stream.next(i, int(self.nodes[i]))
-            self.stepper.set_targets(np.flatnonzero(arrived), lattice.points(self.goals[arrived]))
+            self.stepper.set_targets(self.slots[arrived], lattice.points(self.goals[arrived]))
             arrived = self.nodes == self.goals
         self.at_goal = arrived
         self.priorities.update(arrived)
-        self.trace.append(report.positions[:, 0].copy())
+        self.trace.append(report.positions[f:, 0].copy())
         self.goal_trace.append(self.goals.copy())
 
     def finish(self, planner: Planner, lifelong: int | None, seconds: float) -> FleetRun:
@@ -232,15 +269,70 @@ class _FleetState:
             cost, arrived, reached = np.full(len(self.fleet), steps), self.reached > 0, self.reached
         else:
             cost = np.where(self.at_goal, self.cost, steps)
-            arrived = self.at_goal & stepper.running
+            arrived = self.at_goal & stepper.running[self.first:]
             reached = arrived.astype(np.intp)
         stepper.finish(self.slots[arrived], Outcome.REACHED)
-        stepper.finish(self.slots, Outcome.TIMEOUT)
+        stepper.finish(np.arange(len(stepper.outcome)), Outcome.TIMEOUT)
         tables = planner.goal_tables(self.lattice) if type(planner).fleet_values is not Planner.fleet_values else None
         return FleetRun(self.world, planner.name, self.fleet, np.stack(self.trace), np.stack(self.goal_trace), cost,
-                        arrived, [Outcome(o).label for o in stepper.outcome], self.robot_robot, self.robot_obstacle,
-                        reached, seconds, lifelong, (tables.built, tables.peak) if tables is not None else (0, 0),
-                        self.lattice, dict(self.seconds))
+                        arrived, [Outcome(o).label for o in stepper.outcome[self.first:]], self.robot_robot,
+                        self.robot_obstacle, reached, seconds, lifelong,
+                        (tables.built, tables.peak) if tables is not None else (0, 0), self.lattice, dict(self.seconds),
+                        None if self.teams is None else self.teams.episodes(self.world, stepper))
+
+
+class _Formations:
+    """A world's formations among its fleet: each leader steered by its own copy of the fleet's planner,
+    its followers by their rule, every move given the right of way of
+    :class:`~apf_physics.control.formation.Formations` with the fleet's robots standing as bystanders;
+    the fleet then checks its moves against theirs (:func:`~apf_physics.control.fleet.fleet_moves`'s
+    ``movers``). A formation whose leader reaches its target stops there."""
+
+    def __init__(self, world: World, planner: Planner, bystanders: np.ndarray):
+        self.formations = Formations(world)
+        self.formations.bystanders = bystanders
+        self.initial = self.formations.starts()
+        self.formations.reset(self.initial)
+        self.planners = [copy.copy(planner) for _ in range(self.formations.count)]
+        for f, p in enumerate(self.planners):
+            p.reset(self.formations.worlds[f], self.initial[f, :1].copy())
+        self.trace = [self.initial.copy()]
+
+    def moves(self, stepper: Stepper, step: int) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
+        """``(commands (F, m, 2), gave up (S,), movers)``: the formations' moves this step."""
+        formations, count = self.formations, self.formations.count
+        positions = stepper.positions
+        formations.bystanders = positions[count:, 0]
+        active = stepper.running[:count]
+        leader, gave_up, _ = leader_moves(formations, self.planners, positions[:count], active, step)
+        commands = formations.commands(positions[:count], leader, active & ~gave_up, step)
+        present = formations.present
+        given_up = np.zeros(len(stepper.outcome), bool)
+        given_up[:count] = gave_up & active
+        return commands, given_up, (positions[:count][present], commands[present])
+
+    def after(self, stepper: Stepper, report, step: int) -> None:
+        """A formation whose leader reached its target stops; the deadlock watch; the trace."""
+        count = self.formations.count
+        stepper.finish(np.flatnonzero(report.reached[:count]), Outcome.REACHED)
+        self.formations.watch(report.positions[:count], report.moved[:count], step)
+        self.trace.append(report.positions[:count].copy())
+
+    def episodes(self, world: World, stepper: Stepper) -> list[Episode]:
+        """One episode per formation (its leader's path, its robots' in the record)."""
+        out = []
+        positions = np.stack(self.trace)
+        for f in range(self.formations.count):
+            size = self.formations.sizes[f]
+            steps = int(stepper.steps[f])
+            mine = positions[:steps + 1, f, :size]
+            record = FormationRecord(mine, self.formations.tasks[f].spec.comm_range, self.formations.followed[f], 0, 0,
+                                     list(links_in_range(mine[1:], self.formations.followed[f],
+                                                         self.formations.tasks[f].spec.comm_range).mean(axis=0))
+                                     if steps else [], crowd=world.name, index=f)
+            out.append(Episode(world.name, self.formations.tasks[f].start, Outcome(stepper.outcome[f]).label, steps,
+                               mine[:, 0].copy(), formation=record, frame=world.frame))
+        return out
 
 
 def _robot_pairs(contacts) -> int:

@@ -594,7 +594,7 @@ def parse_world(check: Checker, data: Any, source: str) -> FileWorld | None:
     check.mapping(data, "", _TOP_KEYS, required=required)
     if several and data.get("formation") is not None:
         check.bad("formation", "'formation' and 'formations' together: give one formation, or a list of them")
-    for other in ("formation", "formations", "starts"):
+    for other in ("formation", "starts"):
         if fleet and data.get(other):
             check.bad("robots", f"'robots' and '{other}' together: a fleet's robots start where 'robots' puts them")
     if has_grid and "size" in data:
