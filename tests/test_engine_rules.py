@@ -5,7 +5,6 @@ stay put, and which outcome wins when several apply."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from apf_physics import world_from_dict
 from apf_physics.sim.engine import COLLISION, REACHED, RUNNING, TIMEOUT, TRAPPED, Stepper, TrapDetector, TrapWatch

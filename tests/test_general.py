@@ -15,6 +15,7 @@ from apf_physics.errors import UserError
 from apf_physics.learning import dqn, phases_for_curriculum, preset, train
 from apf_physics.learning.config import HELDOUT_SEED
 from apf_physics.learning.phases import draw_pool
+from apf_physics.world.io.units import world_to_file
 
 ROOT = Path(__file__).resolve().parent.parent
 CURRICULUM = ROOT / "worlds" / "curricula" / "thesis.yaml"
@@ -54,8 +55,8 @@ def test_world_presets_need_stages_or_a_pool():
 def test_pool_is_deterministic_and_not_the_heldout_set():
     config = preset("general", pool_size=3, pool_starts=2)
     a, b = draw_pool(config, 0), draw_pool(config, 0)
-    assert [w.to_dict() for w in a] == [w.to_dict() for w in b]
-    assert [w.to_dict()["targets"] for w in draw_pool(config, 1)] != [w.to_dict()["targets"] for w in a]
+    assert [world_to_file(w) for w in a] == [world_to_file(w) for w in b]
+    assert [world_to_file(w)["targets"] for w in draw_pool(config, 1)] != [world_to_file(w)["targets"] for w in a]
     with pytest.raises(UserError, match="held-out"):
         preset("general", validation_seed=HELDOUT_SEED)
 

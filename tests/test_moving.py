@@ -106,7 +106,7 @@ def test_no_robot_passes_through_a_sweeping_bar(x, y, length, thickness, heading
     stepper = Stepper([world], 8, max_steps=40)
     stepper.start(np.arange(8), starts[:, None, :])
     velocity = np.zeros((8, 1, 2)) if standing else rng.uniform(-1, 1, (8, 1, 2))
-    sides = None
+    sides = was_inside = None   # (which side of the bar each robot was on at the last step, and in its span)
     while stepper.running.any():
         report = stepper.step(velocity)
         t = stepper.steps[:, None].astype(float)

@@ -13,6 +13,7 @@ from apf_physics.world.obstacles import GridObstacle
 from apf_physics.sim.physics import Physics
 from apf_physics.planners import make_planner
 from apf_physics.world.io.worldfile import load_world, world_from_dict
+from apf_physics.world.io.units import world_to_file
 
 MAZE = """type octile
 height 7
@@ -49,7 +50,7 @@ def scaled(data: dict, k: float) -> dict:
 @pytest.mark.parametrize("k", [0.25, 0.05])
 def test_one_world_at_two_scales_gives_the_same_episodes(k):
     unit = load_world("fixed20")
-    small = world_from_dict(scaled(unit.to_dict(), k), "<scaled>")
+    small = world_from_dict(scaled(world_to_file(unit), k), "<scaled>")
     assert small.frame.unit == pytest.approx(k)
     np.testing.assert_allclose(small.starts, unit.starts, atol=1e-9)
     for name in ("gradient", "dqn"):
@@ -79,7 +80,7 @@ def test_ros_map_in_metres_loads_with_its_origin_and_step(tmp_path):
     episodes = evaluate(make_planner("astar"), [world]).episodes
     assert episodes[0].outcome == "reached"
     # the world file round-trips, in metres
-    again = world_from_dict(world.to_dict(), str(tmp_path / "w.yaml"))
+    again = world_from_dict(world_to_file(world), str(tmp_path / "w.yaml"))
     np.testing.assert_allclose(again.targets, world.targets)
     assert again.frame == world.frame
 

@@ -16,6 +16,8 @@ from apf_physics.world.search import shortest_costs, shortest_paths
 from apf_physics.world.search import reachable, shortest_path, shortest_path_length
 from apf_physics.planners.escape import EscapePlanner
 from apf_physics.experiments.rollout import rollout
+from apf_physics.world.io.units import obstacle_to_file, world_to_file
+from apf_physics.world.core import Frame
 
 from conftest import simple_world_dict
 
@@ -132,7 +134,7 @@ def test_thesis_worlds_are_valid_and_reachable(worlds_dir, name):
     assert len(world.starts) >= 4 and len(world.targets) == 1
     assert all(reachable(world, s) for s in world.starts)
     if name.startswith("basic"):
-        assert len(world.obstacles) == 1 and world.obstacles[0].to_dict()["circle"]["radius"] == 0
+        assert len(world.obstacles) == 1 and obstacle_to_file(Frame(), world.obstacles[0])["circle"]["radius"] == 0
 
 
 def test_thesis_test_worlds_trap_gradient_descent(worlds_dir):
@@ -148,13 +150,13 @@ def test_generate_world_is_deterministic_and_reachable():
     for family in FAMILIES:
         a = generate_world(family, np.random.default_rng(3), n_starts=3)
         b = generate_world(family, np.random.default_rng(3), n_starts=3)
-        assert a.to_dict() == b.to_dict()
+        assert world_to_file(a) == world_to_file(b)
         assert len(a.starts) == 3
         assert all(reachable(a, s) for s in a.starts)
         # Starts are not already at the target.
         assert all(nearest_target_distance(a, s) > a.goal_tolerance for s in a.starts)
     c = generate_world("line", np.random.default_rng(4), n_starts=3)
-    assert c.to_dict() != generate_world("line", np.random.default_rng(3), n_starts=3).to_dict()
+    assert world_to_file(c) != world_to_file(generate_world("line", np.random.default_rng(3), n_starts=3))
 
 
 def test_generate_world_rejects_unknown_names():

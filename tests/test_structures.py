@@ -17,12 +17,14 @@ from apf_physics.experiments.rollout import default_max_steps
 from apf_physics.world.search import reachable, shortest_path_length
 from apf_physics.world.io.worldfile import dump_world_yaml
 from apf_physics.experiments.worldsets import generate_set
+from apf_physics.world.io.units import obstacle_to_file
+from apf_physics.world.core import Frame
 
 
 def fingerprint(world) -> str:
     """A short hash of everything a generated world is made of (independent of the YAML layout)."""
     data = {"size": list(map(float, world.size)), "robot_radius": world.robot_radius,
-            "obstacles": [o.to_dict() for o in world.obstacles], "targets": world.targets.tolist(),
+            "obstacles": [obstacle_to_file(Frame(), o) for o in world.obstacles], "targets": world.targets.tolist(),
             "starts": world.starts.tolist(),
             "formations": [[t.start.tolist(), t.target.tolist()] for t in world.formations]}
     return hashlib.sha256(json.dumps(data, sort_keys=True, default=float).encode()).hexdigest()[:16]

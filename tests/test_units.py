@@ -20,6 +20,7 @@ from apf_physics.world.io.mapfiles import write_pgm
 from apf_physics.world.io.units import length_to_file, length_to_steps, points_to_file, points_to_steps, show_length
 from apf_physics.world.io.worldfile import load_world, world_from_dict
 from apf_physics.world.core import Frame
+from apf_physics.world.io.units import world_to_file
 
 START, TARGET = [6.5, -0.5], [1.0, 1.0]
 
@@ -113,7 +114,7 @@ def test_messages_name_the_files_lengths(tmp_path):
 def test_units_may_be_named_and_are_kept(tmp_path):
     world = world_from_dict({"units": "ft", "size": [40, 20], "robot": {"radius": 0.5, "step": 2}, "field": "thesis-general",
                              "targets": [[30, 10]], "starts": [[4, 4]]})
-    assert world.frame.name == "ft" and world.to_dict()["units"] == "ft"
+    assert world.frame.name == "ft" and world_to_file(world)["units"] == "ft"
     with pytest.raises(WorldError, match="units: expected the name of a unit"):
         world_from_dict({"units": 3, "size": [40, 20], "field": "thesis-general", "targets": [[30, 10]]})
 

@@ -178,7 +178,7 @@ def main() -> int:
     cpus = args.nodes * args.node_cpus
     predicted, tasks, factor = paper(names, worlds, per_world, timings, dispatch, cpus)
     local, _, _ = paper(names, worlds, per_world, timings, dispatch, args.cpus)
-    print(f"on paper (dedicated cores; Ray CPU / serial CPU per planner: "
+    print("on paper (dedicated cores; Ray CPU / serial CPU per planner: "
           + ", ".join(f"{n} {f:.2f}" for n, f in factor.items()) + ")")
     print(f"  serial on a core of its own: {serial_cpu:.2f} s (its CPU time)")
     print(f"  {args.cpus} CPUs: {local:.2f} s warm ({serial_cpu / local:.2f}x)")

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
+from typing import Callable
 
 from apf_physics import load_world
 from apf_physics.world.bundled import bundled_dir
@@ -50,43 +51,110 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
+class _Worlds:
+    """The demo's worlds, loaded from the bundled folder (or ``--worlds``)."""
 
+    def __init__(self, folder: str | None):
+        root = Path(folder) if folder is not None else bundled_dir()
+        paths = [root / "fixed20.yaml", *(root / name for name in GENERAL_WORLDS), root / MOVING_WORLD,
+                 root / FORMATIONS_WORLD, root / MAP_WORLD]
+        for path in paths:
+            if not path.is_file():
+                raise UserError(f"{path}: demo world missing (--worlds needs fixed20.yaml, thesis/test1-4.yaml, "
+                                f"{MOVING_WORLD}, {FORMATIONS_WORLD} and {MAP_WORLD})")
+        worlds = [load_world(p) for p in paths]
+        self.fixed, *self.general = worlds[:1 + len(GENERAL_WORLDS)]
+        self.moving, self.crowd, self.ros_map = worlds[1 + len(GENERAL_WORLDS):]
+
+    def runs(self) -> list[tuple[str, Callable]]:
+        """Every evaluation of the demo: a name and a function that runs it."""
+        def run(planner: str, worlds, formation: bool = False) -> Callable:
+            return lambda: evaluate(make_planner(planner), worlds, formation=formation)
+        fixed, general = [self.fixed], self.general
+        return [
+            ("gradient", run("gradient", fixed)), ("dqn", run("dqn", fixed)),
+            ("dqn formation", run("dqn", fixed, True)),
+            ("gradient, general", run("gradient", general)), ("dqn, general", run("dqn", general)),
+            # what a hand-made escape and the grid-search oracle do on the same worlds
+            ("escape, general", run("escape", general)), ("astar, general", run("astar", general)),
+            # moving obstacles: the field at each step; A* replans every step around them
+            ("gradient, moving", run("gradient", [self.moving])), ("dqn, moving", run("dqn", [self.moving])),
+            ("astar, moving", run("astar", [self.moving])),
+            ("dqn, four formations", run("dqn", [self.crowd], True)),
+            # a ROS map in metres, a robot that moves a quarter of a metre a step
+            ("gradient, ROS map", run("gradient", [self.ros_map])), ("dqn, ROS map", run("dqn", [self.ros_map])),
+        ]
+
+
+class _Page:
+    """The results page's sections, each a world's field figures and videos, made as the bar advances."""
+
+    def __init__(self, out: Path, bar, video: bool):
+        self.out, self.bar, self.video = out, bar, video
+
+    def media(self, world, evaluation, stem: str, caption: str, video: bool, episodes=None):
+        self.bar.set_postfix_str(stem)
+        episodes = [e for e in evaluation.episodes if e.world == world.name] if episodes is None else episodes
+        figure, clip = write_media(self.out, world, episodes, stem, caption, video=video,
+                                   overlay=(f"world {world.name}", caption))
+        self.bar.update(1)
+        return figure, clip
+
+    def beside(self, title: str, world, gradient_run, dqn_run) -> Section:
+        """A section: gradient descent's figure, then the shipped DQN's figure and video."""
+        section = Section(title)
+        section.figures.append(self.media(world, gradient_run, f"{world.name}_gradient", "gradient descent", False)[0])
+        self.add(section, *self.media(world, dqn_run, f"{world.name}_dqn", "dqn (shipped)", self.video))
+        return section
+
+    @staticmethod
+    def add(section: Section, figure, clip) -> None:
+        section.figures.append(figure)
+        if clip is not None:
+            section.videos.append(clip)
+
+    def sections(self, worlds: _Worlds, evaluations: list) -> list[Section]:
+        (gradient, dqn, formation, gradient_general, dqn_general, _, _, gradient_moving, dqn_moving, astar_moving,
+         formations, gradient_map, dqn_map) = evaluations
+        fixed, moving, crowd = worlds.fixed, worlds.moving, worlds.crowd
+        section = self.beside("fixed20: thesis §6.2's fixed world, 40 starts", fixed, gradient, dqn)
+        if self.video:   # the formation from four starts where gradient descent is trapped (the interesting ones)
+            trapped = [e.start for e in gradient.episodes if e.outcome == "trapped"][:4]
+            chosen = [e for e in formation.episodes if any((e.start == s).all() for s in trapped)]
+            self.add(section, *self.media(fixed, formation, "fixed20_formation", "leader dqn (shipped), 2 followers",
+                                          True, chosen))
+        sections = [section]
+        for world in worlds.general:
+            sections.append(self.beside(f"{world.name}: a thesis general test world", world, gradient_general,
+                                        dqn_general))
+        section = self.beside(f"{moving.name}: a cup before the target, five obstacles moving across the way", moving,
+                              gradient_moving, dqn_moving)
+        section.figures.append(self.media(moving, astar_moving, f"{moving.name}_astar", "A*, replanning every step",
+                                          False)[0])
+        sections.append(section)
+        section = Section(f"{crowd.name}: four formations, each to its own target across the others' way")
+        self.add(section, *self.media(crowd, formations, f"{crowd.name}_dqn", "leaders dqn (shipped), 2 followers each",
+                                      self.video))
+        sections.append(section)
+        sections.append(self.beside(f"{worlds.ros_map.name}: a ROS map (PGM + YAML) in metres, a 0.2 m robot "
+                                    "moving 0.25 m a step", worlds.ros_map, gradient_map, dqn_map))
+        return sections
+
+
+NOTES = ["Gradient descent beside the shipped DQN planners, on the fixed 20×20 world (single robot and "
+         "three-robot formation), the thesis's four general test worlds, a world with moving obstacles (drawn "
+         "where they are in each frame, their routes as faint lines), four formations crossing each other and a "
+         "ROS occupancy map in metres (drawn in steps of 0.25 m); yellow paths, blue starts, blue rings where a "
+         "robot stopped short."]
+
+
+def run(args: argparse.Namespace) -> int:
     began = time.perf_counter()
-    worlds_dir = Path(args.worlds) if args.worlds is not None else bundled_dir()
-    fixed_path = worlds_dir / "fixed20.yaml"
-    general_paths = [worlds_dir / name for name in GENERAL_WORLDS]
-    moving_path, formations_path = worlds_dir / MOVING_WORLD, worlds_dir / FORMATIONS_WORLD
-    map_path = worlds_dir / MAP_WORLD
-    for path in [fixed_path, *general_paths, moving_path, formations_path, map_path]:
-        if not path.is_file():
-            raise UserError(f"{path}: demo world missing (--worlds needs fixed20.yaml, thesis/test1-4.yaml, "
-                            f"{MOVING_WORLD}, {FORMATIONS_WORLD} and {MAP_WORLD})")
+    worlds = _Worlds(args.worlds)
     out = Path(args.out)
     check_writable(out / PAGE, create_parent=True)
-
-    fixed = load_world(fixed_path)
-    general = [load_world(p) for p in general_paths]
-    moving, crowd, ros_map = load_world(moving_path), load_world(formations_path), load_world(map_path)
-    runs = [
-        ("gradient", lambda: evaluate(make_planner("gradient"), [fixed])),
-        ("dqn", lambda: evaluate(make_planner("dqn"), [fixed])),
-        ("dqn formation", lambda: evaluate(make_planner("dqn"), [fixed], formation=True)),
-        ("gradient, general", lambda: evaluate(make_planner("gradient"), general)),
-        ("dqn, general", lambda: evaluate(make_planner("dqn"), general)),
-        # what a hand-made escape and the grid-search oracle do on the same worlds
-        ("escape, general", lambda: evaluate(make_planner("escape"), general)),
-        ("astar, general", lambda: evaluate(make_planner("astar"), general)),
-        # moving obstacles: the field at each step; A* replans every step around them
-        ("gradient, moving", lambda: evaluate(make_planner("gradient"), [moving])),
-        ("dqn, moving", lambda: evaluate(make_planner("dqn"), [moving])),
-        ("astar, moving", lambda: evaluate(make_planner("astar"), [moving])),
-        ("dqn, four formations", lambda: evaluate(make_planner("dqn"), [crowd], formation=True)),
-        # a ROS map in metres, a robot that moves a quarter of a metre a step
-        ("gradient, ROS map", lambda: evaluate(make_planner("gradient"), [ros_map])),
-        ("dqn, ROS map", lambda: evaluate(make_planner("dqn"), [ros_map])),
-    ]
-    media = 2 * (1 + len(general)) + (0 if args.no_video else 1) + 2 + 1 + 2
+    runs = worlds.runs()
+    media = 2 * (1 + len(worlds.general)) + (0 if args.no_video else 1) + 2 + 1 + 2
     with progress_bar(len(runs) + media, "demo", "step", not args.no_progress) as bar:
         evaluations = []
         for name, run_planner in runs:
@@ -96,67 +164,8 @@ def run(args: argparse.Namespace) -> int:
         table = format_table(evaluations)
         write_text(out / "summary.txt", table + "\n")
         write_json(evaluations, out / "summary.json")
-
-        def media_for(world, evaluation, stem, caption, video, episodes=None):
-            bar.set_postfix_str(stem)
-            episodes = [e for e in evaluation.episodes if e.world == world.name] if episodes is None else episodes
-            figure, clip = write_media(out, world, episodes, stem, caption, video=video,
-                                       overlay=(f"world {world.name}", caption))
-            bar.update(1)
-            return figure, clip
-
-        def beside(title, world, gradient_run, dqn_run):
-            """A section: gradient descent's figure, then the shipped DQN's figure and video."""
-            section = Section(title)
-            section.figures.append(media_for(world, gradient_run, f"{world.name}_gradient", "gradient descent",
-                                             False)[0])
-            figure, clip = media_for(world, dqn_run, f"{world.name}_dqn", "dqn (shipped)", not args.no_video)
-            section.figures.append(figure)
-            if clip is not None:
-                section.videos.append(clip)
-            return section
-
-        sections = []
-        gradient, dqn, formation, gradient_general, dqn_general = evaluations[:5]
-        section = Section("fixed20: thesis §6.2's fixed world, 40 starts")
-        section.figures.append(media_for(fixed, gradient, "fixed20_gradient", "gradient descent", False)[0])
-        figure, clip = media_for(fixed, dqn, "fixed20_dqn", "dqn (shipped)", not args.no_video)
-        section.figures.append(figure)
-        if not args.no_video:
-            section.videos.append(clip)
-            # The formation from four starts where gradient descent is trapped (the interesting ones).
-            trapped = [e.start for e in gradient.episodes if e.outcome == "trapped"][:4]
-            chosen = [e for e in formation.episodes if any((e.start == s).all() for s in trapped)]
-            figure, clip = media_for(fixed, formation, "fixed20_formation", "leader dqn (shipped), 2 followers",
-                                     True, chosen)
-            section.figures.append(figure)
-            section.videos.append(clip)
-        sections.append(section)
-        for world in general:
-            sections.append(beside(f"{world.name}: a thesis general test world", world, gradient_general, dqn_general))
-        gradient_moving, dqn_moving, astar_moving, formations = evaluations[7:11]
-        section = beside(f"{moving.name}: a cup before the target, five obstacles moving across the way", moving,
-                         gradient_moving, dqn_moving)
-        section.figures.append(media_for(moving, astar_moving, f"{moving.name}_astar", "A*, replanning every step",
-                                         False)[0])
-        sections.append(section)
-        section = Section(f"{crowd.name}: four formations, each to its own target across the others' way")
-        figure, clip = media_for(crowd, formations, f"{crowd.name}_dqn", "leaders dqn (shipped), 2 followers each",
-                                 not args.no_video)
-        section.figures.append(figure)
-        if clip is not None:
-            section.videos.append(clip)
-        sections.append(section)
-        gradient_map, dqn_map = evaluations[11:13]
-        sections.append(beside(f"{ros_map.name}: a ROS map (PGM + YAML) in metres, a 0.2 m robot moving 0.25 m a step",
-                               ros_map, gradient_map, dqn_map))
-        page = write_page(out, "apf-physics demo: the shipped models", evaluations, sections,
-                          notes=["Gradient descent beside the shipped DQN planners, on the fixed 20×20 world "
-                                 "(single robot and three-robot formation), the thesis's four general test "
-                                 "worlds, a world with moving obstacles (drawn where they are in each frame, "
-                                 "their routes as faint lines), four formations crossing each other and a ROS "
-                                 "occupancy map in metres (drawn in steps of 0.25 m); yellow "
-                                 "paths, blue starts, blue rings where a robot stopped short."],
+        sections = _Page(out, bar, not args.no_video).sections(worlds, evaluations)
+        page = write_page(out, "apf-physics demo: the shipped models", evaluations, sections, notes=NOTES,
                           files=["summary.txt", "summary.json"])
     print(table)
     videos = sum(len(s.videos) for s in sections)

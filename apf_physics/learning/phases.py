@@ -31,6 +31,7 @@ from apf_physics.world.generate import FAMILIES, generate_world
 from apf_physics.learning.config import TrainConfig
 from apf_physics.learning.validation import EvalSet
 from apf_physics.world.core import World
+from apf_physics.world.io.units import world_to_file
 from apf_physics.world.io.worldfile import world_from_dict
 
 POOL_STREAM = 0x9E11
@@ -86,7 +87,7 @@ def phases_for_world(world: World, config: TrainConfig) -> list[Phase]:
     extra = None
     if config.evaluation.eval_random_starts:
         points = validation_starts(world, config.evaluation.eval_random_starts, config.run.seed)
-        extra = EvalSet.of([world_from_dict({**world.to_dict(), "name": f"{world.name}-random",
+        extra = EvalSet.of([world_from_dict({**world_to_file(world), "name": f"{world.name}-random",
                                              "starts": points.tolist()}, source=world.label)])
     return [Phase(world.name, (world,), training_starts(world, config.env.train_starts, config.run.seed), None, None,
                   EvalSet.of([world]), random_validation=extra)]

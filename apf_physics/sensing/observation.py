@@ -36,7 +36,8 @@ from apf_physics.world import field as apf
 from apf_physics.common.compiled import kernel
 from apf_physics.world.field import Atlas, Grid, Raster, repulsive_term_at
 from apf_physics.common.transforms import signed_log
-from apf_physics.world.core import RASTER_CHUNK, World
+from apf_physics.world.core import World
+from apf_physics.world.freespace import RASTER_CHUNK
 
 CHANNELS = ("potential", "previous", "memory")
 """Channels an observer can build, in the order they are stacked."""

@@ -28,6 +28,26 @@ SETTLE_ROBOT = 0.01
 """Two robots ending a step overlapping more than this are pushed apart [units]."""
 
 
+class _Overlaps:
+    """The overlaps being settled: robots against static shapes (each with where the robot was when
+    it was read, its way out and depth: the shape's boundary as a plane there) and pairs of robots."""
+
+    def __init__(self, static_robot: np.ndarray, static_normal: np.ndarray, static_depth: np.ndarray,
+                 pair_robots: np.ndarray, positions: np.ndarray):
+        self.static_robot, self.static_normal, self.static_depth = static_robot, static_normal, static_depth
+        self.pair_robots = pair_robots
+        self.anchor = positions[static_robot]
+
+    def add(self, robot: np.ndarray, normal: np.ndarray, depth: np.ndarray, pairs: np.ndarray,
+            positions: np.ndarray) -> None:
+        """More overlaps, read with the robots at ``positions``."""
+        self.static_robot = np.concatenate([self.static_robot, robot])
+        self.static_normal = np.concatenate([self.static_normal, normal])
+        self.static_depth = np.concatenate([self.static_depth, depth])
+        self.anchor = np.concatenate([self.anchor, positions[robot]])
+        self.pair_robots = np.concatenate([self.pair_robots, pairs])
+
+
 class Settler:
     """Settles the robots that pymunk moved, in place in ``positions`` (their proxies follow).
 
@@ -78,61 +98,63 @@ class Settler:
             self._alone(alone, first, planes, simulated, before)
         if not len(deep) and not len(undone):
             return
+        overlaps = self._read(ids[deep], normal[deep], -distance[deep], undone)
+        if overlaps is not None:
+            self._push_apart(overlaps, simulated, before)
+
+    def _read(self, ids: np.ndarray, normal: np.ndarray, depth: np.ndarray, undone: np.ndarray) -> _Overlaps | None:
+        """The deep overlaps of the last substep's arbiters (``ids`` (K, 2) body ids, their normals and
+        depths), and what the ``undone`` robots overlap where they were put back; None: nothing."""
         # a robot and a static shape: the robot's way out is against the normal if it is a, along it if b
-        robot, _ = body_robots(ids[deep], self.proxies.ids, self.proxies.order, self.proxies.robot)
-        normal, depth = normal[deep], -distance[deep]
+        robot, _ = body_robots(ids, self.proxies.ids, self.proxies.order, self.proxies.robot)
         both = (robot[:, 0] >= 0) & (robot[:, 1] >= 0)
-        pair_robots = robot[both].astype(np.intp)
         first_side = robot[:, 0] >= 0
         one = ~both
         r = np.where(first_side, robot[:, 0], robot[:, 1])[one].astype(np.intp)
         out = normal[one] * np.where(first_side[one], -1.0, 1.0)[:, None]
         rest = ~np.isin(r, undone) if len(undone) else np.ones(len(r), bool)
-        static_robot, static_normal, static_depth = r[rest], out[rest], depth[one][rest]
-        if not len(static_robot) and not len(pair_robots) and not len(undone):
-            return
+        overlaps = _Overlaps(r[rest], out[rest], depth[one][rest], robot[both].astype(np.intp), self.positions)
+        if not len(overlaps.static_robot) and not len(overlaps.pair_robots) and not len(undone):
+            return None
         if len(undone):
-            more_robot, more_normal, more_depth, more_pairs = self.overlaps_at(undone)
-            static_robot = np.concatenate([static_robot, more_robot])
-            static_normal = np.concatenate([static_normal, more_normal])
-            static_depth = np.concatenate([static_depth, more_depth])
-            pair_robots = np.concatenate([pair_robots, more_pairs])
-        anchor = self.positions[static_robot]
+            overlaps.add(*self.overlaps_at(undone), self.positions)
+        return overlaps
+
+    def _push_apart(self, overlaps: _Overlaps, simulated: np.ndarray, before: np.ndarray) -> None:
+        """Rounds of :func:`project_out` and of asking pymunk what the pushed robots overlap now, until
+        nothing does; after :data:`SETTLE_ROUNDS`, the robots still overlapping go back to where
+        they started the step (``before``, of ``simulated``) and are settled there."""
         m = self.slots.robots_per_slot
         still = np.zeros(0, np.intp)   # robots still overlapping after a round
         for round_ in range(2 * SETTLE_ROUNDS):
             if round_ == SETTLE_ROUNDS:   # still overlapping: back to the step's start, and what is there
                 back = still[np.isin(still, simulated)]
-                self.positions[back] = before[np.searchsorted(simulated, back)]
-                self.proxies.target[self.proxies.of_robot[back]] = (self.positions[back]
-                                                               + self.slots.offset[back // m])
-                self.proxies.moved[self.proxies.of_robot[back]] = True
-                static_robot, static_normal, static_depth, pair_robots = self.overlaps_at(back)
-                anchor = self.positions[static_robot]
-            involved = self._with_mates(np.unique(np.concatenate([static_robot, pair_robots.ravel()])))
-            slots = involved // m
-            group = self.slots.group(involved)   # who meets whom
-            p = project_out(self.positions[involved], self.slots.radius[slots], np.searchsorted(involved, static_robot),
-                             anchor, static_normal, static_depth, group)
+                self._put(back, before[np.searchsorted(simulated, back)])
+                overlaps = _Overlaps(*self.overlaps_at(back), self.positions)
+            involved = self._with_mates(np.unique(np.concatenate([overlaps.static_robot,
+                                                                  overlaps.pair_robots.ravel()])))
+            p = project_out(self.positions[involved], self.slots.radius[involved // m],
+                            np.searchsorted(involved, overlaps.static_robot), overlaps.anchor, overlaps.static_normal,
+                            overlaps.static_depth, self.slots.group(involved))
             moved = np.any(p != self.positions[involved], axis=1)
             robots = involved[moved]
             if not len(robots):
                 return
-            self.positions[robots] = p[moved]
-            proxies = self.proxies.of_robot[robots]   # only robots that pymunk moved touch anything
-            self.proxies.target[proxies] = p[moved] + self.slots.offset[robots // m]
-            self.proxies.moved[proxies] = True
+            self._put(robots, p[moved])   # only robots that pymunk moved touch anything
             # a robot pushed out of one shape may have been pushed into another: ask pymunk again, and
             # keep the shapes already met (a robot in a corner settles against both sides at once)
             more_robot, more_normal, more_depth, more_pairs = self.overlaps_at(robots)
             if not len(more_robot) and not len(more_pairs):
                 return
             still = np.unique(np.concatenate([more_robot, more_pairs.ravel()]))
-            pair_robots = np.concatenate([pair_robots, more_pairs])
-            static_robot = np.concatenate([static_robot, more_robot])
-            anchor = np.concatenate([anchor, self.positions[more_robot]])
-            static_normal = np.concatenate([static_normal, more_normal])
-            static_depth = np.concatenate([static_depth, more_depth])
+            overlaps.add(more_robot, more_normal, more_depth, more_pairs, self.positions)
+
+    def _put(self, robots: np.ndarray, where: np.ndarray) -> None:
+        """Robots at ``where`` (world-local), their proxies to follow before pymunk next steps."""
+        self.positions[robots] = where
+        proxies = self.proxies.of_robot[robots]
+        self.proxies.target[proxies] = where + self.slots.offset[robots // self.slots.robots_per_slot]
+        self.proxies.moved[proxies] = True
 
     def _alone(self, robots: np.ndarray, first: np.ndarray, planes: np.ndarray, simulated: np.ndarray,
                before: np.ndarray) -> None:
@@ -151,10 +173,7 @@ class Settler:
         p = self.free.swept.settle(self.free.map_of[robots], self.positions[robots],
                                     before[np.searchsorted(simulated, robots)], self.slots.radius[slots], first,
                                     planes, SETTLE_OBSTACLE, SETTLE_ROUNDS)
-        self.positions[robots] = p
-        proxies = self.proxies.of_robot[robots]
-        self.proxies.target[proxies] = p + self.slots.offset[slots]
-        self.proxies.moved[proxies] = True
+        self._put(robots, p)
 
     def _with_mates(self, robots: np.ndarray) -> np.ndarray:
         """``robots`` and every robot that pymunk moved this step and that meets one of them (its
@@ -222,10 +241,7 @@ class Settler:
             if not len(crossed):
                 continue
             undone.append(robots[crossed])
-            self.positions[robots[crossed]] = before[crossed]
-            proxies = self.proxies.of_robot[robots[crossed]]
-            self.proxies.target[proxies] = before[crossed] + self.slots.offset[slots[crossed]]
-            self.proxies.moved[proxies] = True
+            self._put(robots[crossed], before[crossed])
         return np.concatenate(undone) if undone else np.zeros(0, np.intp)
 
 

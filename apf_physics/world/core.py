@@ -26,10 +26,10 @@ import numpy as np
 from apf_physics.world import field as apf
 from apf_physics.common import geometry
 from apf_physics.common.compiled import kernel
-from apf_physics.errors import WorldError
 from apf_physics.world.field import FieldParams
-from apf_physics.world.kinematics import LIMIT_KEYS, UnicycleLimits
-from apf_physics.world.obstacles import CircleObstacle, GridObstacle, Obstacle
+from apf_physics.world.freespace import RASTER_CHUNK, FreeSpace
+from apf_physics.world.kinematics import UnicycleLimits
+from apf_physics.world.obstacles import CircleObstacle, Obstacle
 from apf_physics.world.spatial import ShapeSet
 
 T = TypeVar("T")
@@ -40,8 +40,6 @@ clearance feature saturates at 2 beyond the radius)."""
 MOVE_REACH = 1.5
 """Clearance along moves (:meth:`World.path_clearance`) is exact up to this much beyond a robot's
 radius: every test of a move asks about less (the shield's room saturates at 1 beyond its margin)."""
-RASTER_CHUNK = 1 << 16
-"""Raster nodes computed at a time (bounds the temporaries of a large map)."""
 MOMENTS_KEPT = 8
 """Moments a world keeps (:meth:`World.at`): the steps of the slots of a batch in one world, at most."""
 MOTION_TABLE_STEPS = 1 << 16
@@ -170,7 +168,7 @@ class Fleet:
 
 
 @dataclass(frozen=True, eq=False)
-class World:
+class World(FreeSpace):
     """A validated world.
 
     Attributes:
@@ -500,121 +498,6 @@ class World:
         """
         return np.minimum(self.obstacle_distance(points, static=True, near=near), self.edge_distance(points))
 
-    def clearance_raster(self, resolution: int = 8, cap: float = 4.0, margin: float = 2.0) -> apf.Raster:
-        """``min(clearance, cap)`` from the static obstacles, at the nodes of a grid over the map and ``margin`` beyond; cached.
-
-        Capped clearance is still 1-Lipschitz (``cap`` must not exceed :attr:`reach`). A bilinear
-        sample is within ``0.71 / resolution`` of the true capped clearance (the largest
-        weighted distance to a cell's corners, at its centre). Beyond the map's edge the
-        clearance is negative.
-        """
-        def build() -> apf.Raster:
-            grid = apf.Grid.covering((-margin, -margin), (self.size[0] + margin, self.size[1] + margin), resolution)
-            values = grid.map_nodes(lambda nodes: np.minimum(self.static_clearance(nodes), cap), RASTER_CHUNK)
-            return apf.Raster(grid, values)
-        return self.cached(("clearance_raster", int(resolution), float(cap), float(margin)), build, static=True)
-
-    def node_clearance(self, resolution: int) -> np.ndarray:
-        """Static clearance at the nodes of the grid over the map at ``resolution`` nodes per unit
-        (``Grid.covering((0, 0), size, resolution)``), computed in chunks; shared by every target."""
-        def build() -> np.ndarray:
-            grid = apf.Grid.covering((0.0, 0.0), self.size, resolution)
-            return grid.map_nodes(self.static_clearance, RASTER_CHUNK)
-        return self.cached(("node_clearance", int(resolution)), build, static=True)
-
-    @property
-    def thinnest_obstacle(self) -> float:
-        """Least thickness of any obstacle (a point obstacle: 0); +inf without obstacles."""
-        return self.cached("thinnest", lambda: min((o.thickness for o in self.obstacles), default=np.inf))
-
-    def is_free(self, points: np.ndarray, margin: float | None = None) -> np.ndarray:
-        """True where a robot centred at the point keeps ``margin`` (default: its radius) from everything."""
-        margin = self.robot_radius if margin is None else margin
-        return self.clearance(points) >= margin
-
-    def free_cells(self, margin: float | None = None, resolution: int = 4) -> np.ndarray:
-        """Centres of the grid cells (side ``1/resolution``) in which every point is free.
-
-        A cell qualifies when its centre's clearance exceeds ``margin`` plus half the cell's
-        diagonal (clearance changes no faster than distance). Built once and cached.
-        """
-        margin = self.robot_radius if margin is None else margin
-
-        def build() -> np.ndarray:
-            h = 1.0 / resolution
-            xs = np.arange(h / 2, self.size[0], h)
-            ys = np.arange(h / 2, self.size[1], h)
-            centres = np.column_stack([a.ravel() for a in np.meshgrid(xs, ys)])
-            return centres[self.clearance(centres) > margin + h / np.sqrt(2)]
-        return self.cached(("free_cells", float(margin), int(resolution)), build, static=True)
-
-    def start_cells(self) -> np.ndarray:
-        """The :meth:`free_cells` (resolution 4) in which every point is farther than the goal tolerance from every target."""
-        def build() -> np.ndarray:
-            cells = self.free_cells()
-            return cells[self.distance_to_target(cells) > self.goal_tolerance + 0.125 * np.sqrt(2)]
-        return self.cached("start_cells", build)
-
-    def random_free_positions(self, rng: np.random.Generator, count: int, margin: float | None = None,
-                              away_from_targets: bool = False) -> np.ndarray:
-        """``count`` positions where a robot fits, drawn uniformly over the free cells of :meth:`free_cells`.
-
-        Args:
-            rng: The random generator.
-            count: How many.
-            margin: Clearance to keep (default: the robot's radius).
-            away_from_targets: Only positions farther than the goal tolerance from every target
-                (:meth:`start_cells`; ``margin`` must be None).
-
-        Raises:
-            WorldError: No free position exists.
-        """
-        cells = self.start_cells() if away_from_targets else self.free_cells(margin)
-        if not len(cells):
-            raise WorldError(f"{self.label}: no free position for a robot of radius "
-                             f"{self.robot_radius * self.frame.unit:g}{' ' + self.frame.name if self.frame.name else ''}")
-        half = 0.5 / 4
-        return cells[rng.integers(len(cells), size=count)] + rng.uniform(-half, half, size=(count, 2))
-
-    # -- serialisation -----------------------------------------------------------------
-    def _robot_to_file(self) -> dict[str, Any]:
-        u = self.frame.unit
-        robot: dict[str, Any] = {"radius": self.robot_radius * u, "step": u}
-        if self.unicycle is not None:
-            limits = self.unicycle.scaled(1.0 / u)
-            robot.update({"kinematics": "unicycle", **{k: float(getattr(limits, k)) for k in LIMIT_KEYS}})
-        return robot
-
-    def to_dict(self) -> dict[str, Any]:
-        """The world as the world-file contract's mapping, in the file's units (round-trips through ``world_from_dict``)."""
-        frame, u = self.frame, self.frame.unit
-        grids = [o for o in self.obstacles if isinstance(o, GridObstacle)]
-        data: dict[str, Any] = {"name": self.name, **({"units": frame.name} if frame.name else {})}
-        if grids:
-            data["grid"] = dict(grids[0].spec)
-        else:
-            data["size"] = [self.size[0] * u, self.size[1] * u]
-        data.update({
-            "robot": self._robot_to_file(),
-            "goal_tolerance": self.goal_tolerance * u,
-            "field": frame.field_to_file(self.field),
-            "obstacles": [_obstacle_to_file(o, frame) for o in self.obstacles if not isinstance(o, GridObstacle)],
-            "targets": frame.to_file(self.targets).tolist(),
-            "starts": frame.to_file(self.starts).tolist(),
-        })
-        if self.robots is not None:
-            if len(self.targets) == len(self.robots) and np.array_equal(self.targets, self.robots.targets):
-                del data["targets"]   # a file of robots alone: its targets are theirs
-            data["robots"] = [{"start": frame.to_file(s).tolist(), "target": frame.to_file(t).tolist()}
-                              for s, t in zip(self.robots.starts, self.robots.targets)]
-        if self.formation is not None:
-            data["formation"] = _formation_to_file(self.formation.to_dict(), u)
-        if self.formations:
-            data["formations"] = [{**_formation_to_file(task.spec.to_dict(), u),
-                                   "start": frame.to_file(task.start).tolist(),
-                                   "target": frame.to_file(task.target).tolist()} for task in self.formations]
-        return data
-
 
 class Moment:
     """A world at one control step: the queries of Model §1's ``U(·, t)`` and the clearance at ``t``.
@@ -783,29 +666,3 @@ def _least_per_segment(count: int, owner: np.ndarray, clearance: np.ndarray) -> 
     out = np.full(count, np.inf)
     np.minimum.at(out, owner, clearance)
     return out
-
-def _formation_to_file(spec: dict[str, Any], unit: float) -> dict[str, Any]:
-    spec = dict(spec, comm_range=spec["comm_range"] * unit, spacing=spec["spacing"] * unit)
-    if "offsets" in spec:
-        spec["offsets"] = (np.asarray(spec["offsets"], float) * unit).tolist()
-    return spec
-
-
-def _obstacle_to_file(obstacle: Obstacle, frame: Frame) -> dict[str, Any]:
-    """An obstacle's world-file mapping, in the file's units."""
-    u = frame.unit
-    moved = obstacle.moved(np.zeros(2))   # the shape alone
-    if isinstance(moved, CircleObstacle):
-        data: dict[str, Any] = {"circle": {"center": frame.to_file(moved.center).tolist(), "radius": moved.radius * u}}
-    else:
-        data = {"polygon": frame.to_file(moved.vertices).tolist()}
-    if getattr(obstacle, "name", None) is not None:
-        data["name"] = obstacle.name
-    if obstacle.motion is not None:
-        motion = obstacle.motion.to_dict()
-        motion["path"] = (np.asarray(motion["path"], float) * u).tolist()
-        motion["speed"] = motion["speed"] * u
-        if "phase" in motion:
-            motion["phase"] = motion["phase"] * u
-        data["motion"] = motion
-    return data

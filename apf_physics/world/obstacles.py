@@ -120,13 +120,6 @@ class PolygonObstacle:
         """Least width of its convex pieces: how thin a wall of it can be."""
         return min(geometry.convex_width(piece) for piece in self.convex_pieces())
 
-    def to_dict(self) -> dict[str, Any]:
-        data: dict[str, Any] = {"polygon": self.vertices.tolist()}
-        if self.name is not None:
-            data["name"] = self.name
-        if self.motion is not None:
-            data["motion"] = self.motion.to_dict()
-        return data
 
 
 @dataclass(frozen=True, eq=False)
@@ -157,13 +150,6 @@ class CircleObstacle:
         """Its diameter."""
         return 2.0 * self.radius
 
-    def to_dict(self) -> dict[str, Any]:
-        data: dict[str, Any] = {"circle": {"center": self.center.tolist(), "radius": self.radius}}
-        if self.name is not None:
-            data["name"] = self.name
-        if self.motion is not None:
-            data["motion"] = self.motion.to_dict()
-        return data
 
 
 @dataclass(frozen=True, eq=False)
@@ -260,9 +246,6 @@ class GridObstacle:
             distance[who] = np.abs(d)
             near[who] = nearest
         return distance, near
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"grid": dict(self.spec)}
 
 
 Obstacle = Union[PolygonObstacle, CircleObstacle, GridObstacle]

@@ -16,12 +16,13 @@ metres) is :attr:`Frame.name`; empty when the file names none.
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
-from apf_physics.world.core import Frame, FormationSpec
-from apf_physics.world.obstacles import CircleObstacle, Motion, Obstacle, PolygonObstacle
+from apf_physics.world.core import FormationSpec, Frame, World
+from apf_physics.world.kinematics import LIMIT_KEYS
+from apf_physics.world.obstacles import CircleObstacle, GridObstacle, Motion, Obstacle, PolygonObstacle
 
 
 # -- inbound: the file's units to steps ------------------------------------------------------
@@ -88,3 +89,74 @@ def same_units(frames: Sequence[Frame]) -> Frame | None:
     a mean length over worlds in other units has no unit."""
     scales = {(f.unit, f.name) for f in frames}
     return frames[0] if len(scales) == 1 else None
+
+
+# -- a whole world, as its file -------------------------------------------------------------
+def world_to_file(world: World) -> dict[str, Any]:
+    """The world as the world-file contract's mapping, in the file's units and coordinates (read
+    back by :func:`~apf_physics.world.io.worldfile.world_from_dict`, the same world)."""
+    frame, u = world.frame, world.frame.unit
+    grids = [o for o in world.obstacles if isinstance(o, GridObstacle)]
+    data: dict[str, Any] = {"name": world.name, **({"units": frame.name} if frame.name else {})}
+    if grids:
+        data["grid"] = dict(grids[0].spec)
+    else:
+        data["size"] = [world.size[0] * u, world.size[1] * u]
+    data.update({
+        "robot": _robot_to_file(world),
+        "goal_tolerance": world.goal_tolerance * u,
+        "field": frame.field_to_file(world.field),
+        "obstacles": [obstacle_to_file(frame, o) for o in world.obstacles if not isinstance(o, GridObstacle)],
+        "targets": frame.to_file(world.targets).tolist(),
+        "starts": frame.to_file(world.starts).tolist(),
+    })
+    if world.robots is not None:
+        robots = world.robots
+        if len(world.targets) == len(robots) and np.array_equal(world.targets, robots.targets):
+            del data["targets"]   # a file of robots alone: its targets are theirs
+        data["robots"] = [{"start": frame.to_file(s).tolist(), "target": frame.to_file(t).tolist()}
+                          for s, t in zip(robots.starts, robots.targets)]
+    if world.formation is not None:
+        data["formation"] = _formation_to_file(world.formation.to_dict(), u)
+    if world.formations:
+        data["formations"] = [{**_formation_to_file(task.spec.to_dict(), u),
+                               "start": frame.to_file(task.start).tolist(),
+                               "target": frame.to_file(task.target).tolist()} for task in world.formations]
+    return data
+
+
+def _robot_to_file(world: World) -> dict[str, Any]:
+    u = world.frame.unit
+    robot: dict[str, Any] = {"radius": world.robot_radius * u, "step": u}
+    if world.unicycle is not None:
+        limits = world.unicycle.scaled(1.0 / u)
+        robot.update({"kinematics": "unicycle", **{k: float(getattr(limits, k)) for k in LIMIT_KEYS}})
+    return robot
+
+
+def _formation_to_file(spec: dict[str, Any], unit: float) -> dict[str, Any]:
+    spec = dict(spec, comm_range=spec["comm_range"] * unit, spacing=spec["spacing"] * unit)
+    if "offsets" in spec:
+        spec["offsets"] = (np.asarray(spec["offsets"], float) * unit).tolist()
+    return spec
+
+
+def obstacle_to_file(frame: Frame, obstacle: Obstacle) -> dict[str, Any]:
+    """An obstacle's world-file mapping (its shape, name and route), in the file's units: the
+    inverse of :func:`obstacle_to_steps`."""
+    u = frame.unit
+    moved = obstacle.moved(np.zeros(2))   # the shape alone
+    if isinstance(moved, CircleObstacle):
+        data: dict[str, Any] = {"circle": {"center": frame.to_file(moved.center).tolist(), "radius": moved.radius * u}}
+    else:
+        data = {"polygon": frame.to_file(moved.vertices).tolist()}
+    if getattr(obstacle, "name", None) is not None:
+        data["name"] = obstacle.name
+    if obstacle.motion is not None:
+        motion = obstacle.motion.to_dict()
+        motion["path"] = (np.asarray(motion["path"], float) * u).tolist()
+        motion["speed"] = motion["speed"] * u
+        if "phase" in motion:
+            motion["phase"] = motion["phase"] * u
+        data["motion"] = motion
+    return data

@@ -38,7 +38,7 @@ from apf_physics.common.safeyaml import MAX_DEPTH, MAX_NODES, MAX_SCALAR_CHARS  
 from apf_physics.common.safeyaml import read_yaml_file, shortened
 from apf_physics.world.core import Fleet, Frame, FormationTask, World
 from apf_physics.world.io.units import (formation_to_steps, obstacle_to_steps, points_to_steps, show_length,
-                                        show_point, unit_suffix)
+                                        show_point, unit_suffix, world_to_file)
 from apf_physics.world.io.schema import (MAX_FOLLOWERS, MAX_FORMATIONS, MAX_NAME_CHARS,  # noqa: F401 (public here too)
                                      MAX_OBSTACLES, MAX_POLYGON_VERTICES, MAX_PROBLEMS, MAX_ROUTE_POINTS, MAX_SIDE,
                                      MAX_STARTS, MAX_TARGETS, MAX_VERTICES, MIN_SIDE)
@@ -498,7 +498,7 @@ _WorldDumper.add_representer(dict, _represent_dict)
 
 def dump_world_yaml(world: World) -> str:
     """The world as YAML text in the world-file contract."""
-    return yaml.dump(_tidy(world.to_dict()), Dumper=_WorldDumper, sort_keys=False, width=120)
+    return yaml.dump(_tidy(world_to_file(world)), Dumper=_WorldDumper, sort_keys=False, width=120)
 
 
 def save_world(world: World, path: str | Path) -> None:
