@@ -22,7 +22,8 @@ from apf_physics.errors import UserError
 from apf_physics.experiments.evaluate import Episode, evaluate, format_table, write_json, write_text_atomic
 from apf_physics.planners import make_planner
 from apf_physics.common.safefile import check_writable
-from apf_physics.render.page import PAGE, write_results
+from apf_physics.render.fleet import write_fleet_video
+from apf_physics.render.page import PAGE, VIDEO_FPS, Section, Video, file_stem, fleet_table, write_page, write_results
 from apf_physics.world.kinematics import KINEMATICS
 from apf_physics.experiments.rollout import kinematics_option
 from apf_physics.world.io.units import show_length
@@ -258,9 +259,11 @@ def run_scenarios(args: argparse.Namespace) -> int:
 def run_fleets(args: argparse.Namespace, worlds: list | None) -> int:
     """Fleets: the first ``--agents`` lines of ``--scen`` on its map, or each world's ``robots:``, every
     robot at once; a table per planner and world, JSON per robot and a summary per run."""
-    for flag in ("ray", "html", "random_starts", "formation", "buckets", "limit", "kinematics"):
+    for flag in ("ray", "random_starts", "formation", "buckets", "limit", "kinematics"):
         if getattr(args, flag) not in (None, False):
             raise UserError(f"--{flag.replace('_', '-')}: not with fleets")
+    if args.html:
+        check_writable(Path(args.html) / PAGE, create_parent=True)
     if worlds is None:
         if len(args.worlds) != 1:
             raise UserError(f"--scen: give one MovingAI .map as WORLD, got {len(args.worlds)}")
@@ -285,7 +288,29 @@ def run_fleets(args: argparse.Namespace, worlds: list | None) -> int:
     if args.json:
         write_text_atomic(args.json, json.dumps([run.to_dict() for run in runs], indent=1))
         print(f"wrote {args.json}")
+    if args.html:
+        print(f"wrote {fleet_page(args.html, runs, names)} (open it in a browser)")
     return 0
+
+
+def fleet_page(folder: str, runs: list, names: list[str]) -> Path:
+    """The results page of fleets: the table, and a video of each run (:mod:`apf_physics.render.fleet`)."""
+    folder = Path(folder)
+    sections = []
+    for run in runs:
+        stem = file_stem(run.world.name, run.planner, "fleet")
+        video, poster = folder / f"{stem}.mp4", folder / f"{stem}_last.png"
+        positions, goals = run.drawn()
+        s = run.summary()
+        tally = (f"{s['goals_reached']} goals in {run.steps} steps" if run.lifelong is not None
+                 else f"{s['arrived']}/{s['robots']} on their goal after {run.steps} steps")
+        frames = write_fleet_video(run.world, positions, goals, video, fps=VIDEO_FPS, size=1536, png=poster,
+                                   caption=lambda step, run=run: [f"{run.world.name}  {run.planner}  step {step}/{run.steps}"])
+        sections.append(Section(f"{run.world.name}: {run.planner}",
+                                videos=[Video(video, f"{len(run.fleet)} robots, {tally}", frames / VIDEO_FPS, poster,
+                                              wide=True)]))
+    rows = [{"planner": run.planner, "world": run.world.name, **run.summary()} for run in runs]
+    return write_page(folder, f"apf-physics eval: fleets, {', '.join(names)}", [], sections, tables=[fleet_table(rows)])
 
 
 class FleetProgress:

@@ -136,8 +136,8 @@ def render_fleet(args: argparse.Namespace, world, fleet, out, codec, png) -> int
     planner = make_planner(args.planner, model=args.model)
     run = rollout_fleet(world, planner, fleet, max_steps=args.max_steps, lifelong=args.lifelong, seed=args.seed)
     summary = run.summary()
-    goals = run.lattice.points(run.goals.ravel()).reshape(run.positions.shape)
-    home = np.hypot(*(run.positions - goals).transpose(2, 0, 1)) < 1e-6
+    positions, goals = run.drawn()
+    home = np.hypot(*(run.positions - goals[:, :len(fleet)]).transpose(2, 0, 1)) < 1e-6
     reached = np.concatenate([[0], np.cumsum(np.sum(home[1:] & ((run.goals[1:] != run.goals[:-1]) | ~home[:-1]), axis=1))])
 
     def caption(step: int) -> list[str]:
@@ -147,7 +147,7 @@ def render_fleet(args: argparse.Namespace, world, fleet, out, codec, png) -> int
                 f"{len(fleet)} robots: {tally}; robot-robot collisions {summary['robot_robot_collisions']}, "
                 f"robot-obstacle {summary['robot_obstacle_collisions']}"]
 
-    written = write_fleet_video(world, run.positions, goals, out, fps=args.fps, size=args.size or 2048, hold=args.hold,
+    written = write_fleet_video(world, positions, goals, out, fps=args.fps, size=args.size or 2048, hold=args.hold,
                                 caption=caption, caption_place=args.caption, codec=codec.name,
                                 progress=not args.no_progress, png=png)
     tally = (f"{summary['goals_reached']} goals, {summary['throughput']:.3f} per step" if run.lifelong is not None

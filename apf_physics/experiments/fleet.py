@@ -86,6 +86,21 @@ class FleetRun:
         """Control steps the run took."""
         return len(self.positions) - 1
 
+    def drawn(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(positions, goals)``, each ``(steps + 1, R, 2)``: every robot at every step and its goal, the
+        fleet's robots first, then the formations' (held where they stopped; a leader's goal is its
+        formation's target, a follower's is NaN: it has none of its own). What a video draws."""
+        positions = self.positions
+        goals = self.lattice.points(self.goals.ravel()).reshape(positions.shape)
+        for episode in self.formations or ():
+            mine = episode.formation.positions
+            mine = np.concatenate([mine, np.repeat(mine[-1:], len(positions) - len(mine), axis=0)])
+            target = np.full(mine.shape, np.nan)
+            target[:, 0] = self.world.formations[episode.formation.index].target
+            positions = np.concatenate([positions, mine], axis=1)
+            goals = np.concatenate([goals, target], axis=1)
+        return positions, goals
+
     def episodes(self) -> list[Episode]:
         """One :class:`~apf_physics.experiments.rollout.Episode` per robot: its path up to its cost."""
         out = []

@@ -51,7 +51,8 @@ def fleet_frame(image: FieldImage, positions: np.ndarray, goals: np.ndarray, ste
     Args:
         image: The map (:func:`fleet_image`).
         positions: ``(steps + 1, N, 2)`` every robot's positions.
-        goals: ``(steps + 1, N, 2)`` every robot's goal at every step.
+        goals: ``(steps + 1, N, 2)`` every robot's goal at every step (NaN: none drawn, e.g. a
+            formation's follower).
         step: The step shown.
         colours: (N, 3) each robot's colour (:func:`fleet_colours`).
         lines: Text for the caption.
@@ -68,16 +69,17 @@ def fleet_frame(image: FieldImage, positions: np.ndarray, goals: np.ndarray, ste
     # squares a step wide, trails a third of a step: legible at a few pixels per step
     r = max(1.5, 0.45 * image.scale)
     width = max(1, int(round(0.3 * image.scale)))
-    home = np.hypot(*(now - goal).T) < 1e-6
+    has_goal = ~np.isnan(goal[:, 0])
+    home = has_goal & (np.hypot(*(now - np.where(has_goal[:, None], goal, now)).T) < 1e-6)
     for k in range(max(0, step - tail), step):   # the trail, older steps dimmer
         fade = 0.25 + 0.5 * (k - step + tail + 1) / (tail + 1)
         a, b = px(positions[k]), px(positions[k + 1])
         for i in np.flatnonzero(np.any(positions[k] != positions[k + 1], axis=1)).tolist():
             cv2.line(frame, tuple(a[i]), tuple(b[i]), tuple(int(c * fade) for c in colours[i]), width, cv2.LINE_AA,
                      _SHIFT)
-    g, p = px(goal), px(now)
+    g, p = px(np.where(has_goal[:, None], goal, now)), px(now)
     side = int(round(0.5 * image.scale * _ONE))
-    for i in range(len(now)):
+    for i in np.flatnonzero(has_goal).tolist():
         colour = tuple(int(c) for c in colours[i])
         if lines_to_goals and not home[i]:   # a faint line from the robot to its goal
             cv2.line(frame, tuple(p[i]), tuple(g[i]), tuple(int(c * 0.3) for c in colours[i]), 1, cv2.LINE_AA, _SHIFT)
