@@ -34,6 +34,8 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import torch  # noqa: E402
 
+import numpy as np  # noqa: E402
+
 from apf_physics.common.safefile import write_text  # noqa: E402
 from apf_physics.experiments.fleet import rollout_fleet  # noqa: E402
 from apf_physics.experiments.movingai import draw_scenarios, scenario_fleet  # noqa: E402
@@ -94,6 +96,28 @@ def run_cases(args: argparse.Namespace) -> None:
         write_text(args.json, json.dumps(rows, indent=1))
 
 
+def crowd_test_us(run, robots: int) -> tuple[float, float]:
+    """Microseconds per robot of a crowd's free-move test over the run's recorded steps: by cells
+    (:func:`~apf_physics.sim.freemove.crowd_needs`, what the engine runs) and dense (every pair,
+    ``may_touch`` and ``close_under_touch``: the engine's before), side by side in this process."""
+    from apf_physics.sim.freemove import close_under_touch, crowd_needs, may_touch
+    radius = np.full(robots, run.world.robot_radius)
+    steps = range(0, run.steps, max(1, run.steps // 40))
+    times = []
+    for dense in (False, True):
+        clock = time.perf_counter()
+        for t in steps:
+            p, dp = run.positions[t], run.positions[t + 1] - run.positions[t]
+            needs = np.zeros(robots, bool)
+            if dense:
+                both, near = may_touch(p[None], dp[None], radius[None, :, None], np.ones((1, robots), bool), 2.83)
+                close_under_touch(needs[None], both, near)
+            else:
+                crowd_needs(p, dp, radius, needs, 2.83)
+        times.append(1e6 * (time.perf_counter() - clock) / (len(steps) * robots))
+    return times[0], times[1]
+
+
 def speed(args: argparse.Namespace) -> None:
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     for size in args.sizes:
@@ -107,6 +131,9 @@ def speed(args: argparse.Namespace) -> None:
               f"{run.robot_robot}+{run.robot_obstacle}: {1000 * total / robot_steps:.3f} ms per robot-step "
               f"(values {parts['values']:.3f}, rule {parts['rule']:.4f}, engine {parts['physics']:.4f}); "
               f"{run.tables[0]} value tables built, peak {run.tables[1] / 2**20:.1f} MiB", flush=True)
+        cells, dense = crowd_test_us(run, size)
+        print(f"        the crowd's free-move test: {cells:.2f} µs per robot by cells, {dense:.2f} dense "
+              f"(every pair), ratio {dense / cells:.1f}", flush=True)
 
 
 def lifelong(args: argparse.Namespace) -> None:
