@@ -3,6 +3,7 @@
     python tools/fleet_anchors.py mapf MAP SCEN --agents N [--solvers lacam,pibt] [--time-limit 60]
     python tools/fleet_anchors.py orca MAP SCEN --agents N [--max-steps S]
     python tools/fleet_anchors.py lifelong MAP SCEN --agents N --horizon H [--seed S]
+    python tools/fleet_anchors.py lacam MAP SCEN --agents N --binary PATH [--time-limit 30]
 
 Neither is a dependency of the package: install them beside it for the benchmark
 (``pip install pymapf navground``); a subcommand whose library is missing says so and stops.
@@ -21,6 +22,11 @@ shortest octile path (the usual pairing of ORCA with a global path). Prints the 
 largest, the agent pairs whose discs overlapped and the agents whose disc entered a wall (each summed
 over the time steps of 0.1 s), and the time per agent-step.
 
+``lacam``: LaCAM* as its authors ship it (``Kei18/lacam3``, a C++ program: give the path of the
+``main`` binary you built by its README; nothing here builds it): the same instance (its ``-m MAP -i
+SCEN -N N``, 4-connected), its sum of costs, makespan and their lower bounds as it reports them,
+and its time.
+
 ``lifelong``: the MAPF baseline's throughput: pymapf's PIBT step (4-connected, no bodies) run one
 step at a time, each agent given its next goal as soon as it arrives, from the same seeded streams
 as ``apf-physics eval ... --lifelong`` (:class:`apf_physics.experiments.fleet.GoalStream`, here on
@@ -32,6 +38,8 @@ from __future__ import annotations
 import argparse
 import os
 import random
+import subprocess
+import tempfile
 import time
 
 import numpy as np
@@ -210,10 +218,29 @@ def lifelong(args) -> None:
           f"{reached / args.horizon:.3f} per step, {seconds:.0f} s; load average {os.getloadavg()[0]:.1f}", flush=True)
 
 
+def lacam(args) -> None:
+    if not os.path.isfile(args.binary):
+        raise SystemExit(f"{args.binary}: no lacam3 binary there (build Kei18/lacam3 by its README)")
+    _, _, scen = cells(args)
+    octile = sum(s.optimal for s in scen)
+    with tempfile.TemporaryDirectory() as folder:
+        out = os.path.join(folder, "result.txt")
+        clock = time.perf_counter()
+        subprocess.run([args.binary, "-m", args.map, "-i", args.scen, "-N", str(args.agents), "-t", str(args.time_limit),
+                        "-o", out], check=True, capture_output=True)
+        seconds = time.perf_counter() - clock
+        result = dict(line.split("=", 1) for line in open(out).read().splitlines() if "=" in line)
+    soc = int(result["soc"])
+    print(f"lacam3 {args.map} {args.agents} agents: solved {result['solved']}, SoC {soc} (bound {result['soc_lb']}; "
+          f"{soc / octile:.3f} of the octile optima), makespan {result['makespan']} (bound {result['makespan_lb']}), "
+          f"{int(result['comp_time']) / 1000:.1f} s of search ({seconds:.1f} s in all); load average "
+          f"{os.getloadavg()[0]:.1f}", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
-    for name, func in (("mapf", mapf), ("orca", orca), ("lifelong", lifelong)):
+    for name, func in (("mapf", mapf), ("orca", orca), ("lifelong", lifelong), ("lacam", lacam)):
         p = sub.add_parser(name)
         p.add_argument("map")
         p.add_argument("scen")
@@ -224,6 +251,9 @@ def main() -> None:
             p.add_argument("--time-limit", type=float, default=60.0)
         if name == "orca":
             p.add_argument("--max-steps", type=int)
+        if name == "lacam":
+            p.add_argument("--binary", required=True)
+            p.add_argument("--time-limit", type=float, default=30.0)
         if name == "lifelong":
             p.add_argument("--horizon", type=int, default=500)
             p.add_argument("--seed", type=int, default=0)
