@@ -37,7 +37,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from apf_physics.common.compiled import kernel
-from apf_physics.world.search import shortest_paths
+from apf_physics.world.search import shortest_costs
 
 MAP_FEATURES = 2
 """Node features of a :class:`~apf_physics.sensing.mapview.MapView`: clearance margin, target."""
@@ -230,9 +230,8 @@ def fixed_point(edges: list, free: torch.Tensor, goal: torch.Tensor) -> torch.Te
     """The fixed point of :func:`_bellman_update`, without updating the whole grid again and again.
 
     ``−V`` is a shortest-path cost to the goal nodes with positive edge costs, so it is found
-    by :func:`~apf_physics.world.search.shortest_paths` (relaxing outward from the nodes whose value
-    just fell): each round costs what the wavefront holds, not the whole grid, and long paths
-    (a maze's) are followed to their end. The values are the updates' own, to the bit: each is
+    by :func:`~apf_physics.world.search.shortest_costs` (a compiled Dijkstra search: every node settled
+    once), and long paths (a maze's) are followed to their end. The values are the updates' own, to the bit: each is
     ``V(x + n) − cost``, in float32.
 
     Args:
@@ -244,7 +243,7 @@ def fixed_point(edges: list, free: torch.Tensor, goal: torch.Tensor) -> torch.Te
         (R, C) float32 V: 0 at the goal nodes, ``UNREACHED`` where no path leads (or blocked).
     """
     steps = [(dr, dc, cost.numpy()) for dr, dc, cost in edges]
-    cost_to_go, _ = shortest_paths(free.numpy(), np.flatnonzero(goal.numpy().ravel()), steps, np.float32)
+    cost_to_go = shortest_costs(free.numpy(), np.flatnonzero(goal.numpy().ravel()), steps, np.float32)
     reached = free.numpy().ravel() & (cost_to_go <= -UNREACHED)
     v = np.where(reached, -cost_to_go, np.float32(UNREACHED)).astype(np.float32)
     v[goal.numpy().ravel()] = 0.0

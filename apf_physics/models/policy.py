@@ -279,6 +279,39 @@ class MapPolicy:
                                room[i:i + 1], du[i:i + 1]).numpy()[0]
         return np.where(usable, q, -np.inf)
 
+    def node_values(self, world: World, goal: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """(K,) float32 V at ``points`` of the map's values toward a target at ``goal`` (:data:`UNREACHED`
+        where no way leads): a fleet robot's table (:mod:`apf_physics.control.fleet`). The values are
+        planned in a view of ``world`` with that target alone, dropped afterwards (what the map alone
+        determines stays shared)."""
+        view, v = self.values(world.with_task(np.asarray(goal, float).reshape(1, 2), np.zeros((0, 2))))
+        points = np.asarray(points, float).reshape(-1, 2)
+        with _threads_for(1), torch.inference_mode():
+            sampled, found = sample_values(v, torch.from_numpy(view.free), view.grid.origin, view.grid.resolution,
+                                           torch.from_numpy(points).to(v.dtype))
+        out = np.where(found.numpy(), sampled.numpy(), UNREACHED).astype(np.float32)
+        if self.on_nodes:   # V read on the nodes themselves, as its moves read it (node_scores)
+            rows, cols = view.grid.shape
+            index = view.grid.to_index(points)
+            near = np.rint(index)
+            on = (np.all(np.abs(index - near) <= 1e-6, axis=1) & (near[:, 0] >= 0) & (near[:, 0] < cols)
+                  & (near[:, 1] >= 0) & (near[:, 1] < rows))
+            out[on] = v.numpy()[near[on, 1].astype(np.intp), near[on, 0].astype(np.intp)]
+        return out
+
+    def move_scores(self, here: np.ndarray, there: np.ndarray, moves: np.ndarray, room: np.ndarray,
+                    du: np.ndarray) -> np.ndarray:
+        """(N, M) action values from V sampled at the robots (``here``, (N,)) and at the ends of their
+        ``moves`` (``there``, (N, M); :data:`UNREACHED` where none was found): what :meth:`q_values`
+        computes from the map, for callers that read V from tables of their own (a fleet's)."""
+        with _threads_for(1), torch.inference_mode():
+            there_t = torch.from_numpy(np.asarray(there, np.float32))
+            features = move_features(torch.from_numpy(np.asarray(here, np.float32)), there_t, there_t > UNREACHED / 2,
+                                     torch.from_numpy(np.hypot(*np.asarray(moves, float).T)).float(),
+                                     torch.from_numpy(np.asarray(room, np.float32)),
+                                     torch.from_numpy(np.asarray(du, np.float32)), self.network.dv_clip)
+            return self.network.scores(features).numpy()
+
     def among_others(self, world: World, view: MapView, v: torch.Tensor,
                     position: np.ndarray) -> tuple[MapView, torch.Tensor, tuple[slice, slice]]:
         """The map view and values over the square of :data:`OTHERS_PATCH` around ``position``,
@@ -402,7 +435,7 @@ def node_scores(network: MapNetwork, view: MapView, v: torch.Tensor, kappa: torc
     ends_t = torch.from_numpy(np.asarray(ends, np.intp))
     there = torch.where(ends_t >= 0, flat[ends_t.clamp_min(0)], here[:, None].expand(-1, ends_t.shape[1]))
     found = there > UNREACHED / 2
-    moves_t = torch.from_numpy(np.asarray(moves, float)).to(v.dtype)
+    moves_t = torch.from_numpy(np.array(moves, float)).to(v.dtype)
     lengths = torch.hypot(moves_t[..., 0], moves_t[..., 1])
     features = move_features(here, there, found, lengths, torch.from_numpy(np.asarray(room)).to(v.dtype),
                              torch.from_numpy(np.asarray(du)).to(v.dtype), network.dv_clip)

@@ -19,6 +19,8 @@ from apf_physics.errors import ModelError
 from apf_physics.models import NETWORKS, DQNPolicy, MapPolicy, load_policy, resolve_model, shipped_model_for
 from apf_physics.models.policy import move_inputs, robot_move_inputs
 from apf_physics.sensing.observation import Observer
+from apf_physics.common.transforms import signed_log
+from apf_physics.control.fleet import STAY, Lattice, goal_columns
 from apf_physics.planners.base import Planner
 from apf_physics.world.core import Moment, World
 
@@ -134,6 +136,30 @@ class DQNPlanner(Planner):
             return ACTIONS[shielded_argmax(q, room)] * active[:, None]
         return ACTIONS[shield_over_time(moment, positions, ACTIONS, q, self.prediction, self.horizon)] * active[:, None]
 
+
+    def fleet_values(self, lattice: Lattice, nodes: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        """The map network's action values of the nine unit moves of each robot of a fleet, toward its
+        own goal: its values for that goal (planned once per goal, read at the lattice's nodes and kept
+        within the budget of :meth:`goal_tables`), the room of each move on the lattice and the change of
+        the robot's own U, scored by the network's head. No robot consults a search while it acts.
+
+        Raises:
+            ModelError: The model is a window network (it sees one robot's field in a window; a fleet's
+                values are the map network's).
+        """
+        if not isinstance(self._policy, MapPolicy):
+            raise ModelError(f"{self.describe()}: a fleet is driven by the map network (--model map, the "
+                             "default on Table 4's field), not a window network")
+        policy = self._policy
+        everywhere = lattice.points(np.arange(lattice.count))
+        tables = self.goal_tables(lattice)
+        build = lambda goal: policy.node_values(lattice.world, lattice.points([goal])[0], everywhere)  # noqa: E731
+        there = goal_columns(tables, nodes, goals, build)
+        here = there[:, STAY]
+        ends = lattice.ends(nodes)
+        u = lattice.potential(ends, goals)
+        du = signed_log(u - u[:, STAY:STAY + 1]) / 4.0
+        return policy.move_scores(here, there, ACTIONS, lattice.room[nodes], du)
 
     def _act_on_map(self, positions: np.ndarray, active: np.ndarray, moment: Moment) -> np.ndarray:
         """A map network's move: its best-valued one (with the shield: among the safe ones)."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from apf_physics.control.fleet import Lattice
 from apf_physics.planners.base import Planner
 from apf_physics.world.core import Moment
 
@@ -34,6 +35,11 @@ class GradientPlanner(Planner):
     def stuck(self) -> np.ndarray:
         """Robots whose next unit step would not lower the potential: a local minimum at this step size."""
         return self._stuck
+
+    def fleet_values(self, lattice: Lattice, nodes: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        """Gradient descent on a fleet's lattice: the moves that lower each robot's own U the most
+        (its target's attraction and well, the static obstacles' repulsion) rank first."""
+        return -lattice.potential(lattice.ends(nodes), goals)
 
     def act(self, positions: np.ndarray, active: np.ndarray, moment: Moment | None = None) -> np.ndarray:
         moment = self._moment(moment)

@@ -29,7 +29,7 @@ from apf_physics.world.kinematics import KINEMATICS, LIMIT_BOUNDS, LIMIT_KEYS, U
 from apf_physics.world.obstacles import CircleObstacle, Motion, Obstacle, PolygonObstacle
 from apf_physics.common.safefile import NamedFileError, named_file
 from apf_physics.common.safeyaml import described, key_text, shortened
-from apf_physics.world.core import FormationSpec, FormationTask, Frame
+from apf_physics.world.core import Fleet, FormationSpec, FormationTask, Frame
 
 T = TypeVar("T")
 
@@ -67,7 +67,7 @@ MAX_COUNTED = 1000
 not read to its end)."""
 
 _TOP_KEYS = {"name", "units", "size", "origin", "grid", "sdf", "robot", "robot_radius", "goal_tolerance", "field",
-             "obstacles", "targets", "starts", "formation", "formations"}
+             "obstacles", "targets", "starts", "formation", "formations", "robots"}
 _SDF_KEYS = {"file", "skip", "heights"}
 MAX_UNIT_CHARS = 16
 """Longest name of the file's unit (``units:``) [characters]."""
@@ -367,6 +367,32 @@ def _parse_obstacles(check: Checker, value: Any, box: tuple[np.ndarray, np.ndarr
 
 MAX_FORMATIONS = 64
 """Most formations in one world."""
+MAX_ROBOTS = 10_000
+"""Most robots of a world's ``robots:`` (a fleet; each is one robot of one evaluation)."""
+
+
+def _parse_robots(check: Checker, value: Any) -> Fleet:
+    """A world file's ``robots:``: a list of ``{start: [x, y], target: [x, y]}``, in the file's units."""
+    if not isinstance(value, list) or not value:
+        check.bad("robots", f"expected a non-empty list of robots ({{start: [x, y], target: [x, y]}}), got {described(value)}")
+        raise Invalid
+    if len(value) > MAX_ROBOTS:
+        check.bad("robots", f"at most {MAX_ROBOTS:,} robots, got {len(value):,}")
+        raise Invalid
+    starts, targets = [], []
+    for i, entry in enumerate(value):
+        key = f"robots[{i}]"
+        body = check.attempt(check.mapping, entry, key, {"start", "target"}, required=("start", "target"))
+        if body is None or "start" not in body or "target" not in body:
+            continue
+        start = check.attempt(check.point, body["start"], f"{key}.start")
+        target = check.attempt(check.point, body["target"], f"{key}.target")
+        if start is not None and target is not None:
+            starts.append(start)
+            targets.append(target)
+    if len(starts) < len(value):
+        raise Invalid
+    return Fleet(np.array(starts, float), np.array(targets, float))
 
 
 def _parse_formations(check: Checker, value: Any) -> tuple[FormationTask, ...]:
@@ -599,6 +625,7 @@ class FileWorld:
         formations: The ``formations:`` (empty when there are none).
         unicycle: The robot's limits if it is a unicycle (file units), else None.
         sdf: The obstacles read from the ``sdf:`` world (after :attr:`obstacles` in the world).
+        robots: The ``robots:`` (file units), else None.
     """
 
     name: str | None
@@ -615,6 +642,7 @@ class FileWorld:
     formations: tuple[FormationTask, ...] | None
     unicycle: UnicycleLimits | None = None
     sdf: tuple[Obstacle, ...] | None = ()
+    robots: Fleet | None = None
 
 
 def parse_world(check: Checker, data: Any, source: str, confine: bool = False) -> FileWorld | None:
@@ -633,11 +661,15 @@ def parse_world(check: Checker, data: Any, source: str, confine: bool = False) -
         check.bad("", f"a world file must be a mapping of keys, got {described(data)}")
         return None
     several = data.get("formations") is not None
+    fleet = data.get("robots") is not None
     has_grid = data.get("grid") is not None
-    required = [k for k in (("field",) if several else ("field", "targets"))] + ([] if has_grid else ["size"])
+    required = [k for k in (("field",) if several or fleet else ("field", "targets"))] + ([] if has_grid else ["size"])
     check.mapping(data, "", _TOP_KEYS, required=required)
     if several and data.get("formation") is not None:
         check.bad("formation", "'formation' and 'formations' together: give one formation, or a list of them")
+    for other in ("formation", "starts"):
+        if fleet and data.get(other):
+            check.bad("robots", f"'robots' and '{other}' together: a fleet's robots start where 'robots' puts them")
     if has_grid and "size" in data:
         check.bad("size", "a world with a grid takes its size from the grid: leave size out")
     if has_grid and "origin" in data:
@@ -671,10 +703,13 @@ def parse_world(check: Checker, data: Any, source: str, confine: bool = False) -
     formation = (check.attempt(_parse_formation, check, data["formation"])
                  if data.get("formation") is not None and not several else None)
     formations = check.attempt(_parse_formations, check, data["formations"]) if several else ()
+    robots = check.attempt(_parse_robots, check, data["robots"]) if fleet else None
+    if robots is not None and "targets" not in data:
+        targets = robots.targets   # a fleet's targets are its robots'
     if several and formations:   # the formations' own starts and targets, unless also given at the top
         if "targets" not in data:
             targets = np.array([task.target for task in formations])
         if not data.get("starts"):
             starts = np.array([task.start for task in formations])
     return FileWorld(name, size, grid, frame, robot_radius, goal_tolerance, params, obstacles, targets, starts,
-                     formation, formations, unicycle, sdf)
+                     formation, formations, unicycle, sdf, robots)

@@ -115,6 +115,12 @@ def world_to_file(world: World) -> dict[str, Any]:
         "targets": frame.to_file(world.targets).tolist(),
         "starts": frame.to_file(world.starts).tolist(),
     })
+    if world.robots is not None:
+        robots = world.robots
+        if len(world.targets) == len(robots) and np.array_equal(world.targets, robots.targets):
+            del data["targets"]   # a file of robots alone: its targets are theirs
+        data["robots"] = [{"start": frame.to_file(s).tolist(), "target": frame.to_file(t).tolist()}
+                          for s, t in zip(robots.starts, robots.targets)]
     if world.formation is not None:
         data["formation"] = _formation_to_file(world.formation.to_dict(), u)
     if world.formations:

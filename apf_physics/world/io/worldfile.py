@@ -36,7 +36,7 @@ from apf_physics.common.safefile import MAX_FILE_BYTES, open_regular_file, read_
 from apf_physics.common.safefile import paths_confined, write_text
 from apf_physics.common.safeyaml import MAX_DEPTH, MAX_NODES, MAX_SCALAR_CHARS  # noqa: F401 (public here too)
 from apf_physics.common.safeyaml import read_yaml_file, shortened
-from apf_physics.world.core import Frame, FormationTask, World
+from apf_physics.world.core import Fleet, Frame, FormationTask, World
 from apf_physics.world.io.units import (formation_to_steps, obstacle_to_steps, points_to_steps, show_length,
                                         show_point, unit_suffix, world_to_file)
 from apf_physics.world.io.schema import (MAX_FOLLOWERS, MAX_FORMATIONS, MAX_NAME_CHARS,  # noqa: F401 (public here too)
@@ -206,6 +206,8 @@ def _check_placement(check: Checker, world: World, index: Mapping[str, Sequence[
 def _place(check: Checker, world: World, index: Mapping[str, Sequence[int]]) -> None:
     size, radius, frame = world.size, world.robot_radius, world.frame
     for key, pts, margin in (("targets", world.targets, 0.0), ("starts", world.starts, radius)):
+        if not len(pts) or (key == "targets" and world.robots is not None and pts is world.robots.targets):
+            continue   # (a fleet's targets are checked as its robots': _check_robots)
         if not len(pts):
             continue
         edge = world.edge_distance(pts)
@@ -314,21 +316,26 @@ def _build(check: Checker, data: Any, source: str, confine: bool = False) -> Wor
     formation = None if parts.formation is None else formation_to_steps(frame, parts.formation)
     formations = tuple(FormationTask(to_world(t.start), to_world(t.target), formation_to_steps(frame, t.spec))
                        for t in parts.formations or ())
+    robots = None if parts.robots is None else Fleet(to_world(parts.robots.starts), to_world(parts.robots.targets))
+    if robots is not None and parts.targets is parts.robots.targets:
+        targets = robots.targets
     radius_key = "robot_radius" if isinstance(data, Mapping) and "robot_radius" in data else "robot.radius"
-    _check_together(check, size, robot_radius, goal_tolerance, parts.params, obstacles, targets, len(formations),
-                    frame, radius_key)
+    # a fleet plans each robot to its own target, from tables within a budget of their own: one target's rasters
+    _check_together(check, size, robot_radius, goal_tolerance, parts.params, obstacles,
+                    targets if robots is None or targets is None else targets[:1], len(formations), frame, radius_key)
     if check.problems:
         _check_what_parsed(check, parts, size, robot_radius, goal_tolerance, obstacles, targets, starts, to_world,
                            (data.get("grid") if isinstance(data, Mapping) else None), source)
         return None
     unicycle = None if parts.unicycle is None else parts.unicycle.scaled(frame.unit)
     world = World(parts.name, size, robot_radius, goal_tolerance, parts.params, obstacles, targets, starts, formation,
-                  source, formations, frame=frame, unicycle=unicycle)
+                  source, formations, frame=frame, unicycle=unicycle, robots=robots)
     _check_substeps(check, world)
     # with an SDF world, a placement problem tells the file's obstacles from the SDF world's
     _check_placement(check, world, {"obstacles": list(range(len(parts.obstacles)))} if parts.sdf else None)
     _check_routes(check, world)
     _check_formations(check, world)
+    _check_robots(check, world)
     return world
 
 
@@ -347,6 +354,41 @@ def _check_substeps(check: Checker, world: World) -> None:
     check.bad("robot", f"a robot of radius {world.robot_radius * u:g} moving at up to {top * u:g} per control step"
                        f"{why} needs {substeps:,} physics substeps per step, over the limit of {MAX_SUBSTEPS}: "
                        "a larger radius or a lower max_speed/max_reverse")
+
+
+def _check_robots(check: Checker, world: World) -> None:
+    """A fleet: every start clear of the obstacles and the map's edge by the robot radius, every
+    target inside the map and outside the obstacles, no two starts (nor two targets) on one spot."""
+    fleet = world.robots
+    if fleet is None:
+        return
+    r, frame = world.robot_radius, world.frame
+    for what, points, margin in (("start", fleet.starts, r), ("target", fleet.targets, 0.0)):
+        clear = world.clearance(points)
+        for i in np.flatnonzero((clear < margin) | (clear <= 0)).tolist():
+            check.bad(f"robots[{i}].{what}", f"{show_point(frame, points[i], 9)} is " + (
+                "not clear of the obstacles and the map's edge by the robot radius" if what == "start"
+                else "inside an obstacle or outside the map"))
+        for i, j in _close_pairs(points, 2 * r if what == "start" else 1e-9):
+            check.bad(f"robots[{j}].{what}", f"{show_point(frame, points[j], 9)} is on robots[{i}]'s {what} "
+                                             f"(two robots need {show_length(frame, 2 * r)} between their centres)"
+                      if what == "start" else f"{show_point(frame, points[j], 9)} is robots[{i}]'s target too")
+
+
+def _close_pairs(points: np.ndarray, within: float) -> list[tuple[int, int]]:
+    """Pairs ``(i, j)``, ``i < j``, of points closer than ``within`` (a grid of cells of that size)."""
+    cells: dict[tuple[int, int], list[int]] = {}
+    pairs = []
+    size = max(within, 1e-9)
+    for j, p in enumerate(points):
+        cx, cy = int(np.floor(p[0] / size)), int(np.floor(p[1] / size))
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                for i in cells.get((cx + dx, cy + dy), ()):
+                    if np.hypot(*(points[i] - p)) < within:
+                        pairs.append((i, j))
+        cells.setdefault((cx, cy), []).append(j)
+    return sorted(pairs)
 
 
 def _check_what_parsed(check: Checker, parts: Any, size, robot_radius, goal_tolerance, obstacles, targets, starts,
