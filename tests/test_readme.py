@@ -1,5 +1,5 @@
-"""The README's Python snippets run as written (in order, sharing names, from the project folder) and print
-what their comments say they print."""
+"""The README's Python snippets each run alone, as written (a fresh namespace each, from the project folder), and
+print what their comments say they print."""
 
 from __future__ import annotations
 
@@ -17,33 +17,35 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _run_snippets(monkeypatch) -> tuple[list[str], list[list[str]], dict]:
-    """Each snippet's source and printed lines, and the names they leave."""
+def _run_snippets(monkeypatch) -> tuple[list[str], list[list[str]], list[dict]]:
+    """Each snippet's source, its printed lines and the names it leaves, each run alone: a user copies one
+    snippet into a fresh interpreter, so a name it does not define or import itself is a NameError here."""
     blocks = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), re.S)
     monkeypatch.chdir(ROOT)
-    names: dict = {}
-    printed = []
+    printed, spaces = [], []
     for block in blocks:
+        names: dict = {"__name__": "__main__"}
         out = io.StringIO()
         with contextlib.redirect_stdout(out):
             exec(compile(block, "README.md", "exec"), names)
         printed.append(out.getvalue().splitlines())
-    return blocks, printed, names
+        spaces.append(names)
+    return blocks, printed, spaces
 
 
-def _snippet(blocks: list[str], printed: list[list[str]], needle: str) -> tuple[str, list[str]]:
+def _snippet(blocks: list[str], printed: list[list[str]], spaces: list[dict], needle: str) -> tuple[str, list[str], dict]:
     (i,) = [i for i, b in enumerate(blocks) if needle in b]
-    return blocks[i], printed[i]
+    return blocks[i], printed[i], spaces[i]
 
 
-def test_readme_python_snippets_run_and_print_what_they_say(monkeypatch):
+def test_readme_python_snippets_each_run_alone_and_print_what_they_say(monkeypatch):
     from apf_physics import load_world
 
-    blocks, printed, names = _run_snippets(monkeypatch)
+    blocks, printed, spaces = _run_snippets(monkeypatch)
     assert len(blocks) >= 3
 
     # -- the environment: a step's reward terms, then world, position, distance, success, collision
-    source, lines = _snippet(blocks, printed, 'gym.make("apf_physics/Navigate-v0"')
+    source, lines, names = _snippet(blocks, printed, spaces, 'gym.make("apf_physics/Navigate-v0"')
     assert len(lines) == 2, lines
     terms = ast.literal_eval(lines[0])
     documented = re.search(r"print\(info\[\"reward_terms\"\]\)\s+# \{(.*?)\}", source).group(1)
@@ -63,17 +65,18 @@ def test_readme_python_snippets_run_and_print_what_they_say(monkeypatch):
     assert names["bounded"].observation_space.low.min() == -1.0 and names["bounded"].observation_space.high.max() == 1.0
     assert names["obs"].shape == (64, 1, 11, 11)          # the vector env's last observation
 
-    # -- Stable-Baselines3: DQN and PPO train on the env as the README shows
-    source, lines = _snippet(blocks, printed, "from stable_baselines3 import DQN, PPO")
-    assert lines == ["2000 1024"] and "# 2000 1024" in source
-    assert names["dqn"].observation_space.shape == (1, 11, 11)
+    # -- Stable-Baselines3: DQN (the window network), PPO and SAC train on the vector env as the README shows
+    for algorithm, steps, shape in (("DQN", 2048, (1, 11, 11)), ("PPO", 1024, (1, 11, 11)), ("SAC", 400, (69,))):
+        source, lines, names = _snippet(blocks, printed, spaces, f"from stable_baselines3 import {algorithm}\n")
+        assert lines == [str(steps)] and f"# {steps}" in source, algorithm
+        assert names["model"].observation_space.shape == shape and names["model"].num_timesteps == steps
 
     # -- a unicycle with continuous commands and the range sensor: the spaces the README names
-    source, lines = _snippet(blocks, printed, 'kinematics="unicycle", observation="lidar"')
+    source, lines, names = _snippet(blocks, printed, spaces, 'kinematics="unicycle", observation="lidar"')
     assert lines == ["Box(-1.0, 1.0, (2,), float32) (69,) heading 0.63 rad"] and f"# {lines[0]}" in source
 
     # -- the field: prints nothing, and its expressions give what the comments say
-    source, lines = _snippet(blocks, printed, "world.potential(points)")
+    source, lines, names = _snippet(blocks, printed, spaces, "world.potential(points)")
     assert lines == []
     points = names["points"]
     assert names["world"].potential(points).shape == (2,)
@@ -82,10 +85,31 @@ def test_readme_python_snippets_run_and_print_what_they_say(monkeypatch):
     np.testing.assert_allclose(raster.sample(points), names["world"].potential(points), rtol=0.05)
 
     # -- the ROS map: its size in steps and the step in metres, the target back in metres, five starts reached
-    source, lines = _snippet(blocks, printed, 'load_world("ros_arena")')
+    source, lines, names = _snippet(blocks, printed, spaces, 'load_world("ros_arena")')
     assert lines == ["(21.6, 21.6) 0.25", "[[1.65 0.55]]", str(["reached"] * 5)]
     assert "# (21.6, 21.6) in steps; 0.25 m per step" in source and "# [[1.65 0.55]]" in source
     assert "# 5 x 'reached'" in source
+
+
+def test_the_readme_quotes_sb3_check_env_warnings_as_they_are():
+    """SB3's ``check_env`` on ``Navigate-v0``: the README says how many warnings it gives and quotes the first
+    sentence of each, word for word."""
+    import warnings
+
+    import gymnasium as gym
+    from stable_baselines3.common.env_checker import check_env
+
+    import apf_physics  # noqa: F401  (registers the ids)
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(gym.make("apf_physics/Navigate-v0", world="fixed20"))
+    said = [re.sub(r"\s+", " ", str(w.message).split(". ")[0]) for w in caught]
+    text = re.sub(r"\s+", " ", (ROOT / "README.md").read_text())
+    counts = {1: "once", 2: "twice", 3: "three times", 4: "four times"}
+    assert f"SB3's `check_env` warns {counts[len(said)]}" in text
+    for sentence in said:
+        assert sentence in text, sentence
 
 
 def _figures_tool():
