@@ -87,9 +87,12 @@ ObsScale = Literal[SCALES]
 ObsTransform = Literal[OBS_TRANSFORMS]
 Loss = Literal["mse", "huber"]
 TargetUpdate = Literal["none", "hard", "soft"]
+EvalNetwork = Literal["online", "target"]
 MoveSet = Literal[tuple(MOVE_SETS)]
-EVAL_FIGURES = ("success", "trap_success", "collisions", "length_ratio", "spl", "random_success")
-"""Figures of an evaluation that :attr:`EvalConfig.select` may name (see :mod:`apf_physics.learning.validation`)."""
+EVAL_FIGURES = ("success", "trap_success", "collisions", "length_ratio", "spl", "world_starts_success",
+                "world_starts_collisions")
+"""Figures of an evaluation that :attr:`EvalConfig.select` may name: on the validation starts (the first five,
+``validation_*`` in ``train.csv``; see :mod:`apf_physics.learning.validation`), and on a world's own starts."""
 HELDOUT_SEED = 100
 """Seed of the project's held-out generated test set; training and validation never use it."""
 TRAIN_FAMILIES = FAMILIES + MOVING_FAMILIES + STRUCTURE_FAMILIES
@@ -195,6 +198,8 @@ class DQNConfig:
 
     gamma: float = 0.95
     """γ: discount rate."""
+    n_step: int = 1
+    """Rewards summed into each TD target before bootstrapping (1: eq. 32 as written)."""
     batch_size: int = 7
     """m: transitions per update."""
     buffer_size: int = 100_000
@@ -216,6 +221,10 @@ class DQNConfig:
     """Updates between copies of a hard target network."""
     tau: float = 0.01
     """Soft target update rate: target ← (1 − τ)·target + τ·online."""
+    eval_network: EvalNetwork = "online"
+    """The network evaluated and kept as ``best.pt``: ``"online"`` (the one being updated) or ``"target"``
+    (with soft updates, the average of the online weights over about 1/τ updates: its greedy choices
+    change smoothly from one evaluation to the next, where the online network's jump)."""
     reward_scale: float = 1.0
     """Rewards are multiplied by this before learning (logged returns are unscaled)."""
     epsilon_initial: float = 0.95
@@ -230,12 +239,14 @@ class DQNConfig:
     def __post_init__(self):
         _check([
             (0 < self.tau <= 1, "tau must be in (0, 1]"),
+            (self.eval_network == "online" or self.target_update != "none",
+             "eval_network 'target' needs a target network (target_update 'soft' or 'hard')"),
             (0 <= self.gamma <= 1, "gamma must be in [0, 1]"),
             (0 <= self.epsilon_final <= 1 and 0 <= self.epsilon_initial <= 1, "epsilons must be in [0, 1]"),
             (min(self.batch_size, self.buffer_size, self.exploration_episodes, self.train_frequency,
-                 self.gradient_steps, self.target_update_every) >= 1,
-             "batch_size, buffer_size, exploration_episodes, train_frequency, gradient_steps and "
-             "target_update_every must be positive"),
+                 self.gradient_steps, self.target_update_every, self.n_step) >= 1,
+             "batch_size, buffer_size, exploration_episodes, train_frequency, gradient_steps, "
+             "target_update_every and n_step must be positive"),
         ])
 
 
@@ -290,8 +301,7 @@ class ScheduleConfig:
     time_limit: Optional[float] = None
     """Seconds of training over all resumed sessions (None: no limit)."""
     target_success: Optional[float] = None
-    """Stop once a greedy evaluation reaches this share of the held-out starts (``eval_random_starts``)
-    when there are any, else of the validation starts (None: never early)."""
+    """Stop once a greedy evaluation succeeds from this share of the validation starts (None: never early)."""
     loss_limit: Optional[float] = 1e12
     """Stop, as diverged, when a logged mean loss exceeds this (a non-finite loss always stops; None:
     no limit)."""
@@ -318,12 +328,13 @@ class EvalConfig:
     eval_shield: bool = False
     """Evaluate with the DQN planner's shield (``apf-physics eval --planner dqn``) rather than the
     network's choices as they are (``dqn-unshielded``)."""
-    select: tuple[str, ...] = ("success", "random_success")
+    select: tuple[str, ...] = ("success", "world_starts_success")
     """Which evaluation is best: compared figure by figure, in this order (a leading ``-``: lower is
     better; figures of :data:`EVAL_FIGURES`, rounded to 6 decimals); the first of equals is kept."""
     eval_random_starts: int = 0
-    """On a world: also evaluate from this many random free starts that can reach a target, drawn
-    once from a generator of their own (their success is the figure ``random_success``)."""
+    """On a world: the validation starts (which choose ``best.pt``) are this many random free starts
+    that can reach a target, drawn once from a generator of their own and never trained from; the
+    world's own starts are evaluated beside them (0: the world's own starts are the validation starts)."""
     validation_worlds: int = 30
     """On a curriculum: generated worlds of the validation set (all families in turn)."""
     validation_starts: int = 4
@@ -578,7 +589,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     "thesis-fixed": {},  # the defaults are Table 3
     "thesis-general-world": dict(obs_size=9, filters=(4, 4), reward="thesis-general", exploration_episodes=150,
                                  total_episodes=150, eval_every=2_000, checkpoint_every=5_000, log_every=500),
-    "fast": dict(_FAST, train_starts="reachable", eval_random_starts=1000, select=("random_success", "success"),
+    "fast": dict(_FAST, train_starts="reachable", eval_random_starts=1000, select=("success", "world_starts_success"),
                  exploration_episodes=3_000, total_episodes=None, total_steps=3_000_000, eval_every=3_200,
                  target_success=0.99, time_limit=900.0, checkpoint_every=128_000, log_every=6_400),
     "thesis-general": dict(obs_size=9, filters=(4, 4), reward="thesis-general", exploration_episodes=150,

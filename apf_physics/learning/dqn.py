@@ -20,7 +20,7 @@ from apf_physics.envs import NavigateVectorEnv
 from apf_physics.models.network import QNetwork
 from apf_physics.models.policy import DQNPolicy
 from apf_physics.planners.dqn import DQNPlanner
-from apf_physics.learning.buffer import ReplayBuffer
+from apf_physics.learning.buffer import NStepReturns, ReplayBuffer
 from apf_physics.learning.config import N_ACTIONS, TrainConfig, epsilon_schedule
 from apf_physics.learning.learner import Counters, Learner
 from apf_physics.learning.phases import Phase
@@ -78,8 +78,8 @@ class QLearning:
                 next_q = self.target_network(batch.next_observations).gather(1, next_actions).squeeze(1)
             else:
                 next_q = self.target_network(batch.next_observations).amax(1)
-            # TD target (eq. 32): R + γ·max Q(O_{n+1}), nothing beyond a terminal step
-            td_target = batch.rewards + c.gamma * (1.0 - batch.dones) * next_q
+            # TD target (eq. 32, over m steps): R + γ^m·max Q(O_{n+m}), nothing beyond a terminal step
+            td_target = batch.rewards + batch.discounts * next_q
         q_taken = self.q_network(batch.observations).gather(1, batch.actions).squeeze(1)
         if c.loss == "huber":  # Huber loss: less sensitive to outliers than the thesis's MSE
             loss = F.smooth_l1_loss(q_taken, td_target)
@@ -112,12 +112,16 @@ class Collector:
     Args:
         learning: Whose network acts and whose pool fills.
         reward_scale: Rewards are stored multiplied by it (returns are kept unscaled).
+        n_step: Steps per stored return (:class:`~apf_physics.learning.buffer.NStepReturns`).
+        gamma: γ, the discount rate of the returns.
         window: Recent episodes kept for :meth:`means`.
     """
 
-    def __init__(self, learning: QLearning, reward_scale: float = 1.0, window: int = 100):
+    def __init__(self, learning: QLearning, reward_scale: float = 1.0, n_step: int = 1, gamma: float = 1.0,
+                 window: int = 100):
         self.learning = learning
         self.reward_scale = reward_scale
+        self.n_step, self.gamma = n_step, gamma
         self.recent_returns: collections.deque = collections.deque(maxlen=window)
         self.recent_success: collections.deque = collections.deque(maxlen=window)
 
@@ -126,22 +130,23 @@ class Collector:
         self.obs = obs
         self.prev_done = np.zeros(len(obs), bool)
         self.ep_return = np.zeros(len(obs))
+        self.returns = NStepReturns(self.n_step, self.gamma, len(obs), obs.shape[1:])
 
     def step(self, step: Callable[[np.ndarray], tuple], epsilon: float, rng: np.random.Generator) -> tuple[int, int]:
         """One vector step; ``step(actions)`` returns ``(obs, rewards, terminated, truncated, success)``.
 
         With NEXT_STEP autoreset the step right after an episode ends only returns the reset
-        observation: that transition is not stored.
+        observation: that is no transition.
 
         Returns:
-            Transitions stored and episodes that ended.
+            Transitions made (stored now or held for their n-step return) and episodes that ended.
         """
         actions = epsilon_greedy(self.learning.q_network, self.obs, epsilon, rng)
         next_obs, rewards, terminated, truncated, success = step(actions)
         valid = ~self.prev_done
-        self.learning.buffer.add(self.obs[valid], next_obs[valid], actions[valid],
-                                 rewards[valid] * self.reward_scale, terminated[valid])
         done = (terminated | truncated) & valid
+        self.learning.buffer.add(*self.returns.add(self.obs, actions, rewards * self.reward_scale, next_obs,
+                                                   terminated, done, valid))
         self.ep_return += np.where(valid, rewards, 0.0)
         if done.any():
             self.recent_returns.extend(self.ep_return[done].tolist())
@@ -150,6 +155,10 @@ class Collector:
         self.prev_done = terminated | truncated
         self.obs = next_obs
         return int(valid.sum()), int(done.sum())
+
+    def end(self) -> None:
+        """The environments close: store the transitions still waiting for their n-step return."""
+        self.learning.buffer.add(*self.returns.flush())
 
     def means(self) -> tuple[str | float, str | float]:
         """Mean return and success rate of the recent episodes, rounded for ``train.csv`` (``""``: none yet)."""
@@ -202,9 +211,11 @@ class DQNLearner(Learner):
     def __init__(self, config: TrainConfig):
         self.config = config
         self.learning = QLearning(config)
-        self.network = self.learning.q_network
+        # what is evaluated and kept as best.pt
+        self.network = (self.learning.target_network if config.dqn.eval_network == "target"
+                        else self.learning.q_network)
         self.observer = config.observer
-        self.collector = Collector(self.learning, config.dqn.reward_scale)
+        self.collector = Collector(self.learning, config.dqn.reward_scale, config.dqn.n_step, config.dqn.gamma)
         self.envs: Optional[TrainingEnvs] = None
         self.epsilon = config.dqn.epsilon_initial
 
@@ -223,6 +234,7 @@ class DQNLearner(Learner):
                 self.learning.update(rng)
 
     def end(self) -> None:
+        self.collector.end()
         self.envs.close()
         self.envs = None
 
@@ -230,17 +242,17 @@ class DQNLearner(Learner):
         return DQNPlanner(policy=DQNPolicy(self.network, self.observer), shield=shield)
 
     def log_values(self, c: Counters) -> dict[str, Any]:
-        mean_return, success_rate = self.collector.means()
-        return {"epsilon": round(self.epsilon, 5), "mean_return": mean_return, "success_rate": success_rate,
+        mean_return, training_success = self.collector.means()
+        return {"epsilon": round(self.epsilon, 5), "mean_return": mean_return, "training_success": training_success,
                 "loss": self.learning.mean_loss()}
 
     def state(self, with_buffer: bool) -> tuple[dict[str, Any], dict[str, Any]]:
         learning, collector = self.learning, self.collector
         state = {"updates": learning.updates, "loss_count": learning._loss_count,
                  "collector": {"returns": list(collector.recent_returns), "success": list(collector.recent_success)}}
-        tensors = {"q_network": self.network.state_dict(), "optimizer": learning.optimizer.state_dict(),
+        tensors = {"q_network": learning.q_network.state_dict(), "optimizer": learning.optimizer.state_dict(),
                    "loss_sum": learning._loss_sum.clone()}
-        if learning.target_network is not self.network:
+        if learning.target_network is not learning.q_network:
             tensors["target_network"] = learning.target_network.state_dict()
         if with_buffer:
             tensors["buffer"] = learning.buffer.state_dict()
@@ -248,8 +260,8 @@ class DQNLearner(Learner):
 
     def load(self, state: dict[str, Any], tensors: dict[str, Any]) -> None:
         learning = self.learning
-        self.network.load_state_dict(tensors["q_network"])
-        if learning.target_network is not self.network:
+        learning.q_network.load_state_dict(tensors["q_network"])
+        if learning.target_network is not learning.q_network:
             learning.target_network.load_state_dict(tensors["target_network"])
         learning.optimizer.load_state_dict(tensors["optimizer"])
         if "buffer" in tensors:
