@@ -1,6 +1,6 @@
 """The module paths of the flat layout (0.x), importable for one more release with a warning.
 
-The package's modules moved into subpackages that say where each belongs (README "Layout"):
+The package's modules moved into subpackages that say where each belongs (README, "Layout"):
 ``apf_physics.evaluate`` is now ``apf_physics.experiments.evaluate``, ``apf_physics.rl`` is
 ``apf_physics.learning``, and so on (:data:`MOVED`). Code that imports an old path gets the
 module at its new home, the same object, and one :class:`DeprecationWarning` naming it.

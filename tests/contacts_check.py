@@ -7,7 +7,7 @@ OBSTACLE_OVERLAP = 0.01   # at most this far into an obstacle or past the map's 
 ROBOT_OVERLAP = 0.02      # at most this much overlap of two robots, at the end of a step
 
 
-def overlaps(physics, before, t_end=None):
+def overlaps(physics, before, t_end=None, after=None):
     """``(obstacle (N,), robot (N,), crossed (N,))`` after a step of ``physics`` from ``before``:
     each robot's overlap with obstacles and the map's edge, its largest overlap with a robot it
     meets, and whether its straight path from ``before`` came within half a radius of another's
@@ -15,13 +15,13 @@ def overlaps(physics, before, t_end=None):
     come within a radius of each other on straight paths, but not within half of one unless they
     turn about each other by more than 150° in one step)."""
     m = physics.robots_per_slot
-    after = physics.positions
+    after = physics.positions if after is None else np.asarray(after, float)   # the positions judged
     n = physics.num_robots
     obstacle = np.zeros(n)
     robot = np.zeros(n)
     crossed = np.zeros(n, bool)
     present = physics.present
-    t = physics._slot_time if t_end is None else t_end
+    t = physics.slots.time if t_end is None else t_end
     for s in range(physics.num_slots):
         mine = np.arange(s * m, (s + 1) * m)
         mine = mine[present[mine]]
@@ -30,14 +30,14 @@ def overlaps(physics, before, t_end=None):
     # groups of robots that meet: a slot of several, or a crowd of slots
     groups = {}
     for s in range(physics.num_slots):
-        key = ("crowd", int(physics.crowd[s])) if physics._shared[s] else ("slot", s)
+        key = ("crowd", int(physics.crowd[s])) if physics.slots.shared[s] else ("slot", s)
         groups.setdefault(key, []).extend(range(s * m, (s + 1) * m))
     for robots in groups.values():
         robots = np.array(robots)
         robots = robots[present[robots]]
         if len(robots) < 2:
             continue
-        r = physics._slot_radius[robots // m]
+        r = physics.slots.radius[robots // m]
         a, b = after[robots], before[robots]
         d = np.hypot(*(a[:, None] - a[None]).transpose(2, 0, 1))
         np.fill_diagonal(d, np.inf)

@@ -135,7 +135,7 @@ def test_every_robot_of_the_multi_agent_env_holds(seed):
     env = FormationsParallelEnv(world=WORLDS / "four_formations.yaml", agents="all")
     rng = np.random.default_rng(seed)
     env.reset(seed=seed)
-    physics = env._task.stepper.physics
+    physics = env.task.stepper.physics
     for _ in range(40):
         if not env.agents:
             env.reset()
@@ -150,9 +150,8 @@ def test_the_check_sees_a_pass_through():
     physics = Physics([world], robots_per_slot=2)
     physics.place([0, 1], [[5.0, 10.0], [6.0, 10.0]])
     before = physics.positions
-    physics._positions[:] = [[5.0, 10.0], [4.9, 10.0]]   # robot 1 jumped through robot 0
-    obstacle, robot, crossed = overlaps(physics, before)
+    jumped = [[5.0, 10.0], [4.9, 10.0]]   # robot 1 jumped through robot 0
+    obstacle, robot, crossed = overlaps(physics, before, after=jumped)
     assert crossed.all() and robot.max() > 0.3
-    physics._positions[:] = [[0.1, 10.0], [6.0, 10.0]]
-    obstacle, _, _ = overlaps(physics, before)
+    obstacle, _, _ = overlaps(physics, before, after=[[0.1, 10.0], [6.0, 10.0]])
     assert obstacle[0] == pytest.approx(0.15)

@@ -30,10 +30,9 @@ def test_a_batch_draw_gives_each_row_its_own_draw(worlds_dir, starts, names):
 
 
 @pytest.mark.parametrize("starts", ["world", "random"])
-def test_single_env_over_a_world_list_is_the_vector_envs_array_path(worlds_dir, starts):
+def test_single_env_over_a_world_list_is_a_vector_env_of_one(worlds_dir, starts):
     world = [str(worlds_dir / "fixed20.yaml"), str(worlds_dir / "moving_obstacles.yaml")]
     vec = NavigateVectorEnv(world=world, num_envs=1, starts=starts, max_episode_steps=100)
-    vec._task.stepper.scalar = False   # the array path
     single = gym.make("apf_physics/Navigate-v0", world=world, starts=starts)
     obs, info = vec.reset(seed=7)
     o, inf = single.reset(seed=7)

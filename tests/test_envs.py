@@ -248,9 +248,9 @@ def test_same_step_autoreset_gives_what_next_step_gives_one_step_earlier():
     ended_once = 0
     for _ in range(60):
         actions = rng.integers(0, 9, 6)
-        actions[nxt._needs_reset] = 8   # ignored by the next-step env at its reset step
+        actions[nxt.needs_reset] = 8   # ignored by the next-step env at its reset step
         o1, r1, te1, tr1, info1 = nxt.step(actions)
-        if nxt._needs_reset.any():   # the next-step env resets them at its next step: catch up
+        if nxt.needs_reset.any():   # the next-step env resets them at its next step: catch up
             ended = te1 | tr1
             o2, r2, te2, tr2, info2 = same.step(actions)
             np.testing.assert_array_equal(info2["_final_obs"], ended)

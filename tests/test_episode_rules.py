@@ -48,7 +48,7 @@ def env_episode(world, planner: Planner, start, trap) -> dict:
     """``planner`` steering ``Navigate-v0`` from ``start`` (its moves as the env's actions) until the episode ends."""
     env = gym.make("apf_physics/Navigate-v0", world=world, trap=trap, max_episode_steps=default_max_steps(world))
     _, info = env.reset(seed=0, options={"start": list(start)})
-    stepper = env.unwrapped._task.stepper
+    stepper = env.unwrapped.task.stepper
     planner.reset(world, np.asarray(start, float)[None])
     path = [info["position"]]
     while True:

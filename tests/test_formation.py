@@ -7,8 +7,10 @@ import pytest
 import apf_physics  # noqa: F401
 from apf_physics import UserError, load_world, world_from_dict
 from apf_physics.planners import make_planner
-from apf_physics.control.formation import formation_offsets, initial_followers, swept_distance
-from apf_physics.experiments.rollout import rollout
+from apf_physics.common.geometry import swept_distance
+from apf_physics.control.formation import formation_offsets, initial_followers
+from apf_physics.experiments.rollout import rollout, rollout_formations
+from apf_physics.planners.base import Planner
 from apf_physics.world.core import FormationSpec
 from conftest import simple_world_dict
 
@@ -124,3 +126,37 @@ def test_eval_formation_json(worlds_dir, tmp_path):
     assert {"robots", "min_robot_distance", "robot_robot_collisions", "robot_obstacle_collisions",
             "link_in_range"} <= set(episode)
     assert [r["role"] for r in episode["robots"]] == ["leader", "follower1", "follower2"]
+
+
+class _Standing(Planner):
+    """Leaders that stay where they are (the followers then stay behind them)."""
+
+    name = "standing"
+
+    def act(self, positions, active, moment=None):
+        return np.zeros_like(positions)
+
+
+def _hit_by_a_moving_obstacle(formations: bool) -> dict:
+    """A formation standing at (4, 10), its followers behind it towards -x, and a disc that comes down
+    the line x = 3 (onto follower 1) from the top of the map; the formation's record."""
+    moving = {"circle": {"center": [3.0, 17.0], "radius": 0.5}, "motion": {"path": [[0, -14]], "speed": 1.0}}
+    spec = {"followers": 2, "comm_range": 3.0, "spacing": 1.0}
+    data = simple_world_dict(obstacles=[moving], targets=[[18.0, 10.0]], starts=[[4.0, 10.0]])
+    if formations:
+        data.pop("starts")
+        data["formations"] = [{"start": [4.0, 10.0], "target": [18.0, 10.0], **spec}]
+        episodes = rollout_formations(world_from_dict(data), _Standing(), max_steps=30)
+    else:
+        data["formation"] = spec
+        episodes = rollout(world_from_dict(data), _Standing(), [[4.0, 10.0]], max_steps=30, formation=True)
+    assert episodes[0].outcome == "collision"
+    return episodes[0].to_dict()
+
+
+@pytest.mark.parametrize("formations", [False, True])
+def test_a_moving_obstacle_hitting_a_follower_counts_as_an_obstacle_collision(formations):
+    """One formation and several formations count a robot touched by a moving obstacle alike (as a
+    robot-obstacle collision): the two rollouts once counted it differently."""
+    record = _hit_by_a_moving_obstacle(formations)
+    assert record["robot_obstacle_collisions"] >= 1 and record["robot_robot_collisions"] == 0

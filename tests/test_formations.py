@@ -7,7 +7,7 @@ import pytest
 
 from apf_physics import WorldError, load_world, world_from_dict
 from apf_physics.experiments.evaluate import evaluate
-from apf_physics.control.formation import FormationCrowd, right_of_way
+from apf_physics.control.formation import Formations, right_of_way
 from apf_physics.world.generate import generate_world
 from apf_physics.planners import make_planner
 from apf_physics.experiments.rollout import rollout_formations
@@ -95,7 +95,7 @@ def test_formation_leaders_default_to_the_window_network_on_table_4s_field():
 
 def test_followers_are_placed_clear_of_other_formations():
     world = three_formations()
-    crowd = FormationCrowd(world)
+    crowd = Formations(world)
     robots = np.concatenate([p[:size] for p, size in zip(crowd.starts(), crowd.sizes)])
     gaps = np.hypot(*(robots[:, None] - robots[None]).transpose(2, 0, 1)) + 9 * np.eye(len(robots))
     assert gaps.min() >= 2 * world.robot_radius and np.all(world.clearance(robots) >= world.robot_radius)

@@ -73,7 +73,7 @@ def test_trainer_trains_each_stage_on_its_rehearsal_set(monkeypatch):
 
         def step(self, actions):
             env = self.envs[0]
-            drawn[-1].update(env.worlds[i].name for i in env._task.world_of)
+            drawn[-1].update(env.worlds[i].name for i in env.task.world_of)
             return super().step(actions)
 
     monkeypatch.setattr(dqn, "TrainingEnvs", Recording)

@@ -13,7 +13,7 @@ from apf_physics.errors import ModelError
 from apf_physics.experiments.evaluate import evaluate
 from apf_physics.models import MapNetwork, MapPolicy, load_policy, model_meta, save_model
 from apf_physics.models.mapnet import UNREACHED
-from apf_physics.sensing.observation import MapView
+from apf_physics.sensing.mapview import MapView
 from apf_physics.planners.dqn import DQNPlanner
 from apf_physics.learning.config import preset
 from apf_physics.learning import train
@@ -130,11 +130,11 @@ def test_a_tiny_imitation_run_writes_a_usable_model_and_resumes(tmp_path):
 
 
 @pytest.mark.parametrize("world_name", ["fixed20", "maze", "rooms"])
-def test_fixed_point_equals_the_sweeps_to_the_bit(world_name):
-    """The label-correcting search finds exactly what sweeping the whole grid to a fixed point does."""
-    from apf_physics.models.mapnet import UNREACHED, _neighbours, _shift, _sweep, fixed_point
+def test_fixed_point_equals_the_bellman_updates_to_the_bit(world_name):
+    """The label-correcting search finds exactly what updating the whole grid to a fixed point does."""
+    from apf_physics.models.mapnet import UNREACHED, _bellman_update, _neighbours, _shift, fixed_point
     from apf_physics.models import resolve_model
-    from apf_physics.sensing.observation import MapView
+    from apf_physics.sensing.mapview import MapView
     from apf_physics import load_world
     world = load_world(world_name)
     policy = load_policy(resolve_model("map"))
@@ -146,7 +146,7 @@ def test_fixed_point_equals_the_sweeps_to_the_bit(world_name):
         edges = [(dr, dc, w * 0.5 * (kappa + _shift(kappa, dr, dc, float("inf")))) for dr, dc, w in _neighbours(net.resolution)]
         v = torch.where(goal, 0.0, UNREACHED).to(kappa.dtype)
         while True:
-            new = _sweep(v, edges, free, goal)
+            new = _bellman_update(v, edges, free, goal)
             if torch.equal(new, v):
                 break
             v = new

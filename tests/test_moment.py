@@ -30,7 +30,7 @@ def reference_clearance(world, points, t):
     best = np.full(len(points), np.inf)
     for obstacle in world.obstacles:
         best = np.minimum(best, obstacle_at(obstacle, t).signed_distance(points)[0])
-    for c in world.crowd:
+    for c in world.others:
         best = np.minimum(best, np.hypot(*(points - c).T) - world.robot_radius)
     return np.minimum(np.minimum(best, world.reach), world.edge_distance(points))
 

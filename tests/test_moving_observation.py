@@ -77,8 +77,9 @@ def reference_add_near(self, values: np.ndarray, mine: np.ndarray, local: np.nda
 
 def numpy_add_near(self, values: np.ndarray, mine: np.ndarray, local: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                    centre: np.ndarray, radius: np.ndarray, shapes: list, world: World, lattice: bool) -> None:
-    """Add, in place, the repulsive terms of M shapes to the windows of robots ``mine`` (numpy: the
-    implementation of 2026-11-25 that the compiled loops replaced, timed by ``tools/bench_moving.py``).
+    """Add, in place, the repulsive terms of M shapes to the windows of robots ``mine``: the rule in
+    plain numpy, an independent reference for the compiled loops (and their baseline in
+    ``tools/bench_moving.py``).
 
     ``local`` (m, M, 2): each robot in each shape's frame; ``lo``, ``hi`` (M, 2): the shapes'
     boxes in their frames; discs by ``centre`` and ``radius`` (NaN radius: a polygon,
@@ -140,8 +141,9 @@ def reference_moving_shapes(world: World) -> tuple[list, np.ndarray, np.ndarray,
 
 def reference_add_moving(self, values: np.ndarray, positions: np.ndarray, robots: np.ndarray, t, offsets: np.ndarray,
                          discs: np.ndarray | None = None, add_near=reference_add_near) -> np.ndarray:
-    """``Observer._add_moving`` of 2026-11-25 (before the motion table was read in the compiled
-    loop), adding the terms by ``add_near`` (``reference_add_near`` or ``numpy_add_near``)."""
+    """``Observer._add_moving`` written plainly, each obstacle's offset computed from its motion
+    rather than read from the world's motion table: an independent reference, adding the terms by
+    ``add_near`` (``reference_add_near`` or ``numpy_add_near``)."""
     crowd = discs is not None and len(discs) > 0
     if not self._moving and not crowd:
         return values

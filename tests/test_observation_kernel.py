@@ -135,7 +135,7 @@ def test_python_source_is_the_compiled_rule(monkeypatch):
         compiled = values.copy()
         add_compiled(observer, compiled, *args, lattice)
         with monkeypatch.context() as patch:
-            for name in ("_window_span", "_repulsive_term", "_polygon_points", "_add_terms"):
+            for name in ("_window_span", "repulsive_term_at", "_polygon_points", "_add_terms"):
                 patch.setattr(observation, name, getattr(observation, name).py_func)
             python = values.copy()
             add_compiled(observer, python, *args, lattice)
@@ -151,7 +151,7 @@ def test_python_source_is_the_compiled_rule(monkeypatch):
 
 
 def numpy_memory_window(memory, positions: np.ndarray, robots: np.ndarray) -> np.ndarray:
-    """``VisitMemory.window`` before its compiled loop (2026-11-25)."""
+    """``VisitMemory.window`` in plain numpy: an independent reference for its compiled loop."""
     c0, r0 = memory._cell(positions, robots)
     steps = np.arange(memory.size) - memory.size // 2
     dc = np.broadcast_to(steps[None, :], (memory.size, memory.size))

@@ -1,5 +1,8 @@
 """Gradient descent and the seed worlds behave as the thesis's figures say."""
 
+import json
+from pathlib import Path
+
 import numpy as np
 
 from apf_physics import load_world
@@ -37,11 +40,17 @@ def test_three_targets_without_black_holes_end_between(worlds_dir):
         assert np.hypot(*(e.path[-1] - centroid)) < 1.0
 
 
-def test_fixed20_mixes_traps_and_successes(worlds_dir):
+def test_fixed20_traps_descent_from_the_starts_the_figures_say(worlds_dir):
+    """Gradient descent on the thesis's fixed world: reached and trapped exactly as often as the
+    README's figures say (tools/results/fixed20.json, written by ``tools/figures.py run fixed20``),
+    never colliding."""
     world, episodes = run(worlds_dir, "fixed20")
     outcomes = [e.outcome for e in episodes]
-    assert len(outcomes) == 40
-    assert 5 <= outcomes.count("trapped") and 5 <= outcomes.count("reached")
+    results = json.loads((Path(__file__).resolve().parent.parent / "tools/results/fixed20.json").read_text())
+    (gradient,) = [e["summary"] for e in results if e["planner"] == "gradient"]
+    assert len(outcomes) == gradient["episodes"] == 40
+    assert outcomes.count("reached") == gradient["successes"]
+    assert outcomes.count("trapped") == round(gradient["trapped_rate"] * 40) == 40 - gradient["successes"]
     assert outcomes.count("collision") == 0
 
 

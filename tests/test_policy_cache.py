@@ -39,7 +39,7 @@ def entry_bytes(world) -> int:
 
 
 def kept(world) -> int:
-    return len(world._cache["map_values"])
+    return len(world.peek("map_values"))
 
 
 def grown(step, rounds: int, settle: int = 10) -> int:
@@ -61,18 +61,18 @@ def test_forty_policies_on_one_world_leave_at_most_a_few_values_in_it():
     world = make_world()
     one = entry_bytes(world)
     ask(MapPolicy(NET), world)                               # the world's own rasters, built once
-    entries = len(world._cache)
+    entries = world.cache_size
 
     # policies made and dropped, as a training run's evaluations make them: nothing stays
     growth = grown(lambda i: ask(MapPolicy(NET), world), 40)
-    assert len(world._cache) == entries and kept(world) == 0
+    assert world.cache_size == entries and kept(world) == 0
     assert growth < one, f"{growth:,} bytes for 30 policies (one's values: {one:,})"
 
     # policies that stay alive: the world keeps the latest few
     alive = [MapPolicy(NET) for _ in range(40)]
     for policy in alive:
         ask(policy, world)
-        assert len(world._cache) == entries and kept(world) <= MAP_VALUES_PER_WORLD
+        assert world.cache_size == entries and kept(world) <= MAP_VALUES_PER_WORLD
     assert kept(world) == MAP_VALUES_PER_WORLD
     np.testing.assert_array_equal(ask(alive[0], world), ask(alive[-1], world))   # rebuilt alike after eviction
 
@@ -91,5 +91,5 @@ def test_views_share_the_values_and_copies_start_without():
     view, values = policy.values(world)
     crowded = world.among(np.array([[10.0, 10.0]]))          # another formation's robot: same map, same target
     assert policy.values(crowded)[1] is values and kept(world) == 1
-    assert len(pickle.loads(pickle.dumps(world._cache["map_values"]))) == 0
-    assert isinstance(world._cache["map_values"], MapValues)
+    assert len(pickle.loads(pickle.dumps(world.peek("map_values")))) == 0
+    assert isinstance(world.peek("map_values"), MapValues)

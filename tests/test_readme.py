@@ -1,5 +1,5 @@
-"""The README's Python snippets each run alone, as written (a fresh namespace each, from the project folder), and
-print what their comments say they print."""
+"""Every Python snippet of the README and of docs/ runs alone (a fresh namespace, from the project
+folder); the README's print what their comments say they print."""
 
 from __future__ import annotations
 
@@ -15,37 +15,45 @@ import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
+DOCUMENTS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 
 
-def _run_snippets(monkeypatch) -> tuple[list[str], list[list[str]], list[dict]]:
-    """Each snippet's source, its printed lines and the names it leaves, each run alone: a user copies one
-    snippet into a fresh interpreter, so a name it does not define or import itself is a NameError here."""
-    blocks = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), re.S)
+def snippets(path: Path) -> list[str]:
+    """The ```python blocks of a Markdown file."""
+    return re.findall(r"```python\n(.*?)```", path.read_text(encoding="utf-8"), re.S)
+
+
+def run_alone(block: str, name: str) -> tuple[list[str], dict]:
+    """Run one snippet in a namespace of its own; its printed lines and the names it leaves."""
+    names: dict = {"__name__": "__snippet__"}
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        exec(compile(block, name, "exec"), names)
+    return out.getvalue().splitlines(), names
+
+
+CASES = [(path, k) for path in DOCUMENTS for k in range(len(snippets(path)))]
+
+
+@pytest.mark.parametrize("path, index", CASES, ids=[f"{p.name}#{k}" for p, k in CASES])
+def test_every_snippet_runs_alone(path, index, monkeypatch):
     monkeypatch.chdir(ROOT)
-    printed, spaces = [], []
-    for block in blocks:
-        names: dict = {"__name__": "__main__"}
-        out = io.StringIO()
-        with contextlib.redirect_stdout(out):
-            exec(compile(block, "README.md", "exec"), names)
-        printed.append(out.getvalue().splitlines())
-        spaces.append(names)
-    return blocks, printed, spaces
+    block = snippets(path)[index]
+    run_alone(block, f"{path.name}#{index}")   # raises if it does not run as written, alone
 
 
-def _snippet(blocks: list[str], printed: list[list[str]], spaces: list[dict], needle: str) -> tuple[str, list[str], dict]:
-    (i,) = [i for i, b in enumerate(blocks) if needle in b]
-    return blocks[i], printed[i], spaces[i]
+def _snippet(needle: str) -> tuple[str, list[str], dict]:
+    (block,) = [b for b in snippets(ROOT / "README.md") if needle in b]
+    lines, names = run_alone(block, "README.md")
+    return block, lines, names
 
 
-def test_readme_python_snippets_each_run_alone_and_print_what_they_say(monkeypatch):
+def test_readme_snippets_print_what_they_say(monkeypatch):
     from apf_physics import load_world
 
-    blocks, printed, spaces = _run_snippets(monkeypatch)
-    assert len(blocks) >= 3
-
+    monkeypatch.chdir(ROOT)
     # -- the environment: a step's reward terms, then world, position, distance, success, collision
-    source, lines, names = _snippet(blocks, printed, spaces, 'gym.make("apf_physics/Navigate-v0"')
+    source, lines, names = _snippet('gym.make("apf_physics/Navigate-v0", world="fixed20", obs_size=11')
     assert len(lines) == 2, lines
     terms = ast.literal_eval(lines[0])
     documented = re.search(r"print\(info\[\"reward_terms\"\]\)\s+# \{(.*?)\}", source).group(1)
@@ -62,38 +70,38 @@ def test_readme_python_snippets_each_run_alone_and_print_what_they_say(monkeypat
     # the step was "right-up" (action 6): the potential term is Table 3's β = −4 times the change of U over it
     before, after = world.potential(np.array([position - (1.0, 1.0), position]))
     assert terms["potential"] == pytest.approx(-4.0 * (after - before)) and terms["potential"] > 0
-    assert names["bounded"].observation_space.low.min() == -1.0 and names["bounded"].observation_space.high.max() == 1.0
-    assert names["obs"].shape == (64, 1, 11, 11)          # the vector env's last observation
+
+    # -- the vector env
+    source, lines, names = _snippet("gym.make_vec(")
+    assert lines == ["(64, 1, 11, 11)"] and names["obs"].shape == (64, 1, 11, 11)
 
     # -- Stable-Baselines3: DQN (the window network), PPO and SAC train on the vector env as the README shows
     for algorithm, steps, shape in (("DQN", 2048, (1, 11, 11)), ("PPO", 1024, (1, 11, 11)), ("SAC", 400, (69,))):
-        source, lines, names = _snippet(blocks, printed, spaces, f"from stable_baselines3 import {algorithm}\n")
+        source, lines, names = _snippet(f"from stable_baselines3 import {algorithm}\n")
         assert lines == [str(steps)] and f"# {steps}" in source, algorithm
         assert names["model"].observation_space.shape == shape and names["model"].num_timesteps == steps
+    assert names["model"].observation_space.low.min() == -1.0 and names["model"].observation_space.high.max() == 1.0
 
     # -- a unicycle with continuous commands and the range sensor: the spaces the README names
-    source, lines, names = _snippet(blocks, printed, spaces, 'kinematics="unicycle", observation="lidar"')
+    source, lines, names = _snippet('kinematics="unicycle", observation="lidar"')
     assert lines == ["Box(-1.0, 1.0, (2,), float32) (69,) heading 0.63 rad"] and f"# {lines[0]}" in source
 
-    # -- the field: prints nothing, and its expressions give what the comments say
-    source, lines, names = _snippet(blocks, printed, spaces, "world.potential(points)")
-    assert lines == []
-    points = names["points"]
-    assert names["world"].potential(points).shape == (2,)
-    assert names["world"].gradient(points).shape == (2, 2)
-    raster = names["world"].raster(resolution=10)
-    np.testing.assert_allclose(raster.sample(points), names["world"].potential(points), rtol=0.05)
+    # -- the field
+    source, lines, names = _snippet("world.potential(points)")
+    assert lines == ["(2,) (2, 2)", "(2,)"]
+    np.testing.assert_allclose(names["raster"].sample(names["points"]), names["world"].potential(names["points"]),
+                               rtol=0.05)
 
     # -- the ROS map: its size in steps and the step in metres, the target back in metres, five starts reached
-    source, lines, names = _snippet(blocks, printed, spaces, 'load_world("ros_arena")')
+    source, lines, names = _snippet('load_world("ros_arena")')
     assert lines == ["(21.6, 21.6) 0.25", "[[1.65 0.55]]", str(["reached"] * 5)]
     assert "# (21.6, 21.6) in steps; 0.25 m per step" in source and "# [[1.65 0.55]]" in source
     assert "# 5 x 'reached'" in source
 
 
-def test_the_readme_quotes_sb3_check_env_warnings_as_they_are():
+def test_sb3_check_env_warnings_are_quoted_as_they_are():
     """SB3's ``check_env`` on ``Navigate-v0``: the README says how many warnings it gives and quotes the first
-    sentence of each, word for word."""
+    sentence of each; docs/environments.md quotes each whole (whitespace aside)."""
     import warnings
 
     import gymnasium as gym
@@ -104,12 +112,13 @@ def test_the_readme_quotes_sb3_check_env_warnings_as_they_are():
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         check_env(gym.make("apf_physics/Navigate-v0", world="fixed20"))
-    said = [re.sub(r"\s+", " ", str(w.message).split(". ")[0]) for w in caught]
-    text = re.sub(r"\s+", " ", (ROOT / "README.md").read_text())
+    said = [re.sub(r"\s+", " ", str(w.message)).strip() for w in caught]
+    readme, docs = (re.sub(r"\s+", " ", path.read_text(encoding="utf-8"))
+                    for path in (ROOT / "README.md", ROOT / "docs" / "environments.md"))
     counts = {1: "once", 2: "twice", 3: "three times", 4: "four times"}
-    assert f"SB3's `check_env` warns {counts[len(said)]}" in text
-    for sentence in said:
-        assert sentence in text, sentence
+    assert f"SB3's `check_env` warns {counts[len(said)]}" in readme
+    for message in said:
+        assert message.split(". ")[0] in readme and message in docs, message
 
 
 def _figures_tool():

@@ -33,7 +33,7 @@ from apf_physics.render import (
     write_png,
     write_video,
 )
-from apf_physics.render.drawing import BLACK, BLUE, RED, YELLOW, heatmap
+from apf_physics.render.drawing import BLACK, BLUE, OBSTACLE_FILL, RED, YELLOW, heatmap
 from apf_physics.render.field_plot import figure_map_origin
 from apf_physics.render.video import choose_codec
 
@@ -71,13 +71,24 @@ def colour_at(frame: np.ndarray, image: FieldImage, point) -> tuple[int, int, in
     return tuple(int(v) for v in frame[row, col])
 
 
-def test_frame_shape_dtype_and_not_blank(world, image):
+def test_frame_draws_the_field_and_the_obstacles_where_they_are(world, image):
+    """The background is the field's heatmap (viridis washed to white: low U purple, high U yellow)
+    and the obstacles are filled white where they are."""
     frame = draw_frame(image, Snapshot([[2.0, 2.0]], ("single",)))
-    assert frame.shape == (512, 512, 3)
-    assert frame.dtype == np.uint8
-    # A heatmap with level lines, obstacles and a target: many colours, not one flat fill.
-    assert len(np.unique(frame.reshape(-1, 3), axis=0)) > 100
-    assert frame.std() > 10
+    assert frame.shape == (512, 512, 3) and frame.dtype == np.uint8
+    inside = [0.375 * 20, 0.45 * 20]                      # the middle of the polygon obstacle
+    assert colour_at(frame, image, inside) == OBSTACLE_FILL
+    assert colour_at(frame, image, [0.7 * 20, 0.3 * 20]) == OBSTACLE_FILL   # the circle's centre
+
+    def patch(point):   # the mean colour of a 5x5 patch (level lines cross some pixels)
+        col, row = image.pixel_of(np.asarray(point, float))[0]
+        return frame[row - 2:row + 3, col - 2:col + 3].reshape(-1, 3).mean(axis=0)
+
+    low = patch(world.targets[0] + [1.5, 0.0])             # in the target's black hole: the lowest U around
+    high = patch([0.3 * 20 - 0.3, 0.45 * 20])              # just outside the polygon, within p0: U is high
+    u_low, u_high = world.potential(np.array([world.targets[0] + [1.5, 0.0], [0.3 * 20 - 0.3, 0.45 * 20]]))
+    assert u_low < u_high
+    assert high[0] > low[0] + 30 and high[2] < low[2]     # yellower (red up, blue down) where U is higher
 
 
 def test_draw_frame_is_pure(image):

@@ -148,18 +148,25 @@ def test_thesis_presets_stay_as_written():
     assert not fast.evaluation.eval_shield
 
 
-def test_general_presets_keep_their_recipes():
-    general = preset("general")
-    assert (general.env.num_envs, general.dqn.batch_size, general.env.max_episode_steps, general.env.world_start_fraction) == (
-        32, 128, 200, 0.25)
-    assert general.schedule.families and general.schedule.time_limit == 1500 and general.evaluation.eval_shield
-    assert general.evaluation.select == ("-collisions", "spl", "success") and not general.env.memory
-    memory = preset("general-memory")
-    assert memory.env.memory and memory.network.obs_transform == "relative-log-memory" and memory.env.world_start_fraction == 0.5
+def test_each_preset_is_its_base_changed_by_its_layer():
+    """A chained preset equals the preset it builds on in every option but those its own layer sets
+    (learning.config.LAYERS): what --show-config credits to a layer is what that layer changes."""
+    from apf_physics.learning.config import LAYERS, TrainConfig
+
+    for name, (base, changes, _) in LAYERS.items():
+        if " " in name:
+            continue
+        mine = preset(name).options()
+        if base is None:
+            below = TrainConfig(preset=name).options()
+        elif " " in base:   # a shared part: the defaults with that part's changes
+            below = replace(TrainConfig(preset=name), **LAYERS[base][1]).options()
+        else:
+            below = preset(base).options()
+        differ = {k for k in mine if k != "preset" and mine[k] != below[k]}
+        assert differ <= set(changes), (name, differ - set(changes))
     revisit = preset("general-revisit")
-    assert revisit.env.reward == "general" and revisit.env.reward_weights.revisit < 0 and revisit.env.reward_weights.length < 0
-    assert {k: v for k, v in revisit.options().items() if k not in ("preset", "reward")} == \
-        {k: v for k, v in memory.options().items() if k not in ("preset", "reward")}
+    assert revisit.env.reward_weights.revisit < 0 and revisit.env.reward_weights.length < 0
 
 
 def test_unknown_names_keys_and_bad_values_are_refused():
@@ -735,3 +742,30 @@ def test_the_target_is_measured_on_the_validation_starts_not_the_world_starts():
     assert c.top_success == 0.5 and stop_reason(config, phases, c, 0.0) is None
     evals.record({"success": 0.95, "world_starts_success": 0.8}, c, net, config)
     assert stop_reason(config, phases, c, 0.0) == "target_success 0.9 reached"
+
+
+def test_show_config_names_the_layer_each_value_comes_from():
+    """Every option of a preset is shown with its value as the preset has it, and the layer that set
+    it: a chained preset's option is credited to the preset that changed it, a --set to --set."""
+    from apf_physics.learning.config import LAYERS, PRESETS, explain
+
+    for name in PRESETS:
+        rows = {option.rpartition(".")[2]: (value, source) for option, value, source in explain(name)}
+        assert {k: v for k, (v, _) in rows.items()} == preset(name).options()
+        for option, (value, source) in rows.items():
+            if source == "default":
+                assert option not in PRESETS[name] or option in ("preset",)
+    moving = {option: source for option, _, source in explain("moving", {"learning_rate": 3e-4})}
+    assert moving["env.memory"] == "preset general-memory" and moving["env.previous"] == "preset moving"
+    assert moving["dqn.loss"].startswith("fast learner") and moving["network.learning_rate"] == "--set"
+    assert moving["dqn.gamma"] == "default" and "fast learner" in LAYERS
+
+
+def test_train_show_config_trains_nothing_and_needs_no_out(tmp_path, capsys):
+    from apf_physics.cli import main
+
+    assert main(["train", "--world", "worlds/fixed20.yaml", "--show-config", "--set", "batch_size=256"]) == 0
+    out = capsys.readouterr().out
+    assert any(line.split()[:2] == ["dqn.batch_size", "256"] and line.split()[-1] == "--set" for line in out.splitlines())
+    assert main(["train", "--world", "worlds/fixed20.yaml"]) == 2   # training needs --out
+    assert not list(tmp_path.iterdir())

@@ -17,7 +17,7 @@ import torch
 from apf_physics.experiments.movingai import bucket_summary
 from apf_physics.errors import UserError, closest_match, did_you_mean
 from apf_physics.experiments.evaluate import Evaluation, figures
-from apf_physics.control.formation import FormationCrowd, FormationTeam, formation_success, link_lengths, links_in_range
+from apf_physics.control.formation import Formations, FormationTeam, formation_success, link_lengths, links_in_range
 from apf_physics.models.network import relative_log
 from apf_physics.experiments.rollout import Episode, FormationRecord
 from apf_physics.common.safefile import Replacement, atomic_path, check_writable, stale_temporaries, write_text
@@ -167,7 +167,7 @@ def test_link_lengths_and_success_are_the_model_rule():
     class Crowd:
         count, sizes, followed = 2, [4, 3], [spec.followed, line.followed]
 
-    crowd_links = FormationCrowd.links(Crowd(), batch)
+    crowd_links = Formations.links(Crowd(), batch)
     np.testing.assert_array_equal(crowd_links[1], link_lengths(robots[::-1][:3], line.followed))
 
 

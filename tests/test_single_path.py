@@ -1,11 +1,6 @@
-"""One robot: the single environment's scalar path gives exactly the array path's episodes.
-
-A batch of one robot (``Navigate-v0``) is stepped by the scalar path of
-:class:`~apf_physics.sim.engine.Stepper` and :class:`~apf_physics.envs.task.NavigationTask`
-(``Stepper.scalar``); the vector environment by the array path. From the same seed and
-actions both give the same episodes to the last bit: observations, rewards and their terms,
-ends, positions, distances. The vector environment is compared with one copy (its array path
-forced), so that only the two code paths differ, not the pymunk space around the robot.
+"""One step path: the single environment, a vector environment of one copy, and a robot among
+others give the same episodes to the last bit: observations, rewards and their terms, ends,
+positions, distances.
 """
 
 import gymnasium as gym
@@ -30,9 +25,7 @@ CASES = [
 def test_single_env_gives_the_vector_env_episodes_exactly(worlds_dir, name, options):
     world = str(worlds_dir / name)
     vec = NavigateVectorEnv(world=world, num_envs=1, starts="random", max_episode_steps=100, **options)
-    vec._task.stepper.scalar = False   # the array path
     single = gym.make("apf_physics/Navigate-v0", world=world, starts="random", **options)
-    assert single.unwrapped._task.stepper.scalar
     obs, info = vec.reset(seed=5)
     o, inf = single.reset(seed=5)
     np.testing.assert_array_equal(obs[0], o)
@@ -62,30 +55,31 @@ def test_single_env_gives_the_vector_env_episodes_exactly(worlds_dir, name, opti
     assert ended > 3
 
 
-def test_a_stepper_of_one_reports_as_the_array_path(worlds_dir):
-    """The same commands to two steppers of one slot, one on the scalar path: the same reports."""
+def test_a_stepper_of_one_reports_as_a_slot_of_a_batch(worlds_dir):
+    """The same commands to a stepper of one slot and to slot 0 of a stepper of two: the same reports."""
     world = load_world(worlds_dir / "fixed20.yaml")
     trap = TrapDetector("descent", window=6)
     one = Stepper([world], 1, max_steps=30, trap=trap)
-    array = Stepper([world], 1, max_steps=30, trap=trap)
-    array.scalar = False
+    two = Stepper([world], 2, max_steps=30, trap=trap)
     rng = np.random.default_rng(0)
     starts = world.random_free_positions(rng, 200)
     k = 0
-    for stepper in (one, array):
-        stepper.start([0], starts[k][None, None])
+    one.start([0], starts[k][None, None])
+    two.start([0, 1], np.stack([starts[k], starts[-1]])[:, None])
     outcomes = set()
     for _ in range(1500):
         command = rng.integers(-1, 2, (1, 1, 2)).astype(float)
-        a, b = one.step(command), array.step(command)
-        np.testing.assert_array_equal(a.positions, b.positions)
+        a, b = one.step(command), two.step(np.concatenate([command, -command]))
+        np.testing.assert_array_equal(a.positions[0], b.positions[0])
         for field in ("moved", "collided", "reached", "ended", "distance"):
-            np.testing.assert_array_equal(getattr(a, field), getattr(b, field), field)
-        np.testing.assert_array_equal(a.contacts.any, b.contacts.any)
-        assert one.outcome[0] == array.outcome[0] and one.steps[0] == array.steps[0]
+            np.testing.assert_array_equal(getattr(a, field)[0], getattr(b, field)[0], field)
+        assert a.contacts.any[0] == b.contacts.any[0]
+        assert one.outcome[0] == two.outcome[0] and one.steps[0] == two.steps[0]
         if a.ended[0]:
             outcomes.add(int(one.outcome[0]))
             k += 1
-            for stepper in (one, array):
-                stepper.start([0], starts[k % 200][None, None])
+            one.start([0], starts[k % 200][None, None])
+            two.start([0], starts[k % 200][None, None])
+        if b.ended[1]:
+            two.start([1], starts[(-k - 1) % 200][None, None])
     assert len(outcomes) >= 3

@@ -40,9 +40,29 @@ def test_json_is_accepted(tmp_path):
 
 
 def test_round_trip(tmp_path):
-    world = world_from_dict(simple_world_dict())
+    """A world written and read back is the same world: its map, robot, field, obstacles, targets,
+    starts and formation, and so the same potential everywhere."""
+    data = simple_world_dict(formation={"followers": 2, "comm_range": 2.5, "spacing": 0.75, "shape": "wedge"},
+                             obstacles=[{"polygon": [[5, 5], [8, 5], [8, 9], [6, 9]], "name": "wall"},
+                                        {"circle": {"center": [12, 4], "radius": 0.5},
+                                         "motion": {"path": [[0, 3]], "speed": 0.5, "phase": 1.0}}])
+    world = world_from_dict(data)
     again = world_from_dict(yaml.safe_load(dump_world_yaml(world)))
-    assert again.to_dict() == world.to_dict()
+    assert (again.name, again.size, again.robot_radius, again.goal_tolerance) == \
+        (world.name, world.size, world.robot_radius, world.goal_tolerance)
+    assert again.field == world.field and again.formation == world.formation
+    np.testing.assert_array_equal(again.targets, world.targets)
+    np.testing.assert_array_equal(again.starts, world.starts)
+    (polygon, circle), (polygon2, circle2) = world.obstacles, again.obstacles
+    np.testing.assert_array_equal(polygon2.vertices, polygon.vertices)
+    assert polygon2.name == "wall" and circle2.radius == circle.radius
+    np.testing.assert_array_equal(circle2.center, circle.center)
+    np.testing.assert_array_equal(circle2.motion.path, circle.motion.path)
+    assert (circle2.motion.speed, circle2.motion.loop, circle2.motion.phase) == \
+        (circle.motion.speed, circle.motion.loop, circle.motion.phase)
+    points = np.random.default_rng(0).uniform(0, 20, (200, 2))
+    for t in (0.0, 3.0):
+        np.testing.assert_array_equal(again.potential(points, t), world.potential(points, t))
 
 
 def test_polygon_winding_is_normalised():
@@ -245,9 +265,10 @@ RASTER_PEAK = """
 import sys
 import numpy as np
 from apf_physics.world.io.mapfiles import write_pgm
-from apf_physics.sensing.observation import MapView, observation_raster
+from apf_physics.sensing.mapview import MapView
+from apf_physics.sensing.observation import observation_raster
 from apf_physics.world.search import SearchGrid
-from apf_physics.sim.swept import Sweeps
+from apf_physics.sim.swept import SweptDistances
 from apf_physics.world.io.worldfile import raster_memory, world_from_dict
 if sys.argv[1] == "grid":   # a random occupancy grid of 150 x 150 cells, one unit each
     occupied = np.random.default_rng(0).random((150, 150)) < 0.2
@@ -264,7 +285,7 @@ try:   # reset the peak, so that what imports used does not count
 except OSError:
     pass
 before = status("VmRSS")
-Sweeps().add(world)                                            # the physics' index of static shapes
+SweptDistances().add(world)                                            # the physics' index of static shapes
 observation_raster(world, 7, 4)                                # the DQN planner's (and u_wall's potential raster)
 world.start_cells()                                            # --random-starts
 SearchGrid.of(world).cost_to_go                                # the A* planner's

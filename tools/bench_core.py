@@ -76,7 +76,7 @@ def main() -> None:
     res = 10
     times = []
     for _ in range(5):
-        world._cache.clear()
+        world.forget()
         t = time.perf_counter()
         raster = world.raster(res)
         times.append(time.perf_counter() - t)

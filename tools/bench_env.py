@@ -96,11 +96,11 @@ class OursVector:
 
     def via_pymunk(self) -> float:
         """The share of robot-steps that go through pymunk (robots holding a proxy after a step)."""
-        physics = self.env._task.stepper.physics
+        physics = self.env.task.stepper.physics
         simulated = 0
         for a in self.actions[:50]:
             self.env.step(a)
-            simulated += int((physics._robot_proxy >= 0).sum())
+            simulated += int(physics.in_pymunk.sum())
         return simulated / (50 * self.env.num_envs)
 
 

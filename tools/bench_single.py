@@ -8,13 +8,11 @@ blocks`` steps, so that a change of the machine's load hits all alike; the figur
 the median over its blocks, and the ratio the median of each block's ratio to the CartPole
 block beside it (aim ≤ 5); the fastest block of each is printed too (on a loaded machine it is
 the one the scheduler took least from). Each figure is given by the wall clock and by the
-thread's CPU time. A third line steps Navigate-v0's batch of
-one by the stepper's array path instead of its scalar path (``Stepper.scalar = False``): before
-and after in one run. A fourth steps it with ``Physics.step`` and ``Observer.observe`` stubbed
+thread's CPU time. A third steps it with ``Physics.step`` and ``Observer.observe`` stubbed
 (nobody moves, nothing touches): the step's own part, the env, task, stepper and wrappers.
 
 Then where a Navigate step goes: the same steps again with the physics call
-(``Physics.step``, its free-move test apart (``needs_physics``, or ``Sweeps.near_one`` for one robot), and steps with and without pymunk apart), the
+(``Physics.step``, its free-move test apart (``FreeMoveTest.step``), and steps with and without pymunk apart), the
 observation of the steps (``Observer.observe``) and the resets (``env.reset`` through the
 wrappers, their observation included; ``NavigationTask.start`` apart) timed apart (per call,
 with ``time.perf_counter``). ``--profile`` adds a cProfile of the Navigate steps (top 25 by own time).
@@ -59,7 +57,7 @@ def stubbed(env):
     """``env`` with ``Physics.step`` and ``Observer.observe`` replaced by stubs (nothing touched,
     nobody moves; the window of the start): what is left of a step is the env's, the task's, the
     stepper's and the wrappers' own part (episodes run to the step limit, 100 steps)."""
-    task = env.unwrapped._task
+    task = env.unwrapped.task
     nothing = ContactLog.nothing(task.stepper.physics.num_robots)
     window = task.observer.observe(task.stepper.positions[:, 0], None, task.stepper.steps)
     task.stepper.physics.step = lambda velocities, active=None: nothing
@@ -69,11 +67,10 @@ def stubbed(env):
 
 def side_by_side(steps: int, blocks: int) -> dict[str, tuple[float, float]]:
     """Median µs per step (wall clock, CPU time) of CartPole-v1, of Navigate-v0, and of Navigate-v0
-    with its batch of one stepped by the array path (``Stepper.scalar = False``: the step before
-    the scalar path), timed in alternating blocks; the two Navigate-v0 take the same actions."""
+    with the physics and the observation stubbed, timed in alternating blocks; the Navigate-v0
+    take the same actions."""
     envs = {"CartPole-v1": make("CartPole-v1"), "Navigate-v0": make("apf_physics/Navigate-v0"),
-            "array path": make("apf_physics/Navigate-v0"), "own part": stubbed(make("apf_physics/Navigate-v0"))}
-    envs["array path"].unwrapped._task.stepper.scalar = False
+            "own part": stubbed(make("apf_physics/Navigate-v0"))}
     rng = np.random.default_rng(0)
     per = max(1, steps // blocks)
     times: dict[str, list[tuple[float, float]]] = {name: [] for name in envs}
@@ -121,7 +118,7 @@ def timed(obj, name: str, into: list):
 
 def breakdown(steps: int) -> None:
     env = make("apf_physics/Navigate-v0")
-    task = env.unwrapped._task
+    task = env.unwrapped.task
     physics, observer = task.stepper.physics, task.observer
     actions = np.random.default_rng(1).integers(0, 9, steps)
     run(env, actions[:500])   # warm up
@@ -131,7 +128,7 @@ def breakdown(steps: int) -> None:
     def sorting(*args, **kwargs):   # physics steps with and without pymunk, apart
         t = time.perf_counter()
         out = step(*args, **kwargs)
-        (simulated if physics._proxy_held else free).append(time.perf_counter() - t)
+        (simulated if physics.in_pymunk[0] else free).append(time.perf_counter() - t)
         return out
     reset = env.reset
 
@@ -144,7 +141,7 @@ def breakdown(steps: int) -> None:
         return out
     physics.step, env.reset = sorting, resetting
     try:
-        with timed(physics, "needs_physics", test), timed(physics._sweeps, "near_one", test), \
+        with timed(physics.free, "step", test), \
                 timed(observer, "observe", obs), timed(task, "start", starts):
             total, _ = run(env, actions)
     finally:
@@ -176,12 +173,11 @@ def main() -> None:
     args = parser.parse_args()
     print(f"load average at start: {os.getloadavg()[0]:.2f}")
     times = side_by_side(args.steps, args.blocks)
-    (cart, cart_cpu, _, _), nav, array, own = times.values()
+    (cart, cart_cpu, _, _), nav, own = times.values()
     print(f"single environment, random actions, through gymnasium.make (median of {args.blocks} alternating blocks; "
           f"wall clock, and CPU time; x CartPole: the median of the blocks' ratios to the CartPole block beside them)")
     print(f"  CartPole-v1                             {cart:7.1f} us/step (CPU {cart_cpu:6.1f})")
     for label, (wall, cpu, ratio, ratio_cpu) in (("apf_physics/Navigate-v0", nav),
-                                                 ("the same, stepped by the array path", array),
                                                  ("own part: physics, observation stubbed", own)):
         aim = "; aim <= 5" if label.startswith("apf") else ""
         print(f"  {label:39s} {wall:7.1f} us/step (CPU {cpu:6.1f})   {ratio:5.1f} x CartPole (CPU {ratio_cpu:4.1f} x{aim})")

@@ -73,8 +73,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                                           "print a table and optionally write JSON.")
     p.add_argument("worlds", nargs="+", metavar="WORLD", help="world files (.yaml) or directories of them")
     p.add_argument("--planner", default="gradient",
-                   help="planner, or several separated by commas: gradient, dqn, dqn-unshielded, dqn-known, astar, sipp, "
-                        "escape (default: gradient)")
+                   help="planner, or several separated by commas: gradient, dqn (the default learned planner: the "
+                        "best shipped network for the field), mapnet (the map network), window-dqn (the thesis's "
+                        "window DQN), each also -unshielded, dqn-known, astar, sipp, escape (default: gradient)")
     p.add_argument("--model", help="DQN model file, or a shipped model by name (general, moving, map, fixed20; "
                                    "default: the shipped model for the world's field)")
     p.add_argument("--formation", action="store_true", help="run the world's formation (leader and followers)")
@@ -117,8 +118,7 @@ def random_starts(world, count: int, seed: int) -> np.ndarray:
     out = np.empty((0, 2))
     while len(out) < count:
         cand = world.random_free_positions(rng, count)
-        far = np.min(np.linalg.norm(cand[:, None] - world.targets[None], axis=2), axis=1) > world.goal_tolerance
-        out = np.vstack([out, cand[far]])
+        out = np.vstack([out, cand[~world.reached(cand)]])
     return out[:count]
 
 
@@ -165,8 +165,14 @@ def run(args: argparse.Namespace) -> int:
         evaluations = evaluate_on_ray(names, worlds, starts, model=args.model, max_steps=args.max_steps,
                                       formation=args.formation, address=args.ray or None,
                                       worlds_per_task=args.ray_batch, kinematics=args.kinematics)
+        notes = []
+        for name in names:   # which network each learned planner ran (on the last world, as a local run says)
+            planner = make_planner(name, model=args.model)
+            if hasattr(planner, "describe"):
+                planner.reset(worlds[-1], np.zeros((1, 2)))
+                notes.append(planner.describe())
     else:
-        evaluations = []
+        evaluations, notes = [], []
         for name in names:
             planner = make_planner(name, model=args.model)
             count = sum(len(w.formations) if args.formation and w.formations
@@ -178,7 +184,11 @@ def run(args: argparse.Namespace) -> int:
                                             kinematics=args.kinematics))
             finally:
                 progress.close()
+            if hasattr(planner, "describe"):   # a learned planner: say which network ran
+                notes.append(planner.describe())
     print(format_table(evaluations))
+    for note in notes:
+        print(note)
     if args.json:
         write_json(evaluations, args.json)
         print(f"wrote {args.json}")

@@ -11,7 +11,8 @@ import yaml
 
 from apf_physics.learning.curriculum import load_curriculum
 from apf_physics.errors import UserError
-from apf_physics.learning.config import CURRICULUM_DEFAULT, PRESETS, WORLD_DEFAULT, load_config, preset, replace
+from apf_physics.learning.config import (CURRICULUM_DEFAULT, OPTIONS, PRESETS, WORLD_DEFAULT, explain, load_config, preset,
+                                         replace)
 from apf_physics.learning.phases import phases_for_curriculum, phases_for_world
 from apf_physics.learning.rundir import RunDir
 from apf_physics.learning.trainer import CSV_COLUMNS, check_phases, load_checkpoint_config, train
@@ -29,13 +30,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                     "`apf-physics eval` runs it: the one to use), OUT/last.pt (the full training state, for "
                     "--resume), OUT/train.csv and OUT/train.png (the training curve), and OUT/tensorboard/ when "
                     "the tensorboard package is installed. OUT is locked while a run trains into it.")
-    where = p.add_mutually_exclusive_group(required=True)
+    where = p.add_mutually_exclusive_group()
     where.add_argument("--world", help="world file (.yaml) to train in; its starts are the evaluation starts")
     where.add_argument("--curriculum", metavar="FILE",
                        help="a curriculum file of stages (e.g. worlds/curricula/thesis.yaml): stage i trains its "
                             "worlds with every earlier stage's (rehearsal), then generated worlds; evaluated on "
                             "generated validation worlds")
-    p.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
+    p.add_argument("--out", metavar="DIR", help="output folder (created if missing)")
     recipe = p.add_mutually_exclusive_group()
     recipe.add_argument("--config", metavar="FILE", help="a configuration file (YAML), e.g. the config.yaml of an "
                                                          "earlier run, instead of a preset")
@@ -54,6 +55,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         "how long it runs and how often it reports)")
     p.add_argument("--no-progress", action="store_true", help="show no progress (default: a bar when stderr is a "
                                                                  "terminal, else a line per log row)")
+    p.add_argument("--show-config", action="store_true",
+                   help="print every training option of the recipe (preset or --config, with --set) and where its "
+                        "value comes from, and train nothing (no --out needed)")
     p.set_defaults(func=run)
 
 
@@ -84,11 +88,33 @@ def resume_command(args: argparse.Namespace) -> str:
     return shlex.join(["apf-physics", "train", *where, "--out", args.out, "--resume"])
 
 
+def show_config(args: argparse.Namespace, overrides: dict) -> int:
+    """``--show-config``: every option, its value and its source, one line each."""
+    if args.config is not None:
+        given = {key.rpartition(".")[2] for key in overrides}
+        config = replace(load_config(args.config), **overrides)
+        rows = [(f"{OPTIONS[o]}.{o}" if OPTIONS[o] else o, v, "--set" if o in given else args.config)
+                for o, v in config.options().items()]
+    else:
+        rows = explain(args.preset or (CURRICULUM_DEFAULT if args.curriculum else WORLD_DEFAULT), overrides)
+    width = max(len(name) for name, _, _ in rows)
+    for name, value, source in rows:
+        shown = list(value) if isinstance(value, tuple) else value
+        print(f"{name:<{width}}  {shown!s:<32}  {source}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
 
     overrides = parse_overrides(args.set)
     if args.seed is not None:
         overrides["seed"] = args.seed
+    if args.show_config:
+        return show_config(args, overrides)
+    if not args.world and not args.curriculum:
+        raise UserError("train: give --world FILE or --curriculum FILE (or --show-config to see a recipe)")
+    if not args.out:
+        raise UserError("train: give --out DIR, the folder to train into")
     world = load_world(args.world) if args.world else None
     stages = None if args.world else load_curriculum(args.curriculum)
     # Everything that can be refused is checked before the output folder is made: a refused command leaves nothing.

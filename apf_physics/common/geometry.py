@@ -381,6 +381,16 @@ def grid_boundary(occupied: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.vstack(ends_a).astype(float), np.vstack(ends_b).astype(float)
 
 
+def swept_distance(p: np.ndarray, dp: np.ndarray, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+    """Smallest distance between two points moving linearly over one step (broadcasting)."""
+    r0 = p - q
+    dr = dp - dq
+    a = np.sum(dr * dr, axis=-1)
+    t = np.clip(np.where(a > 0, -np.sum(r0 * dr, axis=-1) / np.where(a > 0, a, 1.0), 0.0), 0.0, 1.0)
+    closest = r0 + t[..., None] * dr
+    return np.sqrt(np.sum(closest * closest, axis=-1))
+
+
 # -- rectangles --------------------------------------------------------------------------
 
 def occupancy_rectangles(occupied: np.ndarray) -> np.ndarray:

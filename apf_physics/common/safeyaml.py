@@ -25,7 +25,7 @@ import yaml
 from apf_physics.errors import UserError
 from apf_physics.common.safefile import read_regular_file
 
-# -- limits (README "World files"): what any YAML file (world or curriculum) may hold ---------
+# -- limits (docs/world-files.md): what any YAML file (world or curriculum) may hold ---------
 MAX_DEPTH = 32
 """Deepest nesting of lists and mappings (a world file needs 5)."""
 MAX_NODES = 500_000

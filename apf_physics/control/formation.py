@@ -26,7 +26,7 @@ import numpy as np
 from apf_physics.control.shield import ACTIONS, SAFETY
 from apf_physics.errors import UserError
 from apf_physics.world.field import repulsive, repulsive_term
-from apf_physics.common.geometry import near_any
+from apf_physics.common.geometry import near_any, swept_distance
 from apf_physics.world.core import FormationSpec, World
 
 
@@ -70,16 +70,6 @@ def formation_success(reached: bool, positions: np.ndarray, followed: Sequence[i
     return bool(reached) and bool(np.all(links_in_range(positions, followed, comm_range)))
 
 
-def swept_distance(p: np.ndarray, dp: np.ndarray, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
-    """Smallest distance between two points moving linearly over one step (broadcasting)."""
-    r0 = p - q
-    dr = dp - dq
-    a = np.sum(dr * dr, axis=-1)
-    t = np.clip(np.where(a > 0, -np.sum(r0 * dr, axis=-1) / np.where(a > 0, a, 1.0), 0.0), 0.0, 1.0)
-    closest = r0 + t[..., None] * dr
-    return np.sqrt(np.sum(closest * closest, axis=-1))
-
-
 ROUNDING = 1e-9
 """A safety margin short by less than this is rounding, and safe (:meth:`FollowerController.act`)."""
 
@@ -116,7 +106,7 @@ class FollowerController:
         """Start a new run with robots at ``positions`` (leader first)."""
         positions = np.asarray(positions, dtype=float)
         self.trails = [[p.copy()] for p in positions]
-        target = self.world.targets[np.argmin(np.hypot(*(self.world.targets - positions[0]).T))]
+        target = self.world.nearest_target(positions[0])[0]
         to_target = target - positions[0]
         self.heading = to_target / max(np.hypot(*to_target), 1e-12)
 
@@ -229,7 +219,7 @@ def initial_followers(world: World, spec: FormationSpec, leader: np.ndarray) -> 
         UserError: No free position within range fits a follower.
     """
     leader = np.asarray(leader, dtype=float)
-    target = world.targets[np.argmin(np.hypot(*(world.targets - leader).T))]
+    target = world.nearest_target(leader)[0]
     back = leader - target
     back = back / np.hypot(*back) if np.hypot(*back) > 0 else np.array([-1.0, 0.0])
     left = np.array([-back[1], back[0]])
@@ -351,7 +341,7 @@ def right_of_way(world: World, positions: np.ndarray, moves: np.ndarray, order: 
     return out
 
 
-class FormationCrowd:
+class Formations:
     """Several formations in one world, each to its own target, as one crowd of stepper slots.
 
     Formation ``f`` is slot ``f``; its robots are the first ``1 + followers`` of the slot's

@@ -2,7 +2,7 @@
 
 A planner scores moves; the shield admits only those that keep the robot ``SAFETY`` clear of
 everything along the move (:func:`move_clearance`) and, near moving obstacles, over the steps
-after it (:func:`shield_over_time`, README "The shield over time").
+after it (:func:`shield_over_time`, docs/planners.md, "The shield over time").
 """
 
 from __future__ import annotations
@@ -202,12 +202,12 @@ def assess_moves(moment: Moment, positions: np.ndarray, moves: np.ndarray, predi
     s2 = 1.0 + np.arange(1, (horizon - 1) * k + 1) / k                              # its continuation
     offsets = predicted_offsets(world, t, np.concatenate([s1, s2]), prediction)     # (S, Mv, 2)
     # what the robot sees: every moving obstacle (within the sensing radius), the crowd's discs standing
-    shapes = [world.obstacles[i] for i in world.moving] + [CircleObstacle(c, world.robot_radius) for c in world.crowd]
-    paths = [offsets[:, j] for j in range(len(world.moving))] + [np.zeros((len(s1) + len(s2), 2))] * len(world.crowd)
+    shapes = [world.obstacles[i] for i in world.moving] + [CircleObstacle(c, world.robot_radius) for c in world.others]
+    paths = [offsets[:, j] for j in range(len(world.moving))] + [np.zeros((len(s1) + len(s2), 2))] * len(world.others)
     reach_moves = float(np.max(np.hypot(*moves.T)))
     # the fastest each obstacle was seen to move over the last two steps (a turn within a step shortens it)
     seen = world.moving_offsets(np.array([t - 2.0, t - 1.0, float(t)]))                     # (3, Mv, 2)
-    sensed_speed = np.hypot(*np.diff(seen, axis=0).transpose(2, 0, 1)).max(axis=0).tolist() + [0.0] * len(world.crowd)
+    sensed_speed = np.hypot(*np.diff(seen, axis=0).transpose(2, 0, 1)).max(axis=0).tolist() + [0.0] * len(world.others)
     near = []
     for shape, path, seen_speed in zip(shapes, paths, sensed_speed):
         d_now, _ = shape.signed_distance(positions - path[0])

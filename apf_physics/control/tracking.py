@@ -27,6 +27,8 @@ Units: lengths in units, time in control steps, angles in radians (counter-clock
 
 from __future__ import annotations
 
+from typing import Sequence
+
 import numpy as np
 
 from apf_physics.control.shield import SAFETY
@@ -518,3 +520,24 @@ class UnicycleFollowers:
             arcs[0] = standing[0]
             self._keep_apart(v_all, arcs, standing, 1)
         return v_all, omega_all
+
+
+def leader_caps(states: np.ndarray, moving: np.ndarray, followers: Sequence[UnicycleFollowers],
+                limits: UnicycleLimits) -> np.ndarray:
+    """(S,) the fastest each moving slot's leader may go so that its followers keep up
+    (:meth:`UnicycleFollowers.leader_cap`); the top speed for slots not moving."""
+    return np.array([followers[s].leader_cap(states[s]) if moving[s] else limits.max_speed for s in range(len(states))])
+
+
+def team_drive(states: np.ndarray, v: np.ndarray, omega: np.ndarray, moving: np.ndarray,
+               followers: Sequence[UnicycleFollowers] = ()) -> np.ndarray:
+    """(S, m, 2) every unicycle's ``(v, ω)``: each leader's given command, its followers' by their
+    rule (:meth:`UnicycleFollowers.drive`, which may stop a leader about to meet a follower); the
+    one place where a team's commands are put together, for ``eval``'s rollouts and the environments."""
+    n, m = states.shape[:2]
+    commands = np.zeros((n, m, 2))
+    commands[:, 0, 0], commands[:, 0, 1] = v, omega
+    if followers:
+        for s in np.flatnonzero(moving).tolist():
+            commands[s, :, 0], commands[s, :, 1] = followers[s].drive(states[s], float(v[s]), float(omega[s]))
+    return commands

@@ -83,34 +83,35 @@ class FormationEnv(gym.Env):
         self.chooser = StartChooser(starts, self.worlds)
         self.render_mode = render_mode
         self.action_space = self.robot.action_space()
-        self._task = NavigationTask(self.worlds, 1, self.observer, self.weights, formation=spec, trap=trap,
+        self.task = NavigationTask(self.worlds, 1, self.observer, self.weights, formation=spec, trap=trap,
                                     robot=self.robot)
-        self.observation_space = self._task.observation_space()
+        """The episodes this environment steps (stepper, physics, observer): for tools and tests to look inside."""
+        self.observation_space = self.task.observation_space()
         self.m = spec.followers + 1
         self.followed = spec.followed
 
     @property
     def world(self):
-        return self.worlds[self._task.world_of[0]]
+        return self.worlds[self.task.world_of[0]]
 
     @property
     def positions(self) -> np.ndarray:
         """(m, 2) every robot's position, the leader first."""
-        return self._task.positions[0].copy()
+        return self.task.positions[0].copy()
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         if seed is not None:
-            self._task.seed([seed])
+            self.task.seed([seed])
         w, start = self.chooser.choose(self.np_random, options)
-        self._task.start(np.array([0]), np.array([w]), start[None])
+        self.task.start(np.array([0]), np.array([w]), start[None])
         self.steps = 0
         self.in_range = np.zeros(self.formation.followers)
         self.trails = [[p.copy()] for p in self.positions]
-        return self._task.observation(0), self._get_info()
+        return self.task.observation(0), self._get_info()
 
     def step(self, action):
-        result = self._task.step(np.array([int(action)]) if self.robot.action == "discrete" else action)
+        result = self.task.step(np.array([int(action)]) if self.robot.action == "discrete" else action)
         for trail, p in zip(self.trails, self.positions):
             trail.append(p.copy())
         self.steps += 1
@@ -122,16 +123,16 @@ class FormationEnv(gym.Env):
         info["collision"] = collided
         info["robot_robot_contact"] = bool(result.robot_contact[0])
         info["formation_success"] = formation_success(reached, self.positions, self.followed, self.formation.comm_range)
-        if self._task.stepper.trap is not None:
+        if self.task.stepper.trap is not None:
             info["trapped"] = bool(result.trapped[0])
-        return (self._task.observation(0), float(result.reward[0]), bool(result.terminated[0]), bool(result.truncated[0]),
+        return (self.task.observation(0), float(result.reward[0]), bool(result.terminated[0]), bool(result.truncated[0]),
                 info)
 
     def _get_info(self) -> dict:
         links = link_lengths(self.positions, self.followed)
         share = self.in_range / self.steps if self.steps else np.ones_like(links)
         return {"positions": self.positions, "position": self.positions[0], "world": self.world.name,
-                "distance": float(self._task.distance()[0]), "links": links,
+                "distance": float(self.task.distance()[0]), "links": links,
                 "links_in_range": links_in_range(self.positions, self.followed, self.formation.comm_range),
                 "link_in_range_share": share}
 

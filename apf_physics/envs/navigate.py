@@ -143,8 +143,9 @@ class NavigateEnv(gym.Env):
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         self.render_mode = render_mode
         self.action_space = self.robot.action_space()
-        self._task = NavigationTask(self.worlds, 1, self.observer, self.weights, trap=trap, robot=self.robot)
-        self.observation_space = self._task.observation_space()
+        self.task = NavigationTask(self.worlds, 1, self.observer, self.weights, trap=trap, robot=self.robot)
+        """The episodes this environment steps (stepper, physics, observer): for tools and tests to look inside."""
+        self.observation_space = self.task.observation_space()
         self._trail: list[np.ndarray] = []
         self._steps = 0
         self._world_name = self.worlds[0].name   # the current episode's world's (set at reset)
@@ -152,25 +153,25 @@ class NavigateEnv(gym.Env):
     @property
     def world(self):
         """The world of the current episode."""
-        return self.worlds[self._task.world_of[0]]
+        return self.worlds[self.task.world_of[0]]
 
     @property
     def position(self) -> np.ndarray:
-        return self._task.positions[0, 0].copy()
+        return self.task.positions[0, 0].copy()
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         if seed is not None:
-            self._task.seed([seed])
+            self.task.seed([seed])
         w, start = self.chooser.choose(self.np_random, options)
-        self._task.start(_SLOT, np.array([w]), start[None])
+        self.task.start(_SLOT, np.array([w]), start[None])
         self._world_name = self.worlds[w].name
         self._trail = [start.copy()]
         self._steps = 0
-        return self._task.observation(0), self._get_info()
+        return self.task.observation(0), self._get_info()
 
     def step(self, action):
-        result = self._task.step(int(action) if self.robot.action == "discrete" else action)
+        result = self.task.step(int(action) if self.robot.action == "discrete" else action)
         self._steps += 1
         if self.render_mode is not None:  # the trail is only drawn
             self._trail.append(self.position)
@@ -178,23 +179,23 @@ class NavigateEnv(gym.Env):
         info["reward_terms"] = dict(zip(TERMS, result.terms[:, 0].tolist()))
         info["success"] = bool(result.reached[0])
         info["collision"] = bool(result.collided[0])
-        if self._task.stepper.trap is not None:
+        if self.task.stepper.trap is not None:
             info["trapped"] = bool(result.trapped[0])
-        return (self._task.observation(0), float(result.reward[0]), bool(result.terminated[0]), bool(result.truncated[0]),
+        return (self.task.observation(0), float(result.reward[0]), bool(result.terminated[0]), bool(result.truncated[0]),
                 info)
 
     def _get_info(self) -> dict:
-        info = {"position": self._task.positions[0, 0].copy(), "world": self._world_name,
-                "distance": float(self._task.distance()[0])}
+        info = {"position": self.task.positions[0, 0].copy(), "world": self._world_name,
+                "distance": float(self.task.distance()[0])}
         if self.robot.unicycle is not None:
-            info["heading"] = float(self._task.stepper.headings[0, 0])
+            info["heading"] = float(self.task.stepper.headings[0, 0])
         return info
 
     def render(self):
         if self.render_mode != "rgb_array":
             return None
-        snap = Snapshot(self._task.positions[0, :1], ("single",), (np.asarray(self._trail),),
+        snap = Snapshot(self.task.positions[0, :1], ("single",), (np.asarray(self._trail),),
                         (f"{self.world.name}  step {self._steps}",), self._steps,
-                        headings=self._task.stepper.headings[0, :1] if self.robot.unicycle is not None else None)
+                        headings=self.task.stepper.headings[0, :1] if self.robot.unicycle is not None else None)
         return draw_frame(field_image(self.world), snap)
 

@@ -13,7 +13,8 @@ from apf_physics.control.shield import ACTIONS
 from apf_physics.errors import UserError
 from apf_physics.world.kinematics import KINEMATICS, LIMIT_KEYS, UNICYCLE_ACTIONS, UnicycleLimits, holonomic_from_unit
 from apf_physics.sensing.lidar import LidarConfig
-from apf_physics.sensing.observation import OBSERVATIONS, ObserverConfig
+from apf_physics.sensing.kinds import OBSERVATIONS
+from apf_physics.sensing.observation import ObserverConfig
 from apf_physics.world.core import World
 from apf_physics.world.io.worldfile import load_world
 
@@ -45,7 +46,7 @@ class RobotOptions:
             one unit per step: the box's corners are Table 1's diagonal moves) or a unicycle's
             ``(v, ω)`` as shares of its limits (:meth:`UnicycleLimits.from_unit`).
         unicycle: The unicycle's limits, or None for a holonomic robot.
-        observation: One of :data:`~apf_physics.sensing.observation.OBSERVATIONS`.
+        observation: One of :data:`~apf_physics.sensing.kinds.OBSERVATIONS`.
         lidar: The range sensor (used with a ``"lidar"`` observation).
     """
 
@@ -162,8 +163,7 @@ def observer_config(obs_size: int, resolution: int, memory: bool, obs_scale: str
     """
     if observer is not None:
         return observer if isinstance(observer, ObserverConfig) else ObserverConfig.from_dict(observer)
-    channels = ("potential",) + (("previous",) if previous else ()) + (("memory",) if memory else ())
-    return ObserverConfig(size=int(obs_size), resolution=int(resolution), channels=channels, scale=obs_scale)
+    return ObserverConfig.of(obs_size, resolution, previous=previous, memory=memory, scale=obs_scale)
 
 
 class StartChooser:

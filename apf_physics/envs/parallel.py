@@ -15,7 +15,7 @@ from gymnasium.utils import seeding
 from apf_physics.control.shield import ACTIONS
 from apf_physics.envs.options import observer_config, resolve_worlds
 from apf_physics.envs.reward import TERMS, reward_weights
-from apf_physics.envs.task import CrowdTask, TrapOption
+from apf_physics.envs.task import FormationsTask, TrapOption
 from apf_physics.sensing.observation import ObserverConfig
 from apf_physics.render.drawing import Snapshot, draw_frame, field_image, formation_roles
 
@@ -32,7 +32,7 @@ class FormationsParallelEnv(ParallelEnv):
 
     ``agents="leaders"`` (default): one agent per formation, ``leader_<f>``; its followers
     follow by their own rule and every move gets the right of way
-    (:class:`~apf_physics.control.formation.FormationCrowd`), so robots never touch one another.
+    (:class:`~apf_physics.control.formation.Formations`), so robots never touch one another.
     ``agents="all"``: every robot is an agent, ``robot_<f>_<r>`` (r = 0 the leader), moved
     exactly as told (collisions are then the agents' to avoid).
 
@@ -74,10 +74,11 @@ class FormationsParallelEnv(ParallelEnv):
                  render_mode: str | None = None, trap: TrapOption = None):
         (self.world,) = resolve_worlds(world)
         self.observer = observer_config(obs_size, resolution, memory, obs_scale, observer, previous)
-        self._task = CrowdTask(self.world, self.observer, reward_weights(reward), agents, max_episode_steps, trap)
-        low, high = self._task.observer.value_bounds()  # finite: from the worlds' U
+        self.task = FormationsTask(self.world, self.observer, reward_weights(reward), agents, max_episode_steps, trap)
+        """The episodes this environment steps (stepper, physics, observer): for tools and tests to look inside."""
+        low, high = self.task.observer.value_bounds()  # finite: from the worlds' U
         self._observation_space = spaces.Box(low, high, self.observer.shape, np.float32)
-        self.possible_agents = list(self._task.names)
+        self.possible_agents = list(self.task.names)
         self.agents: list[str] = []
         self.render_mode = render_mode
         self._action_space = spaces.Discrete(len(ACTIONS))
@@ -93,16 +94,16 @@ class FormationsParallelEnv(ParallelEnv):
     def reset(self, seed: int | None = None, options: dict | None = None):
         if seed is not None:
             self.np_random, _ = seeding.np_random(seed)
-        self._task.start()
+        self.task.start()
         self.agents = list(self.possible_agents)
-        obs = self._task._obs
+        obs = self.task._obs
         return {a: obs[self._index[a]] for a in self.agents}, {a: self._info(a) for a in self.agents}
 
     def step(self, actions: dict):
         chosen = np.full(len(self.possible_agents), 8, np.intp)   # agents no longer playing: stay
         for agent, action in actions.items():
             chosen[self._index[agent]] = int(action)
-        result = self._task.step(chosen)
+        result = self.task.step(chosen)
         live = list(self.agents)
         observations = {a: result.observation[self._index[a]] for a in live}
         rewards = {a: float(result.reward[self._index[a]]) for a in live}
@@ -114,28 +115,28 @@ class FormationsParallelEnv(ParallelEnv):
             infos[a] = {**self._info(a), "reward_terms": dict(zip(TERMS, result.terms[:, i].tolist())),
                         "success": bool(result.reached[i]), "collision": bool(result.collided[i]),
                         "robot_robot_contact": bool(result.robot_contact[i])}
-            if self._task.stepper.trap is not None:
+            if self.task.stepper.trap is not None:
                 infos[a]["trapped"] = bool(result.trapped[i])
         self.agents = [a for a in live if not (terminations[a] or truncations[a])]
         return observations, rewards, terminations, truncations, infos
 
     def _info(self, agent: str) -> dict:
         a = self._index[agent]
-        f, r = self._task.members[a]
-        position = self._task.stepper.positions[f, r]
-        world = self._task.crowd.worlds[f]
+        f, r = self.task.members[a]
+        position = self.task.stepper.positions[f, r]
+        world = self.task.formations.worlds[f]
         return {"position": position.copy(), "formation": f, "world": self.world.name,
                 "distance": float(world.distance_to_target(position[None])[0])}
 
     def render(self):
         if self.render_mode != "rgb_array":
             return None
-        crowd = self._task.crowd
-        positions = np.concatenate([self._task.stepper.positions[f, :size] for f, size in enumerate(crowd.sizes)])
-        roles = tuple(role for size in crowd.sizes for role in formation_roles(size))
-        families = tuple(f for f, size in enumerate(crowd.sizes) for _ in range(size))
-        snapshot = Snapshot(positions, roles, (), (f"{self.world.name}  step {self._task.step_count}",),
-                            self._task.step_count, families)
+        formations = self.task.formations
+        positions = np.concatenate([self.task.stepper.positions[f, :size] for f, size in enumerate(formations.sizes)])
+        roles = tuple(role for size in formations.sizes for role in formation_roles(size))
+        families = tuple(f for f, size in enumerate(formations.sizes) for _ in range(size))
+        snapshot = Snapshot(positions, roles, (), (f"{self.world.name}  step {self.task.step_count}",),
+                            self.task.step_count, families)
         return draw_frame(field_image(self.world), snapshot)
 
     def close(self) -> None:

@@ -6,6 +6,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from apf_physics.common.compiled import kernel
+
 
 @dataclass(frozen=True)
 class RewardWeights:
@@ -69,31 +71,51 @@ def reward_weights(spec: str | RewardWeights | dict) -> RewardWeights:
 
 def reward_terms(weights: RewardWeights, collided: np.ndarray, reached: np.ndarray,
                  u_before: np.ndarray, u_after: np.ndarray, revisits: np.ndarray | None = None,
-                 moved: np.ndarray | None = None) -> np.ndarray:
+                 moved: np.ndarray | None = None, running: np.ndarray | None = None) -> np.ndarray:
     """The terms (:data:`TERMS`, one row each) for a batch of steps, ``(6, N)``; their column sums are the rewards.
 
     ``revisits``: earlier visits of the cell each robot entered (None: no W5); ``moved``:
-    distance each robot moved (None: no W6).
+    distance each robot moved (None: no W6); ``running``: (N,) the robots that stepped (the
+    others' terms are 0; None: all).
     """
-    terms = np.zeros((len(TERMS), len(collided)))
-    terms[0] = np.where(collided, weights.w1, 0.0)
-    terms[1] = np.where(reached & ~collided, weights.w2, 0.0)
-    terms[2] = weights.w3
-    terms[3] = weights.beta * (weights.potential_discount * u_after - u_before)
-    if revisits is not None:
-        terms[4] = weights.revisit * revisits
-    if moved is not None:
-        terms[5] = weights.length * moved
-    return terms
+    return rewards(weights, collided, reached, u_before, u_after, revisits, moved, running)[1]
 
 
-def reward_terms_one(weights: RewardWeights, collided: bool, reached: bool, u_before: float, u_after: float,
-                     revisits: float | None = None, moved: float | None = None) -> list[float]:
-    """:func:`reward_terms` of one robot, as a list of Python floats (the same arithmetic, without
-    the fixed cost of arrays of one: the single environment's step)."""
-    return [weights.w1 if collided else 0.0,
-            weights.w2 if reached and not collided else 0.0,
-            weights.w3,
-            weights.beta * (weights.potential_discount * u_after - u_before),
-            weights.revisit * revisits if revisits is not None else 0.0,
-            weights.length * moved if moved is not None else 0.0]
+def rewards(weights: RewardWeights, collided: np.ndarray, reached: np.ndarray, u_before: np.ndarray,
+            u_after: np.ndarray, revisits: np.ndarray | None = None, moved: np.ndarray | None = None,
+            running: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(rewards (N,), terms (6, N))``: :func:`reward_terms` and their column sums, in one pass."""
+    n = len(collided)
+    terms = np.empty((len(TERMS), n))
+    total = np.empty(n)
+    _terms(weights.w1, weights.w2, weights.w3, weights.beta, weights.potential_discount, weights.revisit,
+           weights.length, collided, reached, u_before, u_after,
+           _NONE if revisits is None else np.asarray(revisits, float),
+           _NONE if moved is None else np.asarray(moved, float),
+           _ALL if running is None else running, running is None, terms, total)
+    return total, terms
+
+
+_NONE = np.zeros(0)
+_ALL = np.ones(1, bool)
+
+
+@kernel
+def _terms(w1, w2, w3, beta, discount, w_revisit, w_length, collided, reached, u_before, u_after, revisits,
+           walked, running, everyone, out, total):
+    """:func:`reward_terms`' arithmetic, column by column (a robot's terms, as eq. 15–16 and the
+    project's revisit and length terms read). The one place the reward is computed."""
+    for i in range(out.shape[1]):
+        out[0, i] = w1 if collided[i] else 0.0
+        out[1, i] = w2 if reached[i] and not collided[i] else 0.0
+        out[2, i] = w3
+        out[3, i] = beta * (discount * u_after[i] - u_before[i])
+        out[4, i] = w_revisit * revisits[i] if revisits.shape[0] else 0.0
+        out[5, i] = w_length * walked[i] if walked.shape[0] else 0.0
+        if not everyone:   # a robot that did not step scores nothing (its terms times 0, as numpy multiplies)
+            for k in range(out.shape[0]):
+                out[k, i] = out[k, i] * (1.0 if running[i] else 0.0)
+        sum_ = out[0, i]   # the reward: the terms added in order, as numpy sums a column
+        for k in range(1, out.shape[0]):
+            sum_ = sum_ + out[k, i]
+        total[i] = sum_

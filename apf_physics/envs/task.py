@@ -3,16 +3,14 @@
 One step: actions → the stepper's commands (unit moves, Model Table 1; or a continuous
 velocity, or a unicycle's ``(v, ω)``: :class:`~apf_physics.envs.options.RobotOptions`) →
 followers' moves (formations) → one :class:`~apf_physics.sim.engine.Stepper` step for the whole
-batch → observations (one :class:`~apf_physics.sensing.observation.Observer` call for the windows,
-one :class:`~apf_physics.sensing.observation.RangeObserver` call for the ranges) and the reward's
-named terms. ``Navigate-v0``
+batch → observations (one call of the task's observation kind, whichever it is:
+:mod:`apf_physics.sensing.kinds`) and the reward's named terms. ``Navigate-v0``
 is a batch of one, :class:`~apf_physics.envs.vector.NavigateVectorEnv` a batch of N, and
 ``Formation-v0`` a batch of one formation.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Sequence, Union
 
@@ -20,21 +18,18 @@ import numpy as np
 from gymnasium import spaces
 
 from apf_physics.control.shield import ACTIONS
-from apf_physics.sim.engine import RUNNING, TIMEOUT, TRAPPED, Stepper, TrapDetector
+from apf_physics.sim.engine import TIMEOUT, TRAPPED, Stepper, TrapDetector
 from apf_physics.envs.options import RobotOptions
 from apf_physics.errors import UserError
-from apf_physics.envs.reward import RewardWeights, reward_terms, reward_terms_one
-from apf_physics.control.formation import FormationCrowd, FormationTeam
-from apf_physics.sensing.observation import Observer, ObserverConfig, RangeObserver
-from apf_physics.control.tracking import UnicycleFollowers
+from apf_physics.envs.reward import RewardWeights, rewards
+from apf_physics.control.formation import Formations, FormationTeam
+from apf_physics.sensing.kinds import Robots, make_observation
+from apf_physics.sensing.lidar import LidarConfig
+from apf_physics.sensing.observation import Observer, ObserverConfig
+from apf_physics.control.tracking import UnicycleFollowers, leader_caps, team_drive
 from apf_physics.world.core import FormationSpec, World
 
 
-_ONE_MOVE = ACTIONS.reshape(-1, 1, 1, 2).copy()   # the stepper's commands of a batch of one robot, per action
-_ONE_MOVE.flags.writeable = False
-_FLAGS = {value: np.full(1, value) for value in (False, True)}   # (1,) read-only flags of a batch of one
-for _flag in _FLAGS.values():
-    _flag.flags.writeable = False
 
 
 @dataclass
@@ -77,6 +72,22 @@ def trap_detector(trap: TrapOption) -> TrapDetector | None:
     if isinstance(trap, str) and trap in TRAP_RULES:
         return TrapDetector(trap)
     raise UserError(f"trap must be None, one of {', '.join(TRAP_RULES)} or a TrapDetector, got {trap!r}")
+
+
+def _zeros(space: spaces.Space, num: int) -> np.ndarray | dict:
+    """``num`` rows of zeros of a ``Box`` (or of each ``Box`` of a ``Dict``)."""
+    if isinstance(space, spaces.Dict):
+        return {name: _zeros(part, num) for name, part in space.spaces.items()}
+    return np.zeros((num, *space.shape), space.dtype)
+
+
+def _with_rows(observation: np.ndarray | dict, slots: np.ndarray, rows: np.ndarray | dict) -> np.ndarray | dict:
+    """A copy of ``observation`` with ``rows`` in ``slots`` (an array handed out is never changed)."""
+    if isinstance(observation, dict):
+        return {name: _with_rows(part, slots, rows[name]) for name, part in observation.items()}
+    out = observation.copy()
+    out[slots] = rows
+    return out
 
 
 def _ends(ended: np.ndarray, outcome: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -123,14 +134,12 @@ class NavigationTask:
         robots = 1 if self.team is None else self.team.robots
         self.stepper = Stepper(self.worlds, self.num, robots, max_steps=max_steps, trap=trap_detector(trap),
                                unicycle=robot.unicycle)
+        # the potential at the robots (the reward's W4) and their visits: the window observer, whatever they see
         self.observer = Observer(observer, self.num, self.worlds, track_visits=bool(weights.revisit))
-        self.ranges = RangeObserver(robot.lidar, self.num, robot.unicycle) if robot.ranges else None
-        self._centre = observer.size // 2
-        self._obs = np.zeros((self.num, *observer.shape), np.float32) if robot.window else None
-        self._scan = np.zeros((self.num, self.ranges.size), np.float32) if self.ranges is not None else None
+        self.sensor = make_observation(robot.observation, self.observer, robot.lidar, robot.unicycle, self.worlds)
+        self._observation = _zeros(self.sensor.space(), self.num)
         self._u = np.zeros(self.num)     # the potential at each leader (its window's centre)
         self._moved = np.zeros((self.num, 2))   # each leader's last displacement (a holonomic robot's velocity)
-        self._thesis_one = self.team is None and robot.thesis   # with the stepper's scalar path: stepped by _step_one
 
     @property
     def positions(self) -> np.ndarray:
@@ -142,23 +151,12 @@ class NavigationTask:
         return self.stepper.world_of
 
     def observation_space(self) -> spaces.Space:
-        """One slot's observation space: the window's ``Box``, the ranges' ``Box``, or a ``Dict`` of both."""
-        window = ranges = None
-        if self.robot.window:
-            low, high = self.observer.value_bounds()  # finite: from the worlds' U
-            window = spaces.Box(low, high, self.observer.config.shape, np.float32)
-        if self.ranges is not None:
-            low, high = self.ranges.bounds()
-            ranges = spaces.Box(low, high, low.shape, np.float32)
-        if window is not None and ranges is not None:
-            return spaces.Dict({"window": window, "lidar": ranges})
-        return window if window is not None else ranges
+        """One slot's observation space (:meth:`~apf_physics.sensing.kinds.ObservationKind.space`)."""
+        return self.sensor.space()
 
     def seed(self, seeds: Sequence[int | None]) -> None:
-        """Restart the range sensor's noise, slot ``i`` from ``seeds[i]`` (the environments call it
-        at a seeded reset)."""
-        if self.ranges is not None:
-            self.ranges.seed(seeds)
+        """Restart the sensors' noise, slot ``i`` from ``seeds[i]`` (the environments call it at a seeded reset)."""
+        self.sensor.seed(seeds)
 
     def start(self, slots: np.ndarray, world_ids: np.ndarray, leaders: np.ndarray,
               headings: np.ndarray | None = None, observe: bool = True) -> None:
@@ -191,52 +189,43 @@ class NavigationTask:
                 followers.reset(states[slot])
                 self.unicycle_followers[slot] = followers
         self.observer.reset(slots, leaders, worlds)
+        self.sensor.reset(slots, leaders, worlds)
         self._moved[slots] = 0.0
         if observe:
             self._observe(None if self.num == 1 else slots)   # (a batch of one: its one slot)
 
+    def _robots(self, slots: np.ndarray | None) -> Robots:
+        """What the sensors know of the leaders of ``slots`` (None: all)."""
+        rows = slice(None) if slots is None else slots
+        stepper = self.stepper
+        unicycle = self.robot.unicycle is not None
+        return Robots(stepper.positions[rows, 0], slots, stepper.steps[rows],   # the steps: where moving obstacles are
+                      headings=stepper.headings[rows, 0] if unicycle else None,
+                      velocity=stepper.drive[rows, 0] if unicycle else self._moved[rows],
+                      others=stepper.positions[rows, 1:] if stepper.robots_per_slot > 1 else None)
+
     def _observe(self, slots: np.ndarray | None) -> None:
         """Refresh the observations (and the potential at the leader) of ``slots`` (None: all)."""
-        leaders = self.stepper.positions[:, 0] if slots is None else self.stepper.positions[slots, 0]
-        steps = self.stepper.steps if slots is None else self.stepper.steps[slots]   # moving obstacles' time
-        obs = self.observer.observe(leaders, slots, steps) if self.robot.window else None
-        if obs is not None and self.observer.config.scale == "raw":
-            u = obs[:, 0, self._centre, self._centre]
-        else:  # no window, or a scaled one that reads 0 at the robot: take U from an unscaled sample
-            u = self.observer.potential_at(leaders, slots, steps)
-        scan = self._scan_of(slots, steps) if self.ranges is not None else None
+        robots = self._robots(slots)
+        obs = self.sensor.observe(robots)
+        u = self.sensor.centre_potential(obs)   # what the observation already read, else an unscaled sample
+        if u is None:
+            u = self.observer.potential_at(robots.positions, slots, robots.steps)
         if slots is None:
             self._u = u.astype(float)
-            if obs is not None:
-                self._obs = obs
-            if scan is not None:
-                self._scan = scan
+            self._observation = obs
         else:  # copy on write: an array handed out by step() is never changed afterwards
             self._u[slots] = u
-            if obs is not None:
-                self._obs = self._obs.copy()
-                self._obs[slots] = obs
-            if scan is not None:
-                self._scan = self._scan.copy()
-                self._scan[slots] = scan
-
-    def _scan_of(self, slots: np.ndarray | None, steps: np.ndarray) -> np.ndarray:
-        """The range observations of the leaders of ``slots`` (None: all)."""
-        rows = slice(None) if slots is None else slots
-        poses = self.stepper.poses()[rows, 0]
-        velocity = self.stepper.drive[rows, 0] if self.robot.unicycle is not None else self._moved[rows]
-        others = self.stepper.positions[rows, 1:] if self.stepper.robots_per_slot > 1 else None
-        return self.ranges.observe(self.worlds, self.stepper.world_of[rows], poses, velocity, steps, others, slots)
+            self._observation = _with_rows(self._observation, slots, obs)
 
     def observation(self, slots: np.ndarray | int | None = None) -> np.ndarray | dict:
         """The current observations (or those of ``slots``; an int: that slot's alone): (N, C, k, k)
         windows, (N, K + 5) ranges, or ``{"window": ..., "lidar": ...}``; never changed afterwards."""
-        rows = slice(None) if slots is None else slots
-        if self._scan is None:
-            return self._obs[rows]
-        if self._obs is None:
-            return self._scan[rows]
-        return {"window": self._obs[rows], "lidar": self._scan[rows]}
+        if slots is None:
+            return self._observation
+        if isinstance(self._observation, dict):
+            return {name: part[slots] for name, part in self._observation.items()}
+        return self._observation[slots]
 
     def step(self, actions: np.ndarray | int, restart: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
              ) -> TaskStep:
@@ -249,9 +238,6 @@ class NavigationTask:
         """
         if restart is not None and not len(restart[0]):
             restart = None
-        if self._thesis_one and self.stepper.scalar and self.stepper.outcome[0] == RUNNING and restart is None:
-            return self._step_one(int(actions) if isinstance(actions, (int, np.integer))
-                                  else int(np.asarray(actions).reshape(-1)[0]))
         commands = self.robot.commands(actions, self.num)
         before = self.stepper.positions[:, 0]
         if self.team is None:
@@ -261,18 +247,18 @@ class NavigationTask:
         else:
             commands = self.team.commands(self.stepper.positions, commands, self.stepper.running)
         report = self.stepper.step(commands)
-        moved = report.moved
-        everyone = bool(moved.all())
+        moved, everyone = report.moved, report.everyone
         slots = None if everyone else np.flatnonzero(moved)
         leaders = report.positions[:, 0]
-        if self.ranges is not None and self.robot.unicycle is None:
+        if self.sensor.reads_velocity and self.robot.unicycle is None:   # a holonomic robot's velocity
             self._moved = np.where(moved[:, None], leaders - before, self._moved)
         revisits = None
         if self.observer.memory is not None:
             revisits = np.zeros(self.num)
             revisits[moved] = self.observer.visit(leaders[moved], slots)
         u_before = self._u
-        self._u = self._u.copy()
+        if not everyone:   # the others' U stays as it was, in a new array (u_before is handed to the reward)
+            self._u = self._u.copy()
         observed = slots
         if restart is not None:
             self.start(*restart, observe=False)
@@ -281,11 +267,8 @@ class NavigationTask:
             observed = None if now.all() else np.flatnonzero(now)
         self._observe(observed)
         walked = np.sqrt(np.sum((leaders - before) ** 2, axis=1)) if self.weights.length else None
-        terms = reward_terms(self.weights, report.collided, report.reached, u_before, self._u,
-                             revisits if self.weights.revisit else None, walked)
-        if not everyone:
-            terms *= moved
-        reward = terms.sum(axis=0)
+        reward, terms = rewards(self.weights, report.collided, report.reached, u_before, self._u,
+                                revisits if self.weights.revisit else None, walked, None if everyone else moved)
         ended = report.ended
         terminated, truncated, trapped = _ends(ended, self.stepper.outcome)
         robot_contact = report.contacts.robot.reshape(self.num, -1).any(axis=1) if report.contacts.touched \
@@ -300,55 +283,24 @@ class NavigationTask:
         (which stops a leader about to meet one of its followers)."""
         limits = self.robot.unicycle
         states = self.stepper.states()
+        running = self.stepper.running
         v, omega = limits.clamp(leader[:, 0], leader[:, 1], states[:, 0, 3], states[:, 0, 4])
-        out = np.zeros((self.num, self.stepper.robots_per_slot, 2))
-        for slot in np.flatnonzero(self.stepper.running).tolist():
-            followers = self.unicycle_followers[slot]
-            cap = followers.leader_cap(states[slot])
-            lv, lw = limits.clamp(min(float(v[slot]), cap), float(omega[slot]), states[slot, 0, 3], states[slot, 0, 4])
-            out[slot, :, 0], out[slot, :, 1] = followers.drive(states[slot], float(lv), float(lw))
-        return out
-
-    def _step_one(self, action: int) -> TaskStep:
-        """:meth:`step` of a batch of one running robot alone (``Navigate-v0``): the same
-        numbers, with the reward and the episode's end decided in Python scalars
-        (``tests/test_single_path.py`` checks them against the batch path to the last bit)."""
-        if self.weights.length:
-            (x0, y0), = self.stepper.positions[0].tolist()
-        report = self.stepper.step(_ONE_MOVE[action])
-        revisits = None
-        if self.observer.memory is not None:
-            revisits = float(self.observer.visit(report.positions[:, 0])[0])
-        u_before = float(self._u[0])
-        self._observe(None)
-        walked = None
-        if self.weights.length:
-            (x1, y1), = report.positions[0].tolist()
-            walked = math.sqrt((x1 - x0) ** 2 + (y1 - y0) ** 2)
-        collided, reached, ended = bool(report.collided[0]), bool(report.reached[0]), bool(report.ended[0])
-        terms = reward_terms_one(self.weights, collided, reached, u_before, float(self._u[0]),
-                                 revisits if self.weights.revisit else None, walked)
-        outcome = int(self.stepper.outcome[0])
-        trapped = ended and outcome == TRAPPED
-        truncated = trapped or (ended and outcome == TIMEOUT)
-        robot_contact = bool(report.contacts.touched and report.contacts.robot[0])
-        # fresh arrays for what the vector env hands out (a caller may change its own), read-only
-        # shared flags for the rest
-        return TaskStep(self._obs, np.array([sum(terms)]), np.array([ended and not truncated]), np.array([truncated]),
-                        np.array(terms)[:, None], report.reached, report.collided, report.moved,
-                        _FLAGS[robot_contact], _FLAGS[trapped])
+        v, omega = limits.clamp(np.minimum(v, leader_caps(states, running, self.unicycle_followers, limits)), omega,
+                                states[:, 0, 3], states[:, 0, 4])
+        return team_drive(states, np.where(running, v, 0.0), np.where(running, omega, 0.0), running,
+                          self.unicycle_followers)
 
     def distance(self) -> np.ndarray:
         """(N,) each leader's distance to the nearest target of its world, after the last start or step."""
         return self.stepper.last_distance
 
 
-class CrowdTask:
+class FormationsTask:
     """Several formations of one world at once (its ``formations:``), each to its own target.
 
     What the PettingZoo environment steps: one :class:`~apf_physics.sim.engine.Stepper` slot per
     formation, all in one crowd (their robots meet), the followers' rule and the right of way
-    of :class:`~apf_physics.control.formation.FormationCrowd`, one observer row per agent.
+    of :class:`~apf_physics.control.formation.Formations`, one observer row per agent.
 
     Args:
         world: A world with ``formations``.
@@ -360,61 +312,72 @@ class CrowdTask:
         max_steps: Truncate after this many steps (None: never).
         trap: Truncate a formation whose leader the trap detector finds stuck (:func:`trap_detector`;
             default None: no trap rule).
+        observation: What each agent observes (:data:`~apf_physics.sensing.kinds.OBSERVATIONS`); its
+            range sensor sees every other robot.
+        lidar: The range sensor's beams.
     """
 
     def __init__(self, world: World, observer: ObserverConfig, weights: RewardWeights, agents: str = "leaders",
-                 max_steps: int | None = None, trap: TrapOption = None):
+                 max_steps: int | None = None, trap: TrapOption = None, observation: str = "window",
+                 lidar: LidarConfig = LidarConfig()):
         if agents not in ("leaders", "all"):
             raise ValueError(f"agents must be 'leaders' or 'all', got {agents!r}")
         if not world.formations:
             raise ValueError(f"{world.label}: the world has no 'formations'")
         self.world = world
-        self.crowd = FormationCrowd(world)
+        self.formations = Formations(world)
         self.weights = weights
         self.mode = agents
-        count, m = self.crowd.count, self.crowd.robots
-        self.stepper = Stepper(self.crowd.worlds, count, m, max_steps=max_steps, trap=trap_detector(trap),
+        count, m = self.formations.count, self.formations.robots
+        self.stepper = Stepper(self.formations.worlds, count, m, max_steps=max_steps, trap=trap_detector(trap),
                                crowds=[0] * count)
         if agents == "leaders":
             self.members = [(f, 0) for f in range(count)]
         else:
-            self.members = [(f, r) for f in range(count) for r in range(self.crowd.sizes[f])]
+            self.members = [(f, r) for f in range(count) for r in range(self.formations.sizes[f])]
         self.names = [f"leader_{f}" if agents == "leaders" else f"robot_{f}_{r}" for f, r in self.members]
         self._formation = np.array([f for f, _ in self.members], np.intp)
         self._robot = np.array([f * m + r for f, r in self.members], np.intp)
-        self.observer = Observer(observer, len(self.members), self.crowd.worlds, track_visits=bool(weights.revisit))
-        self._centre = observer.size // 2
+        self.observer = Observer(observer, len(self.members), self.formations.worlds, track_visits=bool(weights.revisit))
+        self.sensor = make_observation(observation, self.observer, lidar, None, self.formations.worlds)
+        # which robots each agent has in its field: the other formations' (and, when every robot is an
+        # agent, its own formation's too)
+        m = self.formations.robots
+        mine = self._formation[:, None] == np.arange(count * m)[None, :] // m
+        self._in_field = ~mine if agents == "leaders" else np.ones_like(mine)
+        self._in_field[np.arange(len(self.members)), self._robot] = False
 
     def start(self) -> None:
         """Every formation at its start (followers behind their leaders)."""
-        initial = self.crowd.starts()
-        slots = np.arange(self.crowd.count)
-        self.stepper.start(slots, initial, world_ids=slots, present=self.crowd.present)
-        self.crowd.reset(initial)
+        initial = self.formations.starts()
+        slots = np.arange(self.formations.count)
+        self.stepper.start(slots, initial, world_ids=slots, present=self.formations.present)
+        self.formations.reset(initial)
         self.step_count = 0
         positions = self._agent_positions()
-        self.observer.reset(np.arange(len(self.members)), positions,
-                            [self.crowd.worlds[f] for f in self._formation])
+        agents = np.arange(len(self.members))
+        worlds = [self.formations.worlds[f] for f in self._formation]
+        self.observer.reset(agents, positions, worlds)
+        self.sensor.reset(agents, positions, worlds)
         self._obs, self._u = self._observe()
 
     def _agent_positions(self) -> np.ndarray:
         return self.stepper.positions.reshape(-1, 2)[self._robot]
 
-    def _observe(self) -> tuple[np.ndarray, np.ndarray]:
+    def _observe(self) -> tuple[np.ndarray | dict, np.ndarray]:
         """Every agent's observation, and U at it (in its formation's field, with the others' discs)."""
         robots = self.stepper.positions.reshape(-1, 2)
         present = self.stepper.physics.present
-        obs = np.empty((len(self.members), *self.observer.config.shape), np.float32)
-        u = np.empty(len(self.members))
-        for a, (f, r) in enumerate(self.members):
-            others = present.copy()
-            others[f * self.crowd.robots:(f + 1) * self.crowd.robots] = self.mode == "all"
-            others[self._robot[a]] = False
-            discs = robots[others]
-            row = np.array([a])
-            obs[a] = self.observer.observe(robots[self._robot[a]][None], row, self.step_count, discs)[0]
-            u[a] = self.observer.potential_at(robots[self._robot[a]][None], row, self.step_count, discs)[0]
-        return obs, u
+        seen = present[None, :] & (np.arange(len(robots))[None, :] != self._robot[:, None])
+        shown = np.where(seen[..., None], robots[None], np.nan)                       # (A, N, 2)
+        discs = np.where((self._in_field & present[None, :])[..., None], robots[None], np.nan)
+        agents = Robots(robots[self._robot], None, self.step_count, others=shown, discs=discs)
+        obs = self.sensor.observe(agents)
+        u = self.sensor.centre_potential(obs)
+        if u is None:
+            u = np.array([self.observer.potential_at(agents.positions[a:a + 1], np.array([a]), self.step_count,
+                                                     d[~np.isnan(d[:, 0])])[0] for a, d in enumerate(discs)])
+        return obs, np.asarray(u, float)
 
     def step(self, actions: np.ndarray) -> TaskStep:
         """Every agent's move (agents of ended formations: ignored)."""
@@ -423,13 +386,13 @@ class CrowdTask:
         running = self.stepper.running
         before = self._agent_positions()
         if self.mode == "leaders":
-            commands = self.crowd.commands(positions, moves, running, self.step_count)
+            commands = self.formations.commands(positions, moves, running, self.step_count)
         else:
             commands = np.zeros(positions.shape)
             commands.reshape(-1, 2)[self._robot] = moves
         report = self.stepper.step(commands)
         self.step_count += 1
-        self.crowd.watch(report.positions, report.moved, self.step_count)
+        self.formations.watch(report.positions, report.moved, self.step_count)
         for a in range(len(self.members)):
             if report.moved[self._formation[a]]:
                 self.observer.visit(self._agent_positions()[a:a + 1], np.array([a]))
@@ -439,8 +402,8 @@ class CrowdTask:
         touched = report.contacts.any[self._robot] if self.mode == "all" else report.collided[self._formation]
         reached = report.reached[self._formation]
         walked = np.hypot(*(self._agent_positions() - before).T) if self.weights.length else None
-        terms = reward_terms(self.weights, touched & moved, reached & moved, u_before, self._u, None, walked) * moved
+        reward, terms = rewards(self.weights, touched & moved, reached & moved, u_before, self._u, None, walked, moved)
         terminated, truncated, trapped = _ends(report.ended[self._formation], self.stepper.outcome[self._formation])
         robot_contact = report.contacts.robot[self._robot]
-        return TaskStep(self._obs, terms.sum(axis=0), terminated, truncated, terms, reached, touched, moved,
+        return TaskStep(self._obs, reward, terminated, truncated, terms, reached, touched, moved,
                         robot_contact, trapped)

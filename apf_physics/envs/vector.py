@@ -86,15 +86,17 @@ class NavigateVectorEnv(VectorEnv):
         self.max_episode_steps = int(max_episode_steps)
         self.render_mode = render_mode
         self.single_action_space = self.robot.action_space()
-        self._task = NavigationTask(self.worlds, self.num_envs, self.observer, self.weights,
+        self.task = NavigationTask(self.worlds, self.num_envs, self.observer, self.weights,
                                     max_steps=self.max_episode_steps, trap=trap, robot=self.robot)
-        self.single_observation_space = self._task.observation_space()
+        """The episodes this environment steps (stepper, physics, observer): for tools and tests to look inside."""
+        self.single_observation_space = self.task.observation_space()
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self._rngs = [seeding.np_random(None)[0] for _ in range(self.num_envs)]
         self._uniforms = np.zeros((self.num_envs, _BLOCK, 4))
         self._drawn = np.full(self.num_envs, _BLOCK)
-        self._needs_reset = np.zeros(self.num_envs, bool)
+        self.needs_reset = np.zeros(self.num_envs, bool)
+        """(N,) bool: copies whose episode ended at the last step; they start anew at the next (autoreset NEXT_STEP)."""
         self._trail: list[np.ndarray] = []
         self._all = np.ones(self.num_envs, bool)
         self._names = np.array([w.name for w in self.worlds], dtype=object)
@@ -125,13 +127,13 @@ class NavigateVectorEnv(VectorEnv):
         return slots, worlds, starts
 
     def _started(self, slots: np.ndarray, starts: np.ndarray) -> None:
-        self._needs_reset[slots] = False
+        self.needs_reset[slots] = False
         if len(slots) and slots[0] == 0:   # (slots ascending)
             self._trail = [starts[0].copy()]
 
     def _start(self, slots: np.ndarray, options: dict | None = None) -> None:
         slots, worlds, starts = self._starts(slots, options)
-        self._task.start(slots, worlds, starts)
+        self.task.start(slots, worlds, starts)
         self._started(slots, starts)
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
@@ -141,39 +143,39 @@ class NavigateVectorEnv(VectorEnv):
                 raise ValueError(f"{len(seeds)} seeds for {self.num_envs} environments")
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
             self._drawn[:] = _BLOCK
-            self._task.seed(seeds)
+            self.task.seed(seeds)
         self._start(np.arange(self.num_envs), options)
         info = self._info()
-        return self._task.observation(), info
+        return self.task.observation(), info
 
     def step(self, actions):
         actions = np.asarray(actions).reshape(self.num_envs, *self.single_action_space.shape)
         # the copies whose episode ended last step begin anew once the others have moved
-        restart = self._starts(np.flatnonzero(self._needs_reset))
-        result = self._task.step(actions, restart)
+        restart = self._starts(np.flatnonzero(self.needs_reset))
+        result = self.task.step(actions, restart)
         self._started(restart[0], restart[2])
-        if self.render_mode is not None and not self._needs_reset[0]:  # the trail is only drawn
-            self._trail.append(self._task.positions[0, 0].copy())
-        self._needs_reset = result.terminated | result.truncated
-        stepped = result.moved | self._needs_reset   # (an episode reached at its start ends without moving)
+        if self.render_mode is not None and not self.needs_reset[0]:  # the trail is only drawn
+            self._trail.append(self.task.positions[0, 0].copy())
+        self.needs_reset = result.terminated | result.truncated
+        stepped = result.moved | self.needs_reset   # (an episode reached at its start ends without moving)
         info = self._info()
         info["reward_terms"] = dict(zip(TERMS, result.terms))
         info["reward_terms"].update({f"_{k}": stepped for k in TERMS})
         info["_reward_terms"] = stepped
         info["success"], info["_success"] = result.reached & stepped, stepped
         info["collision"], info["_collision"] = result.collided & stepped, stepped
-        if self._task.stepper.trap is not None:
+        if self.task.stepper.trap is not None:
             info["trapped"], info["_trapped"] = result.trapped & stepped, stepped
-        if self.autoreset_mode == AutoresetMode.SAME_STEP and self._needs_reset.any():
+        if self.autoreset_mode == AutoresetMode.SAME_STEP and self.needs_reset.any():
             info = self._reset_ended(info)
-        return self._task.observation(), result.reward.astype(np.float32), result.terminated, result.truncated, info
+        return self.task.observation(), result.reward.astype(np.float32), result.terminated, result.truncated, info
 
     def _reset_ended(self, info: dict) -> dict:
         """``SAME_STEP``: restart the copies whose episode just ended; their last observation and
         the step's info go to ``final_obs`` and ``final_info``, ``info`` is the step's with the
         new episodes' ``position``, ``world`` and ``distance``."""
-        ended = self._needs_reset.copy()
-        final = self._task.observation()
+        ended = self.needs_reset.copy()
+        final = self.task.observation()
         final_obs = np.empty(self.num_envs, dtype=object)
         for i in np.flatnonzero(ended).tolist():
             final_obs[i] = {k: v[i] for k, v in final.items()} if isinstance(final, dict) else final[i]
@@ -184,18 +186,18 @@ class NavigateVectorEnv(VectorEnv):
         return after
 
     def _info(self) -> dict:
-        info = {"position": self._task.positions[:, 0].copy(), "_position": self._all,
-                "world": self._names[self._task.world_of], "_world": self._all,
-                "distance": self._task.distance(), "_distance": self._all}
+        info = {"position": self.task.positions[:, 0].copy(), "_position": self._all,
+                "world": self._names[self.task.world_of], "_world": self._all,
+                "distance": self.task.distance(), "_distance": self._all}
         if self.robot.unicycle is not None:
-            info["heading"], info["_heading"] = self._task.stepper.headings[:, 0].copy(), self._all
+            info["heading"], info["_heading"] = self.task.stepper.headings[:, 0].copy(), self._all
         return info
 
     def render(self):
         if self.render_mode != "rgb_array":
             return None
-        world = self.worlds[self._task.world_of[0]]
-        snap = Snapshot(self._task.positions[0, :1], ("single",), (np.asarray(self._trail),), (world.name,),
-                        int(self._task.stepper.steps[0]),
-                        headings=self._task.stepper.headings[0, :1] if self.robot.unicycle is not None else None)
+        world = self.worlds[self.task.world_of[0]]
+        snap = Snapshot(self.task.positions[0, :1], ("single",), (np.asarray(self._trail),), (world.name,),
+                        int(self.task.stepper.steps[0]),
+                        headings=self.task.stepper.headings[0, :1] if self.robot.unicycle is not None else None)
         return draw_frame(field_image(world), snap)

@@ -27,10 +27,11 @@ import numpy as np
 from apf_physics.control.shield import SAFETY
 from apf_physics.sim.engine import Outcome, Stepper, TrapDetector
 from apf_physics.errors import UserError
-from apf_physics.control.formation import FormationCrowd, FormationTeam, formation_spec, formation_success, links_in_range
+from apf_physics.control.formation import Formations, FormationTeam, formation_spec, formation_success, links_in_range
 from apf_physics.world.kinematics import KINEMATICS, UnicycleLimits, arc_points
 from apf_physics.planners.base import Planner
-from apf_physics.control.tracking import CHECK_SAMPLES, UnicycleFollowers, detour_arcs, give_way, track_safely
+from apf_physics.control.tracking import (CHECK_SAMPLES, UnicycleFollowers, detour_arcs, give_way, leader_caps, team_drive,
+                                          track_safely)
 from apf_physics.world.core import World
 
 UNICYCLE_TRAP_FACTOR = 2
@@ -277,7 +278,7 @@ def rollout(world: World, planner: Planner, starts: Sequence[Sequence[float]] | 
         if team is not None:
             moved = report.moved
             robot_steps += moved & touched.robot.reshape(n, m).any(axis=1)
-            obstacle_steps += moved & (touched.obstacle | touched.wall).reshape(n, m).any(axis=1)
+            obstacle_steps += moved & touched.obstacle_or_edge.reshape(n, m).any(axis=1)
             in_range += moved[:, None] & links_in_range(report.positions, team.followed, team.spec.comm_range)
 
     trajectory = np.stack(history)                                     # (T, n, m, 2)
@@ -314,18 +315,10 @@ def unicycle_commands(states: np.ndarray, leader_moves: np.ndarray, moving: np.n
         limits: The robots' limits.
         followers: One :class:`~apf_physics.control.tracking.UnicycleFollowers` per slot (formations), or none.
     """
-    n, m = states.shape[:2]
     moves = np.where(moving[:, None], leader_moves, 0.0)
-    cap = None
-    if followers:
-        cap = np.array([followers[s].leader_cap(states[s]) if moving[s] else limits.max_speed for s in range(n)])
+    cap = leader_caps(states, moving, followers, limits) if followers else None
     v, omega = track_safely(states[:, 0], moves, moment, limits, speed_cap=cap)
-    commands = np.zeros((n, m, 2))
-    commands[:, 0, 0], commands[:, 0, 1] = v, omega
-    if followers:
-        for s in np.flatnonzero(moving).tolist():
-            commands[s, :, 0], commands[s, :, 1] = followers[s].drive(states[s], v[s], omega[s])
-    return commands
+    return team_drive(states, v, omega, moving, followers)
 
 
 CROWD_TRAP_WINDOW = 40
@@ -338,39 +331,39 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
 
     Each leader is steered by its own copy of ``planner`` in its own field (its target,
     the obstacles, and the other formations' robots as discs where they stand); followers
-    follow; every move gets the right of way of :class:`~apf_physics.control.formation.FormationCrowd`.
+    follow; every move gets the right of way of :class:`~apf_physics.control.formation.Formations`.
 
     Unicycles (``unicycle``, default the world file's robot kind): each leader's move is driven
     by :func:`~apf_physics.control.tracking.track_safely` in its own field, its followers by
     :meth:`~apf_physics.control.tracking.UnicycleFollowers.drive`; then every robot of every formation
-    gives way (:func:`crowd_unicycle_commands`: a detour, else a stop, in the crowd's order, a
+    gives way (:func:`formations_unicycle_commands`: a detour, else a stop, in the crowd's order, a
     deadlocked formation first) so that no two robots' arcs meet.
 
     Returns:
         One episode per formation, in the world's order (:attr:`FormationRecord.crowd` names the world).
     """
-    crowd = FormationCrowd(world)
-    count, m = crowd.count, crowd.robots
+    formations = Formations(world)
+    count, m = formations.count, formations.robots
     max_steps = default_max_steps(world) if max_steps is None else int(max_steps)
     limits = robot_limits(world, unicycle)
-    initial = crowd.starts()
+    initial = formations.starts()
     planners = [copy.copy(planner) for _ in range(count)]
     for f, p in enumerate(planners):
-        p.reset(crowd.worlds[f], initial[f, :1].copy())
+        p.reset(formations.worlds[f], initial[f, :1].copy())
     window = max(planner.trap_window or trap.window, *(p.trap_window or trap.window for p in planners), CROWD_TRAP_WINDOW)
     window *= 1 if limits is None else UNICYCLE_TRAP_FACTOR
-    stepper = Stepper(crowd.worlds, count, m, max_steps=max_steps,
+    stepper = Stepper(formations.worlds, count, m, max_steps=max_steps,
                       trap=TrapDetector(planner.trap_rule, window, trap.radius, trap.min_drop), crowds=[0] * count,
                       unicycle=limits)
     slots = np.arange(count)
-    stepper.start(slots, initial, world_ids=slots, present=crowd.present)
-    crowd.reset(initial)
+    stepper.start(slots, initial, world_ids=slots, present=formations.present)
+    formations.reset(initial)
     followers: list[UnicycleFollowers] = []
     if limits is not None:
         states = stepper.states()
         for f in range(count):
-            followers.append(UnicycleFollowers(crowd.worlds[f], crowd.tasks[f].spec, limits))
-            followers[-1].reset(states[f, :crowd.sizes[f]])
+            followers.append(UnicycleFollowers(formations.worlds[f], formations.tasks[f].spec, limits))
+            followers[-1].reset(states[f, :formations.sizes[f]])
     headings = [stepper.headings.copy()] if limits is not None else None
 
     history = [initial.copy()]
@@ -378,7 +371,7 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
     within = np.zeros(count, int)
     between = np.zeros(count, int)
     obstacle_steps = np.zeros(count, int)
-    in_range = [np.zeros(size - 1) for size in crowd.sizes]
+    in_range = [np.zeros(size - 1) for size in formations.sizes]
     step = 0
     while stepper.running.any():
         active = stepper.running
@@ -387,19 +380,19 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
         gave_up = np.zeros(count, bool)
         views = {}
         for f in np.flatnonzero(active).tolist():
-            view = planners[f].world = crowd.view(positions, f)
+            view = planners[f].world = formations.view(positions, f)
             views[f] = view.at(step)
             leader[f] = planners[f].act(positions[f, :1], np.ones(1, bool), views[f])[0]
             stuck = planners[f].stuck()
             gave_up[f] = bool(stuck[0]) if stuck is not None else False
         if limits is None:
-            commands = crowd.commands(positions, leader, active & ~gave_up, step)
+            commands = formations.commands(positions, leader, active & ~gave_up, step)
         else:
-            commands = crowd_unicycle_commands(crowd, stepper.states(), leader, active & ~gave_up, views, limits,
-                                               followers, step)
+            commands = formations_unicycle_commands(formations, stepper.states(), leader, active & ~gave_up, views,
+                                                    limits, followers, step)
         report = stepper.step(commands, gave_up)
         step += 1
-        crowd.watch(report.positions, report.moved, step)
+        formations.watch(report.positions, report.moved, step)
         history.append(report.positions)
         if headings is not None:
             headings.append(stepper.headings.copy())
@@ -411,10 +404,10 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
             others = robot_pairs[mine, 2] // m if len(robot_pairs) else np.zeros(0, int)
             within[f] += bool(np.any(others == f))
             between[f] += bool(np.any(others != f))
-            robots = slice(f * m, f * m + crowd.sizes[f])
-            obstacle_steps[f] += bool((touched.obstacle[robots] | touched.wall[robots] | touched.moving[robots]).any())
-            in_range[f] += links_in_range(report.positions[f, :crowd.sizes[f]], crowd.followed[f],
-                                          crowd.tasks[f].spec.comm_range)
+            robots = slice(f * m, f * m + formations.sizes[f])
+            obstacle_steps[f] += bool(touched.obstacle_or_edge[robots].any())
+            in_range[f] += links_in_range(report.positions[f, :formations.sizes[f]], formations.followed[f],
+                                          formations.tasks[f].spec.comm_range)
         for f in np.flatnonzero(report.collided).tolist():
             contacts[f] = sorted({c.kind for c in touched.contacts if c.robot // m == f})
 
@@ -423,19 +416,19 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
     episodes = []
     for f in range(count):
         steps = int(stepper.steps[f])
-        size = crowd.sizes[f]
+        size = formations.sizes[f]
         positions = trajectory[: steps + 1, f, :size]
         theta = turns[: steps + 1, f, :size].copy() if turns is not None else None
-        record = FormationRecord(positions, crowd.tasks[f].spec.comm_range, crowd.followed[f], int(within[f] + between[f]),
-                                 int(obstacle_steps[f]), list(in_range[f] / max(steps, 1)), crowd=world.name, index=f,
-                                 between_collisions=int(between[f]), deadlocks=int(crowd.deadlocks[f]), headings=theta)
-        episodes.append(Episode(world.name, crowd.tasks[f].start, Outcome(stepper.outcome[f]).label, steps,
+        record = FormationRecord(positions, formations.tasks[f].spec.comm_range, formations.followed[f],
+                                 int(within[f] + between[f]), int(obstacle_steps[f]), list(in_range[f] / max(steps, 1)), crowd=world.name, index=f,
+                                 between_collisions=int(between[f]), deadlocks=int(formations.deadlocks[f]), headings=theta)
+        episodes.append(Episode(world.name, formations.tasks[f].start, Outcome(stepper.outcome[f]).label, steps,
                                 positions[:, 0].copy(), contacts[f], record,
                                 headings=None if theta is None else theta[:, 0].copy()))
     return episodes
 
 
-def crowd_unicycle_commands(crowd: FormationCrowd, states: np.ndarray, leader_moves: np.ndarray, moving: np.ndarray,
+def formations_unicycle_commands(formations: Formations, states: np.ndarray, leader_moves: np.ndarray, moving: np.ndarray,
                             views: dict, limits: UnicycleLimits, followers: Sequence[UnicycleFollowers],
                             step: int) -> np.ndarray:
     """(F, m, 2) every unicycle's ``(v, ω)`` of several formations in one world this step.
@@ -449,17 +442,17 @@ def crowd_unicycle_commands(crowd: FormationCrowd, states: np.ndarray, leader_mo
     count, m = states.shape[:2]
     commands = np.zeros((count, m, 2))
     for f in np.flatnonzero(moving).tolist():
-        size = crowd.sizes[f]
+        size = formations.sizes[f]
         cap = followers[f].leader_cap(states[f, :size])
         v, omega = track_safely(states[f, :1], leader_moves[f:f + 1], views[f], limits, speed_cap=cap)
         commands[f, :size, 0], commands[f, :size, 1] = followers[f].drive(states[f, :size], v[0], omega[0])
     flat_states = states.reshape(-1, 5)
     flat = commands.reshape(-1, 2)
     arcs = arc_points(flat_states, flat[:, 0], flat[:, 1], CHECK_SAMPLES)
-    order = sorted(range(count), key=lambda f: (crowd.first_until[f] < step, f))
-    robots = np.array([f * m + r for f in order for r in range(crowd.sizes[f])], np.intp)
-    contact = 2 * crowd.world.robot_radius + SAFETY
-    now = crowd.world.at(step)
+    order = sorted(range(count), key=lambda f: (formations.first_until[f] < step, f))
+    robots = np.array([f * m + r for f in order for r in range(formations.sizes[f])], np.intp)
+    contact = 2 * formations.world.robot_radius + SAFETY
+    now = formations.world.at(step)
     detours, detour_commands = detour_arcs(flat_states, arcs, limits, now)
     # a robot pushed off its planner's path (a detour) may be given a move that nears an obstacle:
     # none comes nearer than the planners' margin, or than it already is

@@ -38,7 +38,7 @@ def label_starts(world: World, max_steps: int | None = None) -> list[dict]:
             "gradient_outcome": episode.outcome,
             "gradient_trapped": episode.outcome != "reached",
             "astar_length": None if length is None else round(length, 3),
-            "straight_distance": round(float(np.min(np.hypot(*(world.targets - start).T))), 3),
+            "straight_distance": round(float(world.distance_to_target(start)[0]), 3),
         })
     return labels
 

@@ -156,9 +156,8 @@ class EnvConfig:
     @property
     def observer(self) -> ObserverConfig:
         """How observations are built (saved in every model file)."""
-        channels = ("potential",) + (("previous",) if self.previous else ()) + (("memory",) if self.memory else ())
-        return ObserverConfig(size=self.obs_size, resolution=self.obs_resolution, channels=channels,
-                              memory_cap=self.memory_cap, scale=self.obs_scale)
+        return ObserverConfig.of(self.obs_size, self.obs_resolution, previous=self.previous, memory=self.memory,
+                                 memory_cap=self.memory_cap, scale=self.obs_scale)
 
     @property
     def reward_weights(self) -> RewardWeights:
@@ -261,7 +260,7 @@ class ImitationConfig:
     map_moves: MoveSet = "fine"
     """The network's move set (:data:`~apf_physics.control.shield.MOVE_SETS`)."""
     grad_iterations: int = 24
-    """Value-iteration sweeps back-propagated through, after the fixed point."""
+    """Value-iteration (Bellman) updates back-propagated through, after the fixed point."""
     demo_positions: int = 256
     """Robot positions labelled by the teacher per world and update."""
     label_temperature: float = 0.1
@@ -581,38 +580,61 @@ def load_config(path: str | Path) -> TrainConfig:
         raise UserError(f"{path}: {error}") from None
 
 
-_FAST = dict(obs_transform="relative-log", train_starts="lattice", num_envs=64, batch_size=64, learning_starts=2_000,
-             loss="huber", double_dqn=True, target_update="soft", tau=0.01, max_grad_norm=10.0, reward_scale=1e-3)
-"""The learner that learns a world fastest here (the ``fast`` preset's, reused by the general ones)."""
-
-PRESETS: dict[str, dict[str, Any]] = {
-    "thesis-fixed": {},  # the defaults are Table 3
-    "thesis-general-world": dict(obs_size=9, filters=(4, 4), reward="thesis-general", exploration_episodes=150,
-                                 total_episodes=150, eval_every=2_000, checkpoint_every=5_000, log_every=500),
-    "fast": dict(_FAST, train_starts="reachable", eval_random_starts=1000, select=("success", "world_starts_success"),
-                 exploration_episodes=3_000, total_episodes=None, total_steps=3_000_000, eval_every=3_200,
-                 target_success=0.99, time_limit=900.0, checkpoint_every=128_000, log_every=6_400),
-    "thesis-general": dict(obs_size=9, filters=(4, 4), reward="thesis-general", exploration_episodes=150,
-                           stage_episodes=150, restart_exploration=True, total_episodes=None, eval_every=5_000,
-                           eval_shield=True, select=("-collisions", "spl", "success"), log_every=2_000,
-                           checkpoint_every=20_000),
+LAYERS: dict[str, tuple[str | None, dict[str, Any], str]] = {
+    # name: (the layer it changes, its changes by option name, what it is). The defaults of
+    # TrainConfig are Table 3's: thesis-fixed changes nothing.
+    "thesis-fixed": (None, {}, "Table 3 as written"),
+    "fast learner": (None, dict(
+        obs_transform="relative-log", train_starts="lattice", num_envs=64, batch_size=64, learning_starts=2_000,
+        loss="huber", double_dqn=True, target_update="soft", tau=0.01, max_grad_norm=10.0, reward_scale=1e-3),
+        "the learner that learns a world fastest here (shared by fast and the general presets)"),
+    "fast": ("fast learner", dict(
+        train_starts="reachable", eval_random_starts=1000, select=("success", "world_starts_success"),
+        exploration_episodes=3_000, total_episodes=None, total_steps=3_000_000, eval_every=3_200,
+        target_success=0.99, time_limit=900.0, checkpoint_every=128_000, log_every=6_400),
+        "a world, learnt fastest; validated on random starts"),
+    "thesis-general-world": (None, dict(
+        obs_size=9, filters=(4, 4), reward="thesis-general", exploration_episodes=150, total_episodes=150,
+        eval_every=2_000, checkpoint_every=5_000, log_every=500), "Table 4's network and weights on one world"),
+    "thesis-general": (None, dict(
+        obs_size=9, filters=(4, 4), reward="thesis-general", exploration_episodes=150, stage_episodes=150,
+        restart_exploration=True, total_episodes=None, eval_every=5_000, eval_shield=True,
+        select=("-collisions", "spl", "success"), log_every=2_000, checkpoint_every=20_000),
+        "Table 4 through a curriculum, with rehearsal"),
+    "general": ("fast learner", dict(
+        train_starts="random", max_episode_steps=200, batch_size=128, buffer_size=300_000, learning_starts=10_000,
+        num_envs=32, exploration_episodes=12_000, epsilon_final=0.03, families=FAMILIES, pool_size=80, pool_starts=6,
+        refresh_every=500_000, world_start_fraction=0.25, total_episodes=None, time_limit=1500.0,
+        eval_every=150_000, eval_shield=True, select=("-collisions", "spl", "success"), log_every=25_000,
+        checkpoint_every=150_000), "the window network on generated worlds and a curriculum"),
+    "general-memory": ("general", dict(obs_transform="relative-log-memory", memory=True, world_start_fraction=0.5),
+                       "general with the visit-memory channel"),
+    "general-revisit": ("general-memory", dict(reward="general"),
+                        "general-memory with revisit and length reward terms: the shipped general.pt"),
+    "moving": ("general-revisit", dict(obs_transform="relative-log-previous", previous=True,
+                                       families=FAMILIES + MOVING_FAMILIES * len(FAMILIES), time_limit=2400.0),
+               "general-revisit with the field a step earlier, half its pool moving: the shipped moving.pt"),
+    "map": (None, dict(
+        method="imitation", reward="thesis-general", families=FAMILIES + STRUCTURE_FAMILIES,
+        map_sizes=(50.0, 100.0, 250.0), pool_size=48, refresh_every=600, learning_rate=3e-3, total_episodes=None,
+        total_steps=1_000, time_limit=1_800.0, eval_every=125, eval_shield=False,
+        select=("-collisions", "success", "spl"), validation_worlds=24, validation_starts=2, validation_seed=1,
+        log_every=50, checkpoint_every=250, hidden=(32, 32), negative_slope=0.01),
+        "the map network by imitation of A*: the shipped map.pt"),
 }
-PRESETS["general"] = dict(
-    _FAST, train_starts="random", max_episode_steps=200, batch_size=128, buffer_size=300_000, learning_starts=10_000,
-    num_envs=32, exploration_episodes=12_000, epsilon_final=0.03, families=FAMILIES, pool_size=80, pool_starts=6,
-    refresh_every=500_000, world_start_fraction=0.25, total_episodes=None, time_limit=1500.0, eval_every=150_000,
-    eval_shield=True, select=("-collisions", "spl", "success"), log_every=25_000, checkpoint_every=150_000)
-PRESETS["general-memory"] = dict(PRESETS["general"], obs_transform="relative-log-memory", memory=True,
-                                 world_start_fraction=0.5)
-PRESETS["general-revisit"] = dict(PRESETS["general-memory"], reward="general")
-PRESETS["moving"] = dict(PRESETS["general-revisit"], obs_transform="relative-log-previous", previous=True,
-                         families=FAMILIES + MOVING_FAMILIES * len(FAMILIES), time_limit=2400.0)
-PRESETS["map"] = dict(
-    method="imitation", reward="thesis-general", families=FAMILIES + STRUCTURE_FAMILIES, map_sizes=(50.0, 100.0, 250.0),
-    pool_size=48, refresh_every=600, learning_rate=3e-3, total_episodes=None, total_steps=1_000, time_limit=1_800.0,
-    eval_every=125, eval_shield=False, select=("-collisions", "success", "spl"), validation_worlds=24,
-    validation_starts=2, validation_seed=1, log_every=50, checkpoint_every=250, hidden=(32, 32), negative_slope=0.01)
-"""Changes to :class:`TrainConfig`'s defaults (which are Table 3's) for each preset, by option name."""
+"""Each preset as the layer of changes it makes to another (or to :class:`TrainConfig`'s defaults,
+which are Table 3's). ``apf-physics train --show-config`` prints every option of a preset with the
+layer each value comes from (:func:`explain`). Layers with a space in their name are shared parts,
+not presets."""
+
+
+def _flattened(name: str) -> dict[str, Any]:
+    base, changes, _ = LAYERS[name]
+    return {**(_flattened(base) if base is not None else {}), **changes}
+
+
+PRESETS: dict[str, dict[str, Any]] = {name: _flattened(name) for name in LAYERS if " " not in name}
+"""Every preset's changes to :class:`TrainConfig`'s defaults, its layers merged, by option name."""
 WORLD_DEFAULT = "fast"
 """What ``apf-physics train --world`` trains without ``--preset``."""
 CURRICULUM_DEFAULT = "general-revisit"
@@ -633,6 +655,30 @@ def preset(name: str, **overrides: Any) -> TrainConfig:
         raise UserError(f"unknown training preset {name!r}{did_you_mean(name, PRESETS)}; "
                         f"choose one of {', '.join(PRESETS)}")
     return replace(TrainConfig(preset=name), **{**PRESETS[name], **overrides})
+
+
+def explain(name: str, overrides: dict[str, Any] | None = None) -> list[tuple[str, Any, str]]:
+    """Every option of preset ``name`` (with ``overrides``): ``(section.option, value, where it comes from)``,
+    the source being ``"--set"``, the preset layer that set it (:data:`LAYERS`), or ``"default"``.
+
+    Raises:
+        UserError: As :func:`preset`.
+    """
+    config = preset(name, **(overrides or {}))
+    source: dict[str, str] = {}
+    layer: str | None = name
+    while layer is not None:
+        base, changes, _ = LAYERS[layer]
+        for option in changes:
+            source.setdefault(option, f"preset {layer}" if " " not in layer else f"{layer} (in {name})")
+        layer = base
+    given = {_locate(key)[1] for key in (overrides or {})}
+    rows = []
+    for option, value in config.options().items():
+        section = OPTIONS[option]
+        where = "--set" if option in given else source.get(option, "default")
+        rows.append((option if section is None else f"{section}.{option}", value, where))
+    return rows
 
 
 def epsilon_schedule(config: TrainConfig | DQNConfig, episodes: int) -> float:

@@ -30,7 +30,7 @@ import torch.nn.functional as F
 from apf_physics.control.shield import MOVE_SAMPLES, MOVE_SETS, SAFETY
 from apf_physics.models.mapnet import MapNetwork, sample_values
 from apf_physics.models.policy import MapPolicy, map_scores, move_inputs
-from apf_physics.sensing.observation import MapView
+from apf_physics.sensing.mapview import MapView
 from apf_physics.planners.dqn import DQNPlanner
 from apf_physics.learning.config import ImitationConfig, TrainConfig
 from apf_physics.learning.learner import Counters, Learner

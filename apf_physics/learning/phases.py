@@ -178,8 +178,7 @@ def reachable_mask(world: Any, points: np.ndarray) -> np.ndarray:
 
 
 def _away_from_targets(world: World, points: np.ndarray) -> np.ndarray:
-    targets = np.asarray(world.targets, float)
-    return np.min(np.linalg.norm(points[:, None] - targets[None], axis=2), axis=1) > world.goal_tolerance
+    return ~world.reached(points)
 
 
 def validation_starts(world: World, count: int, seed: int) -> np.ndarray:

@@ -133,6 +133,151 @@ def _number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
+class _Reader:
+    """A sweep file's mapping, read key by key; every problem one :class:`UserError` naming the file and key."""
+
+    def __init__(self, path: Path, data: dict):
+        self.path, self.source, self.data = path, str(path), data
+
+    def fail(self, key: str, problem: str) -> UserError:
+        return UserError(f"{self.source}: {key}: {problem}")
+
+    def target(self) -> tuple[str, str]:
+        """``("world" or "curriculum", the file's resolved path)``."""
+        data = self.data
+        where = [k for k in ("world", "curriculum") if data.get(k) is not None]
+        if len(where) != 1:
+            raise UserError(f"{self.source}: name exactly one of world or curriculum (what the trials train on)")
+        kind = where[0]
+        if not isinstance(data[kind], str) or not data[kind].strip():
+            raise self.fail(kind, f"must be a file name, got {data[kind]!r}")
+        beside = self.path.parent / data[kind]
+        try:
+            return kind, str((beside if beside.exists() else resolve_world(data[kind])).resolve())
+        except UserError as exc:
+            raise self.fail(kind, str(exc)) from None
+
+    def preset_name(self, kind: str) -> str:
+        name = self.data.get("preset", WORLD_DEFAULT if kind == "world" else CURRICULUM_DEFAULT)
+        if not isinstance(name, str) or name not in PRESETS:
+            raise self.fail("preset", f"unknown preset {name!r}{did_you_mean(str(name), PRESETS)}; "
+                                      f"choose one of {', '.join(PRESETS)}")
+        return name
+
+    def mapping(self, key: str) -> dict:
+        value = self.data.get(key) or {}
+        if not isinstance(value, dict):
+            raise self.fail(key, f"must be a mapping, got {type(value).__name__}")
+        return {str(k): v for k, v in value.items()}
+
+    def check(self, key: str, values: dict, base: str) -> None:
+        """Each value as a training option of preset ``base``, one at a time (the error names the option)."""
+        for option, value in values.items():
+            if option in SET_BY_SWEEP and not (key == "grid" and option == "preset"):
+                hint = {"seed": "seeds", "preset": "preset (or grid: {preset: [...]})"}.get(option, "budget")
+                raise self.fail(key, f"{option} is set by the sweep's {hint}, not here")
+            try:
+                preset(base, **{option: value})
+            except UserError as exc:
+                raise self.fail(key, str(exc)) from None
+
+    def grid(self, base: str) -> dict:
+        grid = self.mapping("grid")
+        for option, values in grid.items():
+            if not isinstance(values, list) or not values:
+                raise self.fail("grid", f"{option}: must be a non-empty list of values to try, got {values!r}")
+            if option == "preset":
+                for p in values:
+                    if not isinstance(p, str) or p not in PRESETS:
+                        raise self.fail("grid", f"preset: unknown preset {p!r}{did_you_mean(str(p), PRESETS)}; "
+                                                f"choose among {', '.join(PRESETS)}")
+            else:
+                for value in values:
+                    self.check("grid", {option: value}, base)
+        return grid
+
+    def sample(self, base: str, grid: dict, overrides: dict) -> dict[str, tuple[str, tuple]]:
+        sample: dict[str, tuple[str, tuple]] = {}
+        for option, spec in self.mapping("sample").items():
+            if option in grid or option in overrides:
+                raise self.fail("sample", f"{option} is also in {'grid' if option in grid else 'overrides'}")
+            if not isinstance(spec, dict) or len(spec) != 1 or next(iter(spec)) not in DISTRIBUTIONS:
+                raise self.fail("sample", f"{option}: must be one of "
+                                          f"{', '.join(f'{{{d}: [...]}}' for d in DISTRIBUTIONS)}, got {spec!r}")
+            dist, args = next(iter(spec.items()))
+            if not isinstance(args, list) or not args:
+                raise self.fail("sample", f"{option}: {dist} needs a list, got {args!r}")
+            if dist != "choice":
+                low_high = len(args) == 2 and all(_number(a) for a in args) and args[0] < args[1]
+                if not low_high or (dist == "loguniform" and args[0] <= 0) or (
+                        dist == "randint" and not all(isinstance(a, int) for a in args)):
+                    what = {"uniform": "numbers", "loguniform": "positive numbers", "randint": "whole numbers"}[dist]
+                    raise self.fail("sample", f"{option}: {dist} needs [low, high], {what} with low < high, "
+                                              f"got {args!r}")
+            for value in (args if dist == "choice" else [args[0], args[1] - 1 if dist == "randint" else args[1]]):
+                self.check("sample", {option: value}, base)
+            sample[option] = (dist, tuple(args))
+        return sample
+
+    def whole(self, key: str, default: Optional[int], low: int = 1, optional: bool = False) -> Optional[int]:
+        value = self.data.get(key, default)
+        if value is None and optional:
+            return None
+        if not isinstance(value, int) or isinstance(value, bool) or value < low:
+            raise self.fail(key, f"must be a whole number of at least {low}{' or null' if optional else ''}, "
+                                 f"got {value!r}")
+        return value
+
+    def seeds(self) -> tuple[int, ...]:
+        seeds = self.data.get("seeds", [0])
+        if (not isinstance(seeds, list) or not seeds or len(set(seeds)) != len(seeds)
+                or not all(isinstance(s, int) and not isinstance(s, bool) for s in seeds)):
+            raise self.fail("seeds", f"must be a non-empty list of different whole numbers, got {seeds!r}")
+        return tuple(seeds)
+
+    def budget(self, reports: int) -> tuple[str, float | int]:
+        budget = self.data.get("budget")
+        if not isinstance(budget, dict) or len(budget) != 1 or next(iter(budget)) not in BUDGETS:
+            raise self.fail("budget", f"must be one of {', '.join(f'{{{b}: N}}' for b in BUDGETS)} (each trial's), "
+                                      f"got {budget!r}")
+        limit, amount = next(iter(budget.items()))
+        if not _number(amount) or amount <= 0 or (limit != "time_limit" and not float(amount).is_integer()):
+            raise self.fail("budget", f"{limit} must be a positive "
+                                      f"{'number' if limit == 'time_limit' else 'whole number'}, got {amount!r}")
+        if limit != "time_limit" and amount < reports:
+            raise self.fail("reports", f"{reports} reports need a budget of at least {reports} {limit}, got {amount}")
+        return limit, float(amount) if limit == "time_limit" else int(amount)
+
+    def metric(self) -> str:
+        metric = self.data.get("metric", "success")
+        if metric not in METRICS:
+            raise self.fail("metric", f"must be one of {', '.join(METRICS)} (of the validation set), got {metric!r}")
+        return metric
+
+    def asha(self, reports: int) -> dict | None:
+        asha = self.data.get("asha", {})
+        if asha is False or asha is None:
+            return None
+        if not isinstance(asha, dict):
+            raise self.fail("asha", f"must be a mapping (grace_period, reduction_factor) or false, got {asha!r}")
+        unknown = sorted(set(map(str, asha)) - {"grace_period", "reduction_factor"})
+        if unknown:
+            raise self.fail("asha", f"unknown key {unknown[0]!r} (allowed: grace_period, reduction_factor)")
+        grace = asha.get("grace_period", 1)
+        factor = asha.get("reduction_factor", 2)
+        if not isinstance(grace, int) or isinstance(grace, bool) or not 1 <= grace <= reports:
+            raise self.fail("asha", f"grace_period must be a whole number from 1 to reports ({reports}), got {grace!r}")
+        if not _number(factor) or factor <= 1:
+            raise self.fail("asha", f"reduction_factor must be a number above 1, got {factor!r}")
+        return {"grace_period": grace, "reduction_factor": factor}
+
+    def cpus(self) -> float:
+        cpus = self.data.get("trial_cpus", 1)
+        if not _number(cpus) or cpus <= 0:
+            raise self.fail("trial_cpus", f"must be a positive number, got {cpus!r}")
+        return float(cpus)
+
+
 def load_sweep(path: str | Path) -> Sweep:
     """Read and check a sweep file (see the module's notes).
 
@@ -146,150 +291,31 @@ def load_sweep(path: str | Path) -> Sweep:
     """
     path = Path(path)
     source = str(path)
-
-    def fail(key: str, problem: str) -> UserError:
-        return UserError(f"{source}: {key}: {problem}")
-
     data: Any = read_yaml_file(path, "sweep")
     if not isinstance(data, dict):
         raise UserError(f"{source}: a sweep file must be a mapping (world or curriculum, preset, grid, budget, "
                         f"metric ...), got {type(data).__name__}")
+    read = _Reader(path, data)
     for key in data:
         if key not in KEYS:
-            raise fail(str(key), f"unknown key{did_you_mean(str(key), KEYS)}; the keys are {', '.join(KEYS)}")
-
-    where = [k for k in ("world", "curriculum") if data.get(k) is not None]
-    if len(where) != 1:
-        raise UserError(f"{source}: name exactly one of world or curriculum (what the trials train on)")
-    kind = where[0]
-    if not isinstance(data[kind], str) or not data[kind].strip():
-        raise fail(kind, f"must be a file name, got {data[kind]!r}")
-    beside = path.parent / data[kind]
-    try:
-        located = str((beside if beside.exists() else resolve_world(data[kind])).resolve())
-    except UserError as exc:
-        raise fail(kind, str(exc)) from None
-
-    name = data.get("preset", WORLD_DEFAULT if kind == "world" else CURRICULUM_DEFAULT)
-    if not isinstance(name, str) or name not in PRESETS:
-        raise fail("preset", f"unknown preset {name!r}{did_you_mean(str(name), PRESETS)}; "
-                             f"choose one of {', '.join(PRESETS)}")
-
-    def mapping(key: str) -> dict:
-        value = data.get(key) or {}
-        if not isinstance(value, dict):
-            raise fail(key, f"must be a mapping, got {type(value).__name__}")
-        return {str(k): v for k, v in value.items()}
-
-    def check(key: str, values: dict, base: str = name) -> None:
-        """Each value as a training option, one at a time (the error names the option)."""
-        for option, value in values.items():
-            if option in SET_BY_SWEEP and not (key == "grid" and option == "preset"):
-                hint = {"seed": "seeds", "preset": "preset (or grid: {preset: [...]})"}.get(option, "budget")
-                raise fail(key, f"{option} is set by the sweep's {hint}, not here")
-            try:
-                preset(base, **{option: value})
-            except UserError as exc:
-                raise fail(key, str(exc)) from None
-
-    overrides = mapping("overrides")
-    check("overrides", overrides)
-
-    grid = mapping("grid")
-    for option, values in grid.items():
-        if not isinstance(values, list) or not values:
-            raise fail("grid", f"{option}: must be a non-empty list of values to try, got {values!r}")
-        if option == "preset":
-            for p in values:
-                if not isinstance(p, str) or p not in PRESETS:
-                    raise fail("grid", f"preset: unknown preset {p!r}{did_you_mean(str(p), PRESETS)}; "
-                                       f"choose among {', '.join(PRESETS)}")
-        else:
-            for value in values:
-                check("grid", {option: value})
-
-    sample: dict[str, tuple[str, tuple]] = {}
-    for option, spec in mapping("sample").items():
-        if option in grid or option in overrides:
-            raise fail("sample", f"{option} is also in {'grid' if option in grid else 'overrides'}")
-        if not isinstance(spec, dict) or len(spec) != 1 or next(iter(spec)) not in DISTRIBUTIONS:
-            raise fail("sample", f"{option}: must be one of {', '.join(f'{{{d}: [...]}}' for d in DISTRIBUTIONS)}, "
-                                 f"got {spec!r}")
-        dist, args = next(iter(spec.items()))
-        if not isinstance(args, list) or not args:
-            raise fail("sample", f"{option}: {dist} needs a list, got {args!r}")
-        if dist != "choice":
-            low_high = len(args) == 2 and all(_number(a) for a in args) and args[0] < args[1]
-            if not low_high or (dist == "loguniform" and args[0] <= 0) or (
-                    dist == "randint" and not all(isinstance(a, int) for a in args)):
-                what = {"uniform": "numbers", "loguniform": "positive numbers", "randint": "whole numbers"}[dist]
-                raise fail("sample", f"{option}: {dist} needs [low, high], {what} with low < high, got {args!r}")
-        for value in (args if dist == "choice" else [args[0], args[1] - 1 if dist == "randint" else args[1]]):
-            check("sample", {option: value})
-        sample[option] = (dist, tuple(args))
+            raise read.fail(str(key), f"unknown key{did_you_mean(str(key), KEYS)}; the keys are {', '.join(KEYS)}")
+    kind, located = read.target()
+    name = read.preset_name(kind)
+    overrides = read.mapping("overrides")
+    read.check("overrides", overrides, name)
+    grid = read.grid(name)
+    sample = read.sample(name, grid, overrides)
     for option in overrides:
         if option in grid:
-            raise fail("grid", f"{option} is also in overrides")
-
-    def whole(key: str, default: Optional[int], low: int = 1, optional: bool = False) -> Optional[int]:
-        value = data.get(key, default)
-        if value is None and optional:
-            return None
-        if not isinstance(value, int) or isinstance(value, bool) or value < low:
-            raise fail(key, f"must be a whole number of at least {low}{' or null' if optional else ''}, got {value!r}")
-        return value
-
-    samples = whole("samples", 1)
+            raise read.fail("grid", f"{option} is also in overrides")
+    samples = read.whole("samples", 1)
     if samples > 1 and not sample:
-        raise fail("samples", "more than 1 needs distributions to draw from (sample: ...)")
-    reports = whole("reports", 4)
-    max_concurrent = whole("max_concurrent", None, optional=True)
-
-    seeds = data.get("seeds", [0])
-    if (not isinstance(seeds, list) or not seeds or not all(isinstance(s, int) and not isinstance(s, bool) for s in seeds)
-            or len(set(seeds)) != len(seeds)):
-        raise fail("seeds", f"must be a non-empty list of different whole numbers, got {seeds!r}")
-
-    budget = data.get("budget")
-    if not isinstance(budget, dict) or len(budget) != 1 or next(iter(budget)) not in BUDGETS:
-        raise fail("budget", f"must be one of {', '.join(f'{{{b}: N}}' for b in BUDGETS)} (each trial's), "
-                             f"got {budget!r}")
-    limit, amount = next(iter(budget.items()))
-    if not _number(amount) or amount <= 0 or (limit != "time_limit" and not float(amount).is_integer()):
-        raise fail("budget", f"{limit} must be a positive {'number' if limit == 'time_limit' else 'whole number'}, "
-                             f"got {amount!r}")
-    if limit != "time_limit" and amount < reports:
-        raise fail("reports", f"{reports} reports need a budget of at least {reports} {limit}, got {amount}")
-
-    metric = data.get("metric", "success")
-    if metric not in METRICS:
-        raise fail("metric", f"must be one of {', '.join(METRICS)} (of the validation set), got {metric!r}")
-
-    asha = data.get("asha", {})
-    if asha is False or asha is None:
-        asha = None
-    elif isinstance(asha, dict):
-        unknown = sorted(set(map(str, asha)) - {"grace_period", "reduction_factor"})
-        if unknown:
-            raise fail("asha", f"unknown key {unknown[0]!r} (allowed: grace_period, reduction_factor)")
-        grace = asha.get("grace_period", 1)
-        factor = asha.get("reduction_factor", 2)
-        if not isinstance(grace, int) or isinstance(grace, bool) or not 1 <= grace <= reports:
-            raise fail("asha", f"grace_period must be a whole number from 1 to reports ({reports}), got {grace!r}")
-        if not _number(factor) or factor <= 1:
-            raise fail("asha", f"reduction_factor must be a number above 1, got {factor!r}")
-        asha = {"grace_period": grace, "reduction_factor": factor}
-    else:
-        raise fail("asha", f"must be a mapping (grace_period, reduction_factor) or false, got {asha!r}")
-
-    cpus = data.get("trial_cpus", 1)
-    if not _number(cpus) or cpus <= 0:
-        raise fail("trial_cpus", f"must be a positive number, got {cpus!r}")
-
+        raise read.fail("samples", "more than 1 needs distributions to draw from (sample: ...)")
+    reports = read.whole("reports", 4)
+    max_concurrent = read.whole("max_concurrent", None, optional=True)
     sweep = Sweep(source, located if kind == "world" else None, located if kind == "curriculum" else None, name,
-                  overrides, grid, sample, samples, tuple(seeds), (limit, float(amount) if limit == "time_limit"
-                                                                   else int(amount)),
-                  reports, metric, asha, float(cpus), max_concurrent)
+                  overrides, grid, sample, samples, read.seeds(), read.budget(reports), reports, read.metric(),
+                  read.asha(reports), read.cpus(), max_concurrent)
     # every combination of the grid, with the distributions' first values, as a whole configuration
     first = {k: args[0] for k, (_, args) in sample.items()}
     for combo in itertools.islice(itertools.product(*grid.values()), 1000):
@@ -300,5 +326,3 @@ def load_sweep(path: str | Path) -> Sweep:
             shown = ", ".join(f"{k}: {v!r}" for k, v in params.items())
             raise UserError(f"{source}: {'grid ' + shown + ': ' if shown else ''}{exc}") from None
     return sweep
-
-

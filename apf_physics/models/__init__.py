@@ -22,7 +22,7 @@ from apf_physics.world.core import World
 
 MODELS = Path(__file__).resolve().parent
 SHIPPED = {"thesis-fixed": MODELS / "fixed20.pt", "thesis-general": MODELS / "map.pt"}
-"""The ``dqn`` planner's default model, by the world's field preset: the fixed world's Q-network
+"""The default learned planner's model (planner ``dqn``), by the world's field preset: the fixed world's Q-network
 for Table 3's field; the map network (which generalises to rooms, mazes and bigger maps) for
 Table 4's. The other shipped files (``general.pt``, ``moving.pt``) are chosen by name."""
 
@@ -46,13 +46,30 @@ with ``general.pt`` leaders, 56/60 with ``map.pt``. A lone formation on Table 4'
 robots to see) gets it too, as a leader: that case was not compared."""
 
 
-def shipped_model_for(world: World) -> Path:
-    """The shipped model whose training field equals the world's field (for a formation's
-    leader, :data:`SHIPPED_FORMATION` first).
+SHIPPED_NETWORKS = {
+    "window": {"thesis-fixed": MODELS / "fixed20.pt", "thesis-general": MODELS / "general.pt"},
+    "map": {"thesis-general": MODELS / "map.pt"},
+}
+"""The shipped models of each kind of network, by the field they were trained in: the thesis's
+window Q-network (planner ``window-dqn``) and the map network (planner ``mapnet``)."""
+NETWORKS = {"window": "the window Q-network (the thesis's DQN)", "map": "the map network"}
+"""What each kind of network is called in messages."""
+
+
+def shipped_model_for(world: World, network: str | None = None) -> Path:
+    """The shipped model whose training field equals the world's field: the best of any kind
+    (:data:`SHIPPED`; for a formation's leader :data:`SHIPPED_FORMATION` first), or of the kind
+    ``network`` (``"window"`` or ``"map"``, :data:`SHIPPED_NETWORKS`).
 
     Raises:
-        ModelError: No shipped model was trained for this field.
+        ModelError: No shipped model (of that kind) was trained for this field.
     """
+    if network is not None:
+        for preset, path in SHIPPED_NETWORKS[network].items():
+            if world.field.equals_preset(preset) and path.exists():
+                return path
+        raise ModelError(f"{world.label}: no shipped {NETWORKS[network]} for its field {world.field.as_dict()}; "
+                         f"train one with `apf-physics train` and pass --model")
     table = {**SHIPPED, **SHIPPED_FORMATION} if world.formation is not None else SHIPPED
     for preset, path in table.items():
         if world.field.equals_preset(preset) and path.exists():
@@ -61,5 +78,5 @@ def shipped_model_for(world: World) -> Path:
                      f"train one with `apf-physics train` and pass --model")
 
 
-__all__ = ["resolve_model", "DQNPolicy", "MapNetwork", "MapPolicy", "load_policy", "FORMAT_VERSION", "MODELS", "QNetwork", "SHIPPED", "SHIPPED_FORMATION", "SavedModel", "load_model", "model_meta",
+__all__ = ["resolve_model", "DQNPolicy", "MapNetwork", "MapPolicy", "load_policy", "FORMAT_VERSION", "MODELS", "NETWORKS", "QNetwork", "SHIPPED", "SHIPPED_FORMATION", "SHIPPED_NETWORKS", "SavedModel", "load_model", "model_meta",
            "save_model", "shipped_model_for"]

@@ -202,7 +202,7 @@ class SavedModel:
         network: The network, in eval mode, on CPU: a window :class:`QNetwork`, or a
             :class:`~apf_physics.models.mapnet.MapNetwork` (``arch.type`` ``"map"``).
         obs_shape: (C, k, k) observation shape it expects (``()`` for a map network, which
-            sees a :class:`~apf_physics.sensing.observation.MapView` of any size).
+            sees a :class:`~apf_physics.sensing.mapview.MapView` of any size).
         field: Field parameters of the world it was trained on.
         observer: How its observations were built (:func:`observer_of`; None for a map network).
         meta: All metadata of the file (``kind``, ``arch``, ``config``, ``training``, ...).

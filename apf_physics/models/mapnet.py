@@ -1,7 +1,7 @@
 """A Q-network that plans: a learned cost map, value iteration over it, and a per-move head.
 
 The thesis's second direction of future work is an observation that is an image map of the
-world. This network takes one (:class:`~apf_physics.sensing.observation.MapView`): every node of a
+world. This network takes one (:class:`~apf_physics.sensing.mapview.MapView`): every node of a
 grid over the map (``resolution`` per unit) carries the robot's clearance there and whether a
 target is within reach. It has three parts, all learned:
 
@@ -39,7 +39,7 @@ from torch import nn
 from apf_physics.world.search import shortest_paths
 
 MAP_FEATURES = 2
-"""Node features of a :class:`~apf_physics.sensing.observation.MapView`: clearance margin, target."""
+"""Node features of a :class:`~apf_physics.sensing.mapview.MapView`: clearance margin, target."""
 MOVE_FEATURES = 5
 """Per-move features of the head: ΔV, length, room, ΔU, stay."""
 UNREACHED = -1e6
@@ -99,7 +99,7 @@ class MapNetwork(nn.Module):
             free: (R, C) bool, nodes where the robot fits.
             goal: (R, C) bool, free nodes within reach of a target.
             grad_iterations: Iterations run with gradients after the fixed point is reached.
-            max_iterations: Sweeps without gradients, at most (default: none; the fixed point is
+            max_iterations: SweptDistances without gradients, at most (default: none; the fixed point is
                 found by :func:`fixed_point`, however long the paths).
         """
         kappa = self.cost(features)
@@ -112,12 +112,12 @@ class MapNetwork(nn.Module):
             else:
                 v = torch.where(goal, 0.0, UNREACHED).to(kappa.dtype)
                 for k in range(max_iterations):
-                    new = _sweep(v, plain, free, goal)
+                    new = _bellman_update(v, plain, free, goal)
                     if k % 8 == 7 and torch.equal(new, v):
                         break
                     v = new
         for _ in range(grad_iterations):
-            v = _sweep(v, edges, free, goal)
+            v = _bellman_update(v, edges, free, goal)
         return v
 
     # -- the head -------------------------------------------------------------------------------
@@ -139,12 +139,12 @@ def _shift(x: torch.Tensor, dr: int, dc: int, fill: float) -> torch.Tensor:
 
 
 def fixed_point(edges: list, free: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
-    """The fixed point of :func:`_sweep`, without sweeping the whole grid again and again.
+    """The fixed point of :func:`_bellman_update`, without updating the whole grid again and again.
 
     ``−V`` is a shortest-path cost to the goal nodes with positive edge costs, so it is found
     by :func:`~apf_physics.world.search.shortest_paths` (relaxing outward from the nodes whose value
     just fell): each round costs what the wavefront holds, not the whole grid, and long paths
-    (a maze's) are followed to their end. The values are the sweeps' own, to the bit: each is
+    (a maze's) are followed to their end. The values are the updates' own, to the bit: each is
     ``V(x + n) − cost``, in float32.
 
     Args:
@@ -163,8 +163,8 @@ def fixed_point(edges: list, free: torch.Tensor, goal: torch.Tensor) -> torch.Te
     return torch.from_numpy(v.reshape(free.shape))
 
 
-def _sweep(v: torch.Tensor, edges: list, free: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
-    """One Bellman sweep: each free node takes its best neighbour's value minus the edge's cost."""
+def _bellman_update(v: torch.Tensor, edges: list, free: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+    """One Bellman update (a value-iteration step over the whole grid): each free node takes its best neighbour's value minus the edge's cost."""
     padded = F.pad(v[None, None], (1, 1, 1, 1), value=UNREACHED)[0, 0]
     rows, cols = v.shape
     best = v

@@ -14,7 +14,8 @@ from apf_physics.control.shield import MOVE_SETS, SAFETY, move_clearance
 from apf_physics.models.files import SavedModel, load_model, observer_of
 from apf_physics.models.mapnet import MapNetwork, move_features, sample_values
 from apf_physics.models.network import QNetwork
-from apf_physics.sensing.observation import MapView, ObserverConfig
+from apf_physics.sensing.mapview import MapView
+from apf_physics.sensing.observation import ObserverConfig
 from apf_physics.common.transforms import signed_log
 from apf_physics.world.core import Moment, World
 
@@ -144,7 +145,7 @@ class MapValues:
 class MapPolicy:
     """Action values of a :class:`~apf_physics.models.mapnet.MapNetwork` for robots in a world.
 
-    The network's values over the world's :class:`~apf_physics.sensing.observation.MapView` depend
+    The network's values over the world's :class:`~apf_physics.sensing.mapview.MapView` depend
     only on the world's static obstacles and targets, so they are computed once per world
     (kept with the world, :class:`MapValues`) and every step only samples them at the
     robots' moves.

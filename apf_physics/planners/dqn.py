@@ -1,9 +1,10 @@
-"""The DQN planner: greedy actions of a trained Q-network on the robot's observation.
+"""The learned planners: greedy moves of a trained network, checked by the shield.
 
 Two kinds of network (:func:`~apf_physics.models.load_policy` tells them apart): the
-thesis's, on a window of the potential (and the visit memory), with the nine unit moves; and
-the map network (:mod:`apf_physics.models.mapnet`), which plans on a view of the whole map
-and scores the nine moves and eight half-length ones.
+thesis's deep Q-network, on a window of the potential (and the visit memory), with the nine
+unit moves (planner ``window-dqn``); and the map network (:mod:`apf_physics.models.mapnet`,
+planner ``mapnet``), which plans on a view of the whole map and scores the nine moves and
+eight half-length ones. Planner ``dqn`` takes the best shipped one for the world's field.
 """
 
 from __future__ import annotations
@@ -14,7 +15,8 @@ import numpy as np
 
 from apf_physics.control.shield import (ACTIONS, HORIZON, PREDICTIONS, SAFETY, move_clearance, shield_over_time,
                                  shielded_argmax)
-from apf_physics.models import DQNPolicy, MapPolicy, load_policy, resolve_model, shipped_model_for
+from apf_physics.errors import ModelError
+from apf_physics.models import NETWORKS, DQNPolicy, MapPolicy, load_policy, resolve_model, shipped_model_for
 from apf_physics.models.policy import move_inputs
 from apf_physics.sensing.observation import Observer
 from apf_physics.planners.base import Planner
@@ -43,6 +45,9 @@ class DQNPlanner(Planner):
             obstacles where they are along it, no look-ahead; ``dqn-one-step``, for comparison).
         policy: An in-memory policy to use instead of a model file (e.g. a network while it
             trains); its field is not checked against the world's.
+        network: ``"map"`` or ``"window"``: only that kind of network (planners ``mapnet`` and
+            ``window-dqn``: the shipped one of that kind by default, and a model file of another
+            kind is refused); None: any (``dqn``: the best shipped one for the field).
 
     Observations are built by an :class:`~apf_physics.sensing.observation.Observer` with the model's
     own configuration, exactly as the environment built them in training (a model with the
@@ -58,29 +63,37 @@ class DQNPlanner(Planner):
 
     def __init__(self, model: str | Path | None = None, shield: bool = True,
                  policy: DQNPolicy | MapPolicy | None = None, prediction: str = "velocity",
-                 horizon: int = HORIZON):
+                 horizon: int = HORIZON, network: str | None = None):
         if prediction not in PREDICTIONS:
             raise ValueError(f"unknown prediction {prediction!r} (known: {', '.join(PREDICTIONS)})")
+        if network is not None and network not in NETWORKS:
+            raise ValueError(f"unknown network {network!r} (known: {', '.join(NETWORKS)})")
+        self.network = network
         self.model_path = resolve_model(model) if model is not None else None
         self.shield = bool(shield)
         self.prediction = prediction
         self.horizon = int(horizon)
+        family = {None: "dqn", "map": "mapnet", "window": "window-dqn"}[network]
         if not self.shield:
-            self.name = "dqn-unshielded"
+            self.name = f"{family}-unshielded"
         elif self.horizon == 0:
-            self.name = "dqn-one-step"
+            self.name = f"{family}-one-step"
         else:
-            self.name = "dqn" if prediction == "velocity" else f"dqn-{prediction}"
+            self.name = family if prediction == "velocity" else f"{family}-{prediction}"
         self._policy = policy
         self._loaded = None if policy is None else "given"
 
     def reset(self, world: World, positions: np.ndarray) -> None:
         super().reset(world, positions)
         if self._loaded != "given":
-            path = self.model_path or shipped_model_for(world)
+            path = self.model_path or shipped_model_for(world, self.network)
             if self._policy is None or self._loaded != (path, id(world)):
                 self._policy = load_policy(path, expect_field=world.field.as_dict())
                 self._loaded = (path, id(world))
+                kind = "map" if isinstance(self._policy, MapPolicy) else "window"
+                if self.network is not None and kind != self.network:
+                    raise ModelError(f"{path}: holds {NETWORKS[kind]}, not {NETWORKS[self.network]} "
+                                     f"(planner {self.name}); use --planner dqn for any kind")
         positions = np.asarray(positions, dtype=float).reshape(-1, 2)
         if isinstance(self._policy, MapPolicy):
             self.observer = None
@@ -91,6 +104,20 @@ class DQNPlanner(Planner):
         self.trap_window = self.MEMORY_TRAP_WINDOW if self._policy.observer.memory else None
         self._started = False
 
+    def describe(self) -> str:
+        """Which network ran, for tables: e.g. ``"dqn: the map network (map.pt)"``."""
+        if self._loaded is None:
+            return f"{self.name}: no model loaded yet"
+        source = "a network in memory" if self._loaded == "given" else Path(self._loaded[0]).name
+        return f"{self.name}: {NETWORKS[self.network_kind]} ({source})"
+
+    @property
+    def network_kind(self) -> str | None:
+        """``"map"`` or ``"window"``: the kind of network loaded (None before :meth:`reset`)."""
+        if self._policy is None:
+            return None
+        return "map" if isinstance(self._policy, MapPolicy) else "window"
+
     def act(self, positions: np.ndarray, active: np.ndarray, moment: Moment | None = None) -> np.ndarray:
         moment = self._moment(moment)
         if self.observer is None:
@@ -98,7 +125,7 @@ class DQNPlanner(Planner):
         if self._started:  # the first call sees the starts, which reset() counted already
             self.observer.visit(positions)
         self._started = True
-        obs = self.observer.observe(positions, t=moment.t, discs=moment.world.crowd)
+        obs = self.observer.observe(positions, t=moment.t, discs=moment.world.others)
         if not self.shield:
             return ACTIONS[self._policy.act(obs)] * active[:, None]
         q = self._policy.q_values(obs)

@@ -92,12 +92,6 @@ class EscapePlanner(Planner):
         self._track: list[list[np.ndarray]] = [[] for _ in range(n)]  # positions while following
         self._history: list[list] = [[] for _ in range(n)]  # (U, position) along the current descent
 
-    def _target_distance(self, points: np.ndarray) -> np.ndarray:
-        return np.min(np.linalg.norm(points[:, None, :] - self.world.targets[None], axis=2), axis=1)
-
-    def _nearest_target(self, points: np.ndarray) -> np.ndarray:
-        d = np.linalg.norm(points[:, None, :] - self.world.targets[None], axis=2)
-        return self.world.targets[np.argmin(d, axis=1)]
 
     def _safe(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return self._now.path_clearance(a, b, 0.1) >= self.world.robot_radius + self.safety_margin
@@ -173,8 +167,8 @@ class EscapePlanner(Planner):
         # Follow the bodies that form the trap: those about as near as the nearest one.
         self._follow_set[idx] = d <= d.min(axis=1, keepdims=True) + 1.0
         _, normal = self._followed(p, idx)
-        to_target = self._nearest_target(p) - p
-        dist = self._target_distance(p)
+        to_target = self.world.nearest_target(p) - p
+        dist = self.world.distance_to_target(p)
         tangent = _rotate(normal, np.pi / 2)  # side +1: the obstacle on the left
         for k, i in enumerate(idx):
             if any(np.hypot(*(p[k] - q)) < 1.5 for q in self._traps[i]):
@@ -229,7 +223,7 @@ class EscapePlanner(Planner):
         # if descent can move from here.
         following = np.flatnonzero(active & (self.mode == _FOLLOW))
         if len(following):
-            closer = self._target_distance(positions[following]) < self._best_trap[following] - self._margin[following]
+            closer = self.world.distance_to_target(positions[following]) < self._best_trap[following] - self._margin[following]
             candidates = following[closer]
             if len(candidates):
                 _, ok = self._descend(positions, candidates)
@@ -241,7 +235,7 @@ class EscapePlanner(Planner):
         descending = np.flatnonzero(active & (self.mode == _DESCEND))
         if len(descending):
             move, ok = self._descend(positions, descending)
-            far = self._target_distance(positions[descending]) > 2.0
+            far = self.world.distance_to_target(positions[descending]) > 2.0
             for k, i in enumerate(descending):
                 hist = self._history[i]
                 hist.append((u[i], positions[i].copy()))

@@ -79,7 +79,7 @@ def draw_field_plot(
 
 
 def _at_target(world: World, point: np.ndarray) -> bool:
-    return bool(np.min(np.linalg.norm(world.targets - point, axis=1)) <= world.goal_tolerance)
+    return bool(world.reached(point)[0])
 
 
 def field_figure(

@@ -78,6 +78,11 @@ class LidarConfig:
         if not self.noise >= 0:
             raise ValueError(f"lidar noise must be >= 0, got {self.noise}")
 
+    def noisy(self, ranges: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """``ranges`` (..., K) with Gaussian noise of :attr:`noise` drawn from ``rng``, clipped to
+        ``[0, max_range]`` (the one rule for noisy readings, however the generators are kept)."""
+        return np.clip(ranges + rng.normal(0.0, self.noise, np.shape(ranges)), 0.0, self.max_range)
+
     def angles(self) -> np.ndarray:
         """(K,) beam angles relative to the heading [rad], counter-clockwise (module docstring)."""
         k = self.beams
@@ -558,8 +563,8 @@ def _cast(world: World, poses: np.ndarray, config: LidarConfig, t: np.ndarray,
             robot, shape, fx, fy = _near_discs(pos, mov.centre[None] + shift[:, mov.disc_owner], mov.radius, reach)
             _cast_discs(beams, out, robot, fx, fy, mov.radius[shape])
     discs = []
-    if len(world.crowd):
-        discs.append(np.broadcast_to(world.crowd[None], (n,) + world.crowd.shape))
+    if len(world.others):
+        discs.append(np.broadcast_to(world.others[None], (n,) + world.others.shape))
     if others is not None:
         discs.append(others)
     if discs:
@@ -599,7 +604,7 @@ def scan(where: World | Moment, poses: np.ndarray, config: LidarConfig = LidarCo
     if config.noise > 0:
         if rng is None:
             raise ValueError("lidar noise needs a random generator (rng)")
-        ranges = np.clip(ranges + rng.normal(0.0, config.noise, ranges.shape), 0.0, config.max_range)
+        ranges = config.noisy(ranges, rng)
     return ranges
 
 

@@ -20,28 +20,24 @@ the step before (where the moving obstacles were), so that a policy can tell whe
 Channel ``"memory"``: the robot's visits to the 1×1 cells of its map at the same points,
 ``min(n, cap) / cap`` (:class:`VisitMemory`); points outside the map read 1.
 
-A range sensor instead of (or beside) the window: :class:`RangeObserver` (the lidar of
-:mod:`apf_physics.sensing.lidar` with the target's distance and bearing and the robot's own velocity).
+Other kinds of observation: the range sensor (:mod:`apf_physics.sensing.ranges`), the map
+network's view of the whole map (:mod:`apf_physics.sensing.mapview`); every kind behind one
+interface: :mod:`apf_physics.sensing.kinds`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any, Sequence
 
 import numpy as np
 
 from apf_physics.world import field as apf
 from apf_physics.common.compiled import kernel
-from apf_physics.world.field import Atlas, Grid, Raster
-from apf_physics.world.kinematics import UnicycleLimits, distance_bearing
-from apf_physics.sensing.lidar import Lidar, LidarConfig
+from apf_physics.world.field import Atlas, Grid, Raster, repulsive_term_at
 from apf_physics.common.transforms import signed_log
 from apf_physics.world.core import RASTER_CHUNK, World
 
-OBSERVATIONS = ("window", "lidar", "window+lidar")
-"""What the environments' robots see: the potential window (the thesis's), a range sensor
-(:class:`RangeObserver`), or both (a ``Dict`` space)."""
 CHANNELS = ("potential", "previous", "memory")
 """Channels an observer can build, in the order they are stacked."""
 SCALES = ("raw", "log")
@@ -97,6 +93,15 @@ class ObserverConfig:
         """Lowest and highest value of any observation element, whatever the world (infinite for the
         raw potential; :meth:`Observer.value_bounds` gives the finite ones of an observer's worlds)."""
         return (-1.0, 1.0) if self.scale == "log" else (-np.inf, np.inf)
+
+    @classmethod
+    def of(cls, size: int = 11, resolution: int = 4, previous: bool = False, memory: bool = False,
+           memory_cap: int = 4, scale: str = "raw") -> "ObserverConfig":
+        """The configuration with the potential and the optional channels asked for, stacked in
+        :data:`CHANNELS`' order (the one place that order is decided)."""
+        wanted = {"potential": True, "previous": previous, "memory": memory}
+        return cls(size=int(size), resolution=int(resolution), channels=tuple(c for c in CHANNELS if wanted[c]),
+                   memory_cap=int(memory_cap), scale=scale)
 
     def to_dict(self) -> dict[str, Any]:
         return {"size": self.size, "resolution": self.resolution, "channels": list(self.channels),
@@ -364,17 +369,6 @@ def _window_span(x, lo, hi, p0, half):
 
 
 @kernel
-def _repulsive_term(d, krep, p0, u_max):
-    """One shape's term at signed distance ``d``, as :func:`~apf_physics.world.field.repulsive_term`
-    gives it: ``min(krep/2 · (1/d − 1/p0)², u_max)`` within ``p0``, 0 beyond, ``u_max`` inside."""
-    if d <= 0.0:
-        return u_max
-    if d <= p0:
-        return min(0.5 * krep * (1.0 / d - 1.0 / p0) ** 2, u_max)
-    return 0.0
-
-
-@kernel
 def _near_window(where, table, steps, lo, hi, p0, half, r, s):
     """Robot ``r`` in shape ``s``'s frame, ``(x, y) = where[r] − table[steps[r], s]``, and the
     window offsets near the shape's box: ``(x, y, x0, x1, y0, y1)`` (:func:`_window_span` of each axis)."""
@@ -420,7 +414,7 @@ def _add_terms(values, rows, where, table, steps, lo, hi, centre, radius, polygo
     points within ``p0`` of the shape's box ``[lo[s], hi[s]]`` are measured: their signed
     distance ``d`` to the disc ``centre[s]``, ``radius[s]``, or, for a polygon (NaN radius), the
     next of ``polygon_d`` (its points in the order met here: robots, shapes, ``dx``, ``dy``, as
-    :func:`_polygon_points` lists them). A window point's terms (:func:`_repulsive_term`) are
+    :func:`_polygon_points` lists them). A window point's terms (:func:`~apf_physics.world.field.repulsive_term_at`) are
     summed in shape order, from 0, then added to its value, which stays at most ``u_wall``; a
     point inside a shape reads ``u_wall``. A disc's ``d`` is not measured where the squared
     distance from its centre settles the term (surely beyond ``p0``: 0; surely inside: ``u_max``).
@@ -459,7 +453,7 @@ def _add_terms(values, rows, where, table, steps, lo, hi, centre, radius, polygo
                         else:
                             d = np.hypot(ex, ey) - radius[s]
                     c = (half - dy) * k + (half + dx)
-                    term = _repulsive_term(d, krep, p0, u_max)
+                    term = repulsive_term_at(d, krep, p0, u_max)
                     if mark[c] == 0:    # the first term here: 0 + term is term
                         added[c] = term
                         mark[c] = 1
@@ -559,124 +553,3 @@ def _memory_windows(counts, robots, c0, r0, dims, half, cap):
                 else:
                     out[n, i, j] = 1.0
     return out
-
-
-@dataclass(frozen=True)
-class MapView:
-    """What a robot sees of the whole (static) map: the observation of map-planning networks.
-
-    A grid over the map at ``resolution`` nodes per unit (node ``[r, c]`` at
-    ``grid.to_world((c, r))``), each node with :data:`~apf_physics.models.mapnet.MAP_FEATURES`
-    features: the robot's clearance there beyond its radius (``(clearance − radius) / 2``,
-    clipped to ``[−0.5, 1]``) and whether a target is within reach (the goal tolerance).
-
-    Attributes:
-        grid: The nodes.
-        features: (2, rows, cols) float32 node features.
-        free: (rows, cols) bool: the robot fits there with ``margin`` to spare.
-        goal: (rows, cols) bool: free nodes within ``0.9 ×`` the goal tolerance of a target.
-    """
-
-    grid: Grid
-    features: np.ndarray
-    free: np.ndarray
-    goal: np.ndarray
-
-    @classmethod
-    def of(cls, world: World, resolution: int = 2, margin: float = 0.05) -> "MapView":
-        """The (cached) map view of ``world``'s static obstacles."""
-        def build() -> MapView:
-            grid = Grid.covering((0.0, 0.0), world.size, resolution)
-            points = grid.node_points()
-            clearance = world.node_clearance(resolution)
-            free = clearance >= world.robot_radius + margin
-            near = np.full(len(points), np.inf)
-            for target in world.targets:
-                near = np.minimum(near, np.hypot(points[:, 0] - target[0], points[:, 1] - target[1]))
-            goal = (near.reshape(grid.shape) <= 0.9 * world.goal_tolerance) & free
-            features = np.stack([np.clip((clearance - world.robot_radius) / 2.0, -0.5, 1.0),
-                                 goal.astype(float)]).astype(np.float32)
-            return cls(grid, features, free, goal)
-        return world.cached(("map_view", int(resolution), float(margin)), build)
-
-
-class RangeObserver:
-    """The range-sensor observation of ``num`` robots: a vector of ``K + 5`` values in ``[-1, 1]``.
-
-    - ``[0, K)``: the ranges of the K lidar beams (:func:`apf_physics.sensing.lidar.scan`: static and
-      moving obstacles, the map's edge, other robots), divided by the maximum range: 1 where a
-      beam meets nothing. Beam ``k`` points ``−π + 2πk/K`` from the robot's heading (a full
-      circle; beam K/2 straight ahead), or spreads evenly over a narrower field of view.
-    - ``K``: the nearest target's distance ``d`` as ``tanh(d / max_range)`` (0 on the target,
-      near 1 far away).
-    - ``K + 1``, ``K + 2``: the target's bearing in the robot's frame as ``(sin, cos)`` (0, 1:
-      straight ahead).
-    - ``K + 3``, ``K + 4``: the robot's own velocity. A unicycle: its last command ``(v, ω)``,
-      ``v`` over the top speed (forward; over the reverse speed backward) and ``ω`` over the top
-      turn rate. A holonomic robot (no heading: its frame is the map's): the last step's
-      displacement ``(dx, dy)`` over √2, the longest move.
-
-    Args:
-        config: The beams (noise included).
-        num: Robots observed.
-        unicycle: The robots' limits if they are unicycles, else None.
-
-    The noise of robot ``i`` comes from a generator of its own (:meth:`seed`), so that copy ``i``
-    of a vector env seeded ``seed + i`` reads what a single env seeded ``seed + i`` reads.
-    """
-
-    def __init__(self, config: LidarConfig, num: int, unicycle: UnicycleLimits | None = None):
-        self.config = config
-        self.num = int(num)
-        self.unicycle = unicycle
-        self.lidar = Lidar(replace(config, noise=0.0))
-        self.size = config.beams + 5
-        self.rngs = [np.random.default_rng() for _ in range(self.num)]
-
-    def seed(self, seeds: Sequence[int | None]) -> None:
-        """Restart robot ``i``'s noise generator from ``seeds[i]``."""
-        self.rngs = [np.random.default_rng(s) for s in seeds]
-
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(low, high)`` (size,) float32: the ranges and the distance in ``[0, 1]``, the rest in ``[-1, 1]``."""
-        low = np.full(self.size, -1.0, np.float32)
-        low[:self.config.beams + 1] = 0.0
-        return low, np.ones(self.size, np.float32)
-
-    def observe(self, worlds: Sequence[World], world_of: np.ndarray, poses: np.ndarray, velocity: np.ndarray,
-                t: np.ndarray | float = 0.0, others: np.ndarray | None = None,
-                robots: np.ndarray | None = None) -> np.ndarray:
-        """(n, size) float32 observations of ``robots`` (default all).
-
-        Args:
-            worlds, world_of: Robot ``i`` is in ``worlds[world_of[i]]``.
-            poses: (n, 3) ``(x, y, θ)`` (θ = 0 for holonomic robots).
-            velocity: (n, 2) a unicycle's last ``(v, ω)``, or a holonomic robot's last displacement.
-            t: The control step of each robot's episode (where the moving obstacles are).
-            others: (n, D, 2) the other robots each one sees (:func:`~apf_physics.sensing.lidar.teammates`).
-        """
-        poses = np.asarray(poses, float).reshape(-1, 3)
-        world_of = np.asarray(world_of, np.intp).reshape(-1)
-        k = self.config.beams
-        out = np.empty((len(poses), self.size), np.float32)
-        ranges = self.lidar.scan_worlds(worlds, world_of, poses, t, others)
-        if self.config.noise > 0:
-            rows = range(self.num) if robots is None else np.asarray(robots, np.intp).reshape(-1).tolist()
-            noise = np.stack([self.rngs[i].normal(0.0, self.config.noise, k) for i in rows])
-            ranges = np.clip(ranges + noise, 0.0, self.config.max_range)
-        out[:, :k] = ranges / self.config.max_range
-        target = np.empty((len(poses), 2))
-        for w in np.unique(world_of).tolist():
-            mine = world_of == w
-            d = worlds[w].targets[None, :, :] - poses[mine, None, :2]
-            target[mine] = worlds[w].targets[np.argmin(np.hypot(d[..., 0], d[..., 1]), axis=1)]
-        distance, bearing = distance_bearing(poses, target)
-        out[:, k] = np.tanh(distance / self.config.max_range)
-        out[:, k + 1] = np.sin(bearing)
-        out[:, k + 2] = np.cos(bearing)
-        velocity = np.asarray(velocity, float).reshape(-1, 2)
-        if self.unicycle is None:
-            out[:, k + 3:] = np.clip(velocity / np.sqrt(2.0), -1.0, 1.0)
-        else:
-            out[:, k + 3:] = self.unicycle.to_unit(velocity[:, 0], velocity[:, 1])
-        return out

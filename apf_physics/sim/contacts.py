@@ -82,6 +82,11 @@ class ContactLog:
         return self.obstacle | self.wall | self.robot | self.moving
 
     @property
+    def obstacle_or_edge(self) -> np.ndarray:
+        """(N,) bool: touched an obstacle, static or moving, or the map's edge (anything but a robot)."""
+        return self.obstacle | self.wall | self.moving
+
+    @property
     def touched(self) -> bool:
         """Whether anything touched anything."""
         return len(self.pairs) > 0

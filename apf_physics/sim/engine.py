@@ -38,13 +38,13 @@ exact arc (the same substeps keep it from tunnelling). The episode rules are the
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Literal, Sequence
 
 import numpy as np
 
+from apf_physics.common.compiled import kernel
 from apf_physics.world.kinematics import UnicycleLimits, substep_velocities, wrap_angle
 from apf_physics.sim.physics import MAX_SPEED, ContactLog, Physics
 from apf_physics.world.core import Moment, World
@@ -139,6 +139,7 @@ class StepReport:
         reached: (S,) bool: the leader of a moved slot reached a target (and nothing collided).
         ended: (S,) bool: episodes that ended at this step.
         distance: (S,) leader's distance to the nearest target of its world.
+        everyone: Every slot was running (``moved`` is all true).
     """
 
     positions: np.ndarray
@@ -148,6 +149,7 @@ class StepReport:
     reached: np.ndarray
     ended: np.ndarray
     distance: np.ndarray
+    everyone: bool = True
 
 
 class Stepper:
@@ -191,22 +193,16 @@ class Stepper:
         for i, w in enumerate(self.worlds):
             self._targets[i, :len(w.targets)] = w.targets
         self._tolerance = np.array([w.goal_tolerance for w in self.worlds])
-        # the same per world in Python floats, for the scalar path
-        self._target_points = [[tuple(t) for t in np.asarray(w.targets, float).reshape(-1, 2).tolist()] for w in self.worlds]
-        self._tolerance_of = self._tolerance.tolist()
         self._slot_targets = self._targets[self.world_of]       # (S, T, 2): each slot's world's targets
         self._slot_tolerance = self._tolerance[self.world_of]
         self.trap = trap
         self._watch = TrapWatch(trap, self.num_slots) if trap is not None else None
         self._nobody = np.zeros(self.num_slots, bool)
         self._unreported = np.zeros(self.num_slots, bool)   # ended at their start, not yet in a report
+        self._any_unreported = False
         self._moving = any(w.moving for w in self.worlds)
         self.last_distance = np.full(self.num_slots, np.inf)
         """Each leader's distance to its nearest target, after the last start or step."""
-        self.scalar = self.num_slots == 1 and self.robots_per_slot == 1 and unicycle is None
-        """A batch of one robot (``Navigate-v0``, ``eval``'s rollouts): stepped in Python scalars
-        (the same episodes as the array path, to the last bit; False: the array path, for tests)."""
-        self._yes, self._no = _constant(True), _constant(False)
 
     @property
     def running(self) -> np.ndarray:
@@ -223,17 +219,7 @@ class Stepper:
 
     def distance(self) -> np.ndarray:
         """(S,) each leader's distance to the nearest target of its world."""
-        return _nearest(self.positions[:, 0], self._slot_targets)
-
-    def _distance_one(self, x: float, y: float) -> float:
-        """:meth:`distance` of slot 0's leader at ``(x, y)``, in Python floats: the same subtractions
-        and the same ``np.hypot`` (``math.hypot`` rounds differently), so the same bits."""
-        nearest = math.inf
-        for tx, ty in self._target_points[self.world_of[0]]:
-            d = float(np.hypot(x - tx, y - ty))
-            if d < nearest:
-                nearest = d
-        return nearest
+        return _nearest(np.ascontiguousarray(self.positions[:, 0]), self._slot_targets)
 
     def poses(self) -> np.ndarray:
         """(S, m, 3) every robot's ``(x, y, θ)``."""
@@ -290,16 +276,14 @@ class Stepper:
         self.outcome[slots] = RUNNING
         if self.unicycle is not None:
             self._face(slots, positions, headings)
-        if self.scalar:   # (as in _step_one)
-            self.last_distance = distance = np.array([self._distance_one(*positions[0, 0].tolist())])
-        else:
-            self.last_distance = self.last_distance.copy()
-            self.last_distance[slots] = distance = _nearest(positions[:, 0], self._slot_targets[slots])
+        self.last_distance = self.last_distance.copy()
+        self.last_distance[slots] = distance = _nearest(np.ascontiguousarray(positions[:, 0]), self._slot_targets[slots])
         if self._watch is not None:
             self._watch.reset(slots, positions[:, 0], self._leader_potential(slots))
         arrived = distance <= self._slot_tolerance[slots]
         self.outcome[slots[arrived]] = REACHED
         self._unreported[slots] = arrived
+        self._any_unreported = bool(self._unreported.any())
 
     def _face(self, slots: np.ndarray, positions: np.ndarray, headings: np.ndarray | None) -> None:
         """Unicycles of ``slots`` at rest, headed as given or toward the target nearest each leader."""
@@ -343,10 +327,8 @@ class Stepper:
         """
         if gave_up is not None and gave_up.any():
             self.finish(np.flatnonzero(gave_up), Outcome.TRAPPED)
-        if self.scalar and self.outcome[0] == RUNNING:
-            return self._step_one(commands)
         moved = self.outcome == RUNNING
-        everyone = moved.all()
+        everyone = bool(moved.all())
         if self.unicycle is not None:
             commands = self._drive(commands, moved)
         else:
@@ -361,68 +343,69 @@ class Stepper:
         else:
             self.positions = np.where(moved[:, None, None], after, self.positions)
             self.steps += moved
-        distance = self.distance()
-        reached = distance <= self._slot_tolerance
-        if not everyone:
-            reached &= moved
-        collided = self._nobody
-        if contacts.touched:
-            collided = contacts.any.reshape(self.num_slots, -1).any(axis=1) & moved
-            reached &= ~collided
-        ended = self._nobody
-        if contacts.touched or self._watch is not None or self.max_steps is not None or reached.any():
-            outcome = np.where(collided, COLLISION, np.where(reached, REACHED, RUNNING)).astype(np.int8)
-            if self._watch is not None:
-                judge = np.flatnonzero(moved & (outcome == RUNNING))
-                trapped = self._watch.record(judge, self.positions[judge, 0], self._leader_potential(judge))
-                outcome[judge[trapped]] = TRAPPED
+        touched = contacts.any.reshape(self.num_slots, -1).any(axis=1) if contacts.touched else self._nobody
+        watch = self._watch is not None
+        outcome = self.outcome.copy()
+        distance, collided, reached, ended = _episode_rules(
+            np.ascontiguousarray(self.positions[:, 0]), self._slot_targets, self._slot_tolerance, moved, touched,
+            self.steps, -1 if self.max_steps is None or watch else int(self.max_steps), outcome)
+        if watch:   # the trap rule judges the slots still running, before the step limit does
+            judge = np.flatnonzero(moved & (outcome == RUNNING))
+            trapped = self._watch.record(judge, self.positions[judge, 0], self._leader_potential(judge))
+            outcome[judge[trapped]] = TRAPPED
             if self.max_steps is not None:
                 outcome[moved & (outcome == RUNNING) & (self.steps >= self.max_steps)] = TIMEOUT
             ended = moved & (outcome != RUNNING)
-            self.outcome[ended] = outcome[ended]
-        if self._unreported.any():   # episodes that ended at their start: reported once, by this step
+        self.outcome = outcome
+        if self._any_unreported:   # episodes that ended at their start: reported once, by this step
             ended = ended | self._unreported
             reached = reached | self._unreported
             self._unreported[:] = False
+            self._any_unreported = False
         self.last_distance = distance
-        return StepReport(self.positions, contacts, moved, collided, reached, ended, distance)
-
-    def _step_one(self, commands: np.ndarray) -> StepReport:
-        """:meth:`step` for a batch of one running robot: the same rules on the same numbers,
-        decided in Python scalars instead of arrays of one (most of a single step's cost was the
-        fixed cost of small numpy calls). ``tests/test_single_path.py`` checks that both give
-        the same episodes to the last bit."""
-        if self._moving:
-            self.physics.set_time(self.steps)
-        contacts = self.physics.step(np.asarray(commands, float).reshape(1, 2))
-        self.positions = self.physics.positions.reshape(1, 1, 2)
-        self.steps[0] += 1
-        (x, y), = self.positions[0].tolist()
-        distance = self._distance_one(x, y)
-        collided = contacts.touched and bool(contacts.any[0])
-        reached = not collided and distance <= self._tolerance_of[self.world_of[0]]
-        outcome = COLLISION if collided else REACHED if reached else RUNNING
-        if outcome == RUNNING and self._watch is not None:
-            slot = np.zeros(1, np.intp)
-            if self._watch.record(slot, self.positions[:, 0], self._leader_potential(slot))[0]:
-                outcome = TRAPPED
-        if outcome == RUNNING and self.max_steps is not None and self.steps[0] >= self.max_steps:
-            outcome = TIMEOUT
-        self.outcome[0] = outcome
-        self.last_distance = np.array([distance])
-        yes, no = self._yes, self._no
-        return StepReport(self.positions, contacts, yes, yes if collided else no, yes if reached else no,
-                          no if outcome == RUNNING else yes, self.last_distance)
+        return StepReport(self.positions, contacts, moved, collided, reached, ended, distance, everyone)
 
 
-def _nearest(leaders: np.ndarray, targets: np.ndarray) -> np.ndarray:
-    """(k,) the distance of each of ``leaders`` (k, 2) to the nearest of its ``targets`` (k, T, 2)."""
-    d = leaders[:, None, :] - targets
-    return np.hypot(d[..., 0], d[..., 1]).min(axis=1)
-
-
-def _constant(value: bool) -> np.ndarray:
-    """A read-only (1,) bool array (reports of a batch of one share them)."""
-    out = np.full(1, value)
-    out.flags.writeable = False
+@kernel
+def _nearest(leaders, targets):
+    """(k,) the distance of each of ``leaders`` (k, 2) to the nearest of its ``targets`` (k, T, 2)
+    (absent targets are at infinity)."""
+    out = np.empty(leaders.shape[0])
+    for s in range(leaders.shape[0]):
+        best = np.inf
+        for t in range(targets.shape[1]):
+            d = np.hypot(leaders[s, 0] - targets[s, t, 0], leaders[s, 1] - targets[s, t, 1])
+            if d < best:
+                best = d
+        out[s] = best
     return out
+
+
+@kernel
+def _episode_rules(leaders, targets, tolerance, moved, touched, steps, max_steps, outcome):
+    """The episode rules of one step, for every slot (see the module docstring): each leader's
+    distance to its nearest target, and for the slots that moved, whether a robot collided, whether
+    the leader reached a target (and nothing collided), and the outcome (collision, reached, or the
+    step limit when ``max_steps`` ≥ 0), written into ``outcome``.
+
+    Returns:
+        ``(distance, collided, reached, ended)``, each (S,).
+    """
+    n = leaders.shape[0]
+    distance = _nearest(leaders, targets)
+    collided = np.zeros(n, np.bool_)
+    reached = np.zeros(n, np.bool_)
+    ended = np.zeros(n, np.bool_)
+    for s in range(n):
+        if not moved[s]:
+            continue
+        collided[s] = touched[s]
+        reached[s] = distance[s] <= tolerance[s] and not touched[s]
+        if collided[s]:
+            outcome[s] = COLLISION
+        elif reached[s]:
+            outcome[s] = REACHED
+        elif 0 <= max_steps <= steps[s]:
+            outcome[s] = TIMEOUT
+        ended[s] = outcome[s] != RUNNING
+    return distance, collided, reached, ended

@@ -2,13 +2,13 @@
 
 Which robots does the physics send to pymunk this step
 (:meth:`~apf_physics.sim.physics.Physics.needs_physics`)? Those whose move comes within their
-radius (and a margin) of something: :meth:`Sweeps.near` measures, for every robot, the least
+radius (and a margin) of something: :meth:`SweptDistances.near` measures, for every robot, the least
 distance between the segment its centre sweeps (from where it is to where its command takes
 it) and every static edge, disc, grid boundary and the map's edge. A robot sliding along a wall
 that it never touches stays out of pymunk.
 
 Where does a robot alone in its slot end when pymunk left it overlapping a shape at its last
-substep? :meth:`Sweeps.settle` pushes it out, asking for the nearest static shape after each push.
+substep? :meth:`SweptDistances.settle` pushes it out, asking for the nearest static shape after each push.
 
 Each world's static geometry (:func:`~apf_physics.world.outlines.static_geometry`) goes into a bucket
 index (:class:`~apf_physics.world.buckets.SegmentIndex` of reach 0: square buckets, each listing the
@@ -50,10 +50,10 @@ def _index(world: World) -> SegmentIndex | None:
         zeros = np.zeros((len(a), 2))
         side = max(BUCKET_SIDE, math.sqrt(world.size[0] * world.size[1] / MOST_BUCKETS))
         return SegmentIndex(0.0, (a, b, radius, np.zeros(len(a), np.intp), kind, zeros, zeros, zeros), side=side)
-    return world.cached(("sweep_index", BUCKET_SIDE), build, static=True)
+    return world.cached(("swept_index", BUCKET_SIDE), build, static=True)
 
 
-class Sweeps:
+class SweptDistances:
     """The static geometry of the worlds in use, stacked for one compiled query over robots of many worlds."""
 
     def __init__(self):
@@ -94,6 +94,12 @@ class Sweeps:
         grid = np.array([g[:3] + g[6:] for g in grids], float).reshape(-1, 5)        # origin x, y, side, width, height
         shape = np.array([g[3:6] for g in grids], np.intp).reshape(-1, 3)          # cols, rows, first bucket
         return grid, shape, start, member, np.ascontiguousarray(prim)
+
+    def tables(self) -> tuple:
+        """The stacked worlds' arrays ``(grid, shape, start, member, prim)``, as the compiled loops take them."""
+        if self._tables is None:
+            self._tables = self._stack()
+        return self._tables
 
     def near(self, world: np.ndarray, p: np.ndarray, move: np.ndarray, distance: np.ndarray) -> np.ndarray:
         """(K,) bool: the segment from ``p`` to ``p + move`` (each (K, 2)) comes within ``distance``
@@ -237,7 +243,7 @@ def _nearest_static(w, x, y, within, grid, shape, start, member, prim):
 def _settle(world, p, before, radius, first, planes, tolerance, rounds, grid, shape, start, member, prim):
     """Robots alone in their slots, each at ``p[i]`` overlapping the static shapes whose planes
     ``planes[first[i]:first[i + 1]]`` (way out x, y; depth) were read at ``p[i]``, pushed out:
-    see :meth:`Sweeps.settle`."""
+    see :meth:`SweptDistances.settle`."""
     n = p.shape[0]
     out = p.copy()
     for i in range(n):

@@ -52,7 +52,7 @@ the size of its number."""
 
 @dataclass(frozen=True)
 class Frame:
-    """How a world file's coordinates become the world's (README, "Real maps": units).
+    """How a world file's coordinates become the world's (docs/real-maps.md: units).
 
     The world is laid out in **steps**: one unit is the robot's travel per control step, and
     the map's lower-left corner is the origin. A world file in metres with ``robot: {step:
@@ -149,7 +149,7 @@ class World:
         source: The file the world came from, for messages.
         formations: Several formations, each to its own target (the world file's ``formations:``).
         frame: How the world file's coordinates map to the world's (its units and origin).
-        crowd: ``(K, 2)`` centres of other robots, discs of :attr:`robot_radius` that repel and
+        others: ``(K, 2)`` centres of other robots, discs of :attr:`robot_radius` that repel and
             block like obstacles: the robots of other formations, as one leader sees them
             (:meth:`among`). Empty for a world as read from its file.
         unicycle: The robots are unicycles with these limits (``robot: {kinematics: unicycle,
@@ -167,7 +167,7 @@ class World:
     formation: FormationSpec | None = None
     source: str | None = None
     formations: tuple[FormationTask, ...] = ()
-    crowd: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
+    others: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
     frame: Frame = Frame()
     unicycle: UnicycleLimits | None = None
     # Caches of what is built from the world (rasters, indexes). Not constructor arguments: a
@@ -186,9 +186,9 @@ class World:
         """This world with other robots at ``robots`` (K, 2) as discs in the field and in the way.
 
         A view: it shares this world's cache (rasters of the static field stay valid; the
-        crowd's discs are added where they are, like moving obstacles).
+        other robots' discs are added where they are, like moving obstacles).
         """
-        return self._sharing(replace(self, crowd=np.asarray(robots, float).reshape(-1, 2)), everything=True)
+        return self._sharing(replace(self, others=np.asarray(robots, float).reshape(-1, 2)), everything=True)
 
     def with_task(self, targets: np.ndarray, starts: np.ndarray, name: str | None = None) -> World:
         """This world with other targets and starts, sharing what is built from its static
@@ -223,6 +223,22 @@ class World:
         if key not in cache:
             cache[key] = build()
         return cache[key]
+
+    def peek(self, key: Hashable, static: bool = False) -> Any:
+        """What :meth:`cached` keeps under ``key``, or None if nothing is built yet (nothing is built)."""
+        return (self._static if static else self._cache).get(key)
+
+    @property
+    def cache_size(self) -> int:
+        """How many things this world keeps of its own (not counting those shared by :meth:`with_task`)."""
+        return len(self._cache)
+
+    def forget(self) -> None:
+        """Drop everything built from this world (it is rebuilt when next asked for): for benchmarks
+        that time a world's first use."""
+        self._cache.clear()
+        self._static.clear()
+        self._moments.clear()
 
     # -- obstacles in time -----------------------------------------------------------------
     @property
@@ -297,7 +313,7 @@ class World:
         return moment
 
     def obstacles_at(self, t: float = 0.0) -> tuple[Obstacle, ...]:
-        """Every obstacle where it is at control step ``t`` (and the crowd's discs): ``at(t).obstacles``."""
+        """Every obstacle where it is at control step ``t`` (and the other robots' discs): ``at(t).obstacles``."""
         return self.at(t).obstacles
 
     # -- the field ---------------------------------------------------------------------
@@ -353,6 +369,17 @@ class World:
         for tx, ty in self.targets.tolist():
             d = np.minimum(d, np.hypot(points[:, 0] - tx, points[:, 1] - ty))
         return d
+
+    def reached(self, points: np.ndarray) -> np.ndarray:
+        """(N,) bool: a robot centred at each point has reached a target (within :attr:`goal_tolerance`
+        of the nearest, Model §2's episode rule)."""
+        return self.distance_to_target(points) <= self.goal_tolerance
+
+    def nearest_target(self, points: np.ndarray) -> np.ndarray:
+        """(N, 2) the target nearest each point."""
+        points = np.asarray(points, dtype=float).reshape(-1, 2)
+        d = points[:, None, :] - self.targets[None]
+        return self.targets[np.argmin(np.hypot(d[..., 0], d[..., 1]), axis=1)]
 
     # -- geometry ----------------------------------------------------------------------
     def obstacle_distance(self, points: np.ndarray, t: np.ndarray | float = 0.0, static: bool = False,
@@ -551,7 +578,7 @@ class Moment:
     :attr:`World.near_shapes`, rasters, caches). A world without moving obstacles has nothing
     to place: its moments cost an object each.
 
-    The crowd's discs (:meth:`World.among`) are in the field, the obstacle list and the
+    The other robots' discs (:meth:`World.among`) are in the field, the obstacle list and the
     clearance at points; like the static obstacles' they are not in :meth:`path_clearance` of
     a world without moving obstacles (robots keep clear of one another by the right of way).
 
@@ -582,16 +609,16 @@ class Moment:
 
     @property
     def movers(self) -> tuple[Obstacle, ...]:
-        """The moving obstacles where they are (in :attr:`World.moving` order), then the crowd's discs."""
+        """The moving obstacles where they are (in :attr:`World.moving` order), then the other robots' discs."""
         if self._movers is None:
             world = self.world
             self._movers = (tuple(world.obstacles[i].moved(shift) for i, shift in zip(world.moving, self.offsets))
-                            + tuple(CircleObstacle(c, world.robot_radius) for c in world.crowd))
+                            + tuple(CircleObstacle(c, world.robot_radius) for c in world.others))
         return self._movers
 
     @property
     def obstacles(self) -> tuple[Obstacle, ...]:
-        """Every obstacle where it is, in :attr:`World.obstacles` order, then the crowd's discs."""
+        """Every obstacle where it is, in :attr:`World.obstacles` order, then the other robots' discs."""
         if self._obstacles is None:
             world = self.world
             placed = list(world.obstacles)
@@ -627,7 +654,7 @@ class Moment:
     def obstacle_distance(self, points: np.ndarray, static: bool = False, near: bool = False) -> np.ndarray:
         """Signed distance to the nearest obstacle's boundary (negative inside); see :meth:`World.obstacle_distance`.
 
-        ``static``: leave the moving obstacles (and the crowd) out. ``near``: exact only up to
+        ``static``: leave the moving obstacles (and the other robots) out. ``near``: exact only up to
         :data:`MOVE_REACH` beyond the robot's radius.
         """
         points = np.asarray(points, dtype=float).reshape(-1, 2)
@@ -689,16 +716,16 @@ def _table_rows(t):
 
 def _with_moving(world: World, points: np.ndarray, best: np.ndarray, offsets) -> np.ndarray:
     """``best`` (N,) lowered to the signed distance to each moving obstacle, shifted by its offset in
-    ``offsets`` ((2,) or (N, 2) each, in :attr:`World.moving` order), and to the crowd's discs.
+    ``offsets`` ((2,) or (N, 2) each, in :attr:`World.moving` order), and to the other robots' discs.
 
     Measured in each obstacle's own frame: the points moved back by its offset.
     """
     for i, shift in zip(world.moving, offsets):
         d, _ = world.obstacles[i].signed_distance(points - shift)
         best = np.minimum(best, d)
-    if len(world.crowd):
-        crowd = world.crowd
-        gap = np.hypot(points[:, None, 0] - crowd[None, :, 0], points[:, None, 1] - crowd[None, :, 1])
+    if len(world.others):
+        others = world.others
+        gap = np.hypot(points[:, None, 0] - others[None, :, 0], points[:, None, 1] - others[None, :, 1])
         best = np.minimum(best, gap.min(axis=1) - world.robot_radius)
     return best
 

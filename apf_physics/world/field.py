@@ -23,6 +23,7 @@ from typing import Sequence
 
 import numpy as np
 
+from apf_physics.common.compiled import kernel
 from apf_physics.world.obstacles import Obstacle
 from apf_physics.world.spatial import ShapeSet
 
@@ -97,13 +98,33 @@ def black_hole_gradient(points: np.ndarray, targets: np.ndarray, kstr: float, ps
     return np.einsum("nt,ntj->nj", scale, diff)
 
 
+@kernel
+def repulsive_term_at(d, krep, p0, u_max):
+    """One obstacle's term at signed distance ``d`` (Model eq. 4–7): the cap ``u_max`` for ``d ≤ 0``,
+    ``min(krep/2 · (1/d − 1/p0)², u_max)`` for ``0 < d ≤ p0``, 0 beyond.
+
+    The one definition of the term: :func:`repulsive_term` applies it over arrays, and the
+    observations' compiled loops call it point by point.
+    """
+    if d <= 0.0:
+        return u_max
+    if d <= p0:
+        return min(0.5 * krep * (1.0 / d - 1.0 / p0) ** 2, u_max)
+    return 0.0
+
+
+@kernel
+def _repulsive_terms(d, krep, p0, u_max, out):
+    for i in range(d.shape[0]):
+        out[i] = repulsive_term_at(d[i], krep, p0, u_max)
+
+
 def repulsive_term(d: np.ndarray, krep: float, p0: float, u_max: float) -> np.ndarray:
-    """One obstacle's ``min(krep/2 · (1/d − 1/p0)², u_max)`` for ``d ≤ p0``; the cap for ``d ≤ 0``."""
-    with np.errstate(divide="ignore"):
-        inv = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), np.inf)
-    u = 0.5 * krep * (inv - 1.0 / p0) ** 2
-    u = np.where(d <= p0, np.minimum(u, u_max), 0.0)
-    return np.where(d <= 0, u_max, u)
+    """:func:`repulsive_term_at` of every element of ``d``."""
+    d = np.asarray(d, dtype=float)
+    out = np.empty(d.size)
+    _repulsive_terms(np.ascontiguousarray(d).reshape(-1), float(krep), float(p0), float(u_max), out)
+    return out.reshape(d.shape)
 
 
 def repulsive_term_slope(d: np.ndarray, krep: float, p0: float, u_max: float) -> np.ndarray:

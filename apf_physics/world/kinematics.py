@@ -1,7 +1,7 @@
 """How a robot moves: the holonomic robot's moves (Model §2, Table 1), and unicycle (differential-drive)
 kinematics, a robot with a heading driven by ``(v, ω)``.
 
-Units and conventions (as everywhere in the package, README "The model"): lengths in **units**
+Units and conventions (as everywhere in the package, docs/model.md): lengths in **units**
 (one unit is today's robot travel per control step), time in **control steps**, angles in
 **radians**, counter-clockwise positive, heading θ = 0 along +x. A state is ``(x, y, θ, v, ω)``:
 the robot's centre, its heading, and the speed and turn rate it was last commanded

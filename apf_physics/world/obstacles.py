@@ -168,7 +168,7 @@ class CircleObstacle:
 
 @dataclass(frozen=True, eq=False)
 class GridObstacle:
-    """The occupied cells of an occupancy grid, as **one** obstacle (README, "Real maps").
+    """The occupied cells of an occupancy grid, as **one** obstacle (docs/real-maps.md).
 
     Its distance ``d_O`` is the exact Euclidean distance to the union of the occupied cells
     (negative inside, to the nearest free cell), so a wall is one wall however it was cut.

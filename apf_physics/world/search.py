@@ -179,7 +179,7 @@ class SearchGrid:
         return nodes[clear]
 
     def at_target(self, point: np.ndarray) -> bool:
-        return bool(np.min(np.hypot(*(self.world.targets - point).T)) <= self.world.goal_tolerance)
+        return bool(self.world.reached(point)[0])
 
     def reachable(self, start: np.ndarray) -> bool:
         """Whether a target can be reached from ``start`` (connected components, no search)."""
@@ -244,7 +244,7 @@ class SearchGrid:
                 chain.append(int(nxt[chain[-1]]))
         nodes = self._shortcut(self.node_xy(np.asarray(chain)), clearance)
         end = nodes[-1]
-        target = self.world.targets[int(np.argmin(np.hypot(*(self.world.targets - end).T)))]
+        target = self.world.nearest_target(end)[0]
         if self._clear(end, target, self.world.robot_radius + LOS_MARGIN, clearance):
             if np.hypot(*(nodes[-1] - target)) > 1e-9:
                 nodes = np.vstack([nodes, target])

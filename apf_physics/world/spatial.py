@@ -1,7 +1,7 @@
 """Distances to many obstacles at a cost that does not grow with their number.
 
 A :class:`ShapeSet` answers one question for ``(N, 2)`` points: the signed distance to each
-obstacle within a ``reach`` (README, "Real maps"). The field sums a repulsive term
+obstacle within a ``reach`` (docs/real-maps.md). The field sums a repulsive term
 over those pairs, and the world takes their least as the clearance.
 
 Polygons and circles, when there are more than :data:`LOOSE_AT_MOST` of them, go into a

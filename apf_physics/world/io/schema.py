@@ -1,6 +1,6 @@
 """The world-file schema: what a world file's mapping may hold, each value checked, every problem collected.
 
-:func:`parse_world` checks a mapping read from a world file (README "World files") key by
+:func:`parse_world` checks a mapping read from a world file (docs/world-files.md) key by
 key: unknown keys (with a did-you-mean), missing ones, types, ranges and the limits below,
 each checked before the work it protects. It returns the values in the file's own units
 (:class:`FileWorld`); :func:`apf_physics.world.io.worldfile.world_from_dict` converts them and builds the
@@ -32,7 +32,7 @@ from apf_physics.world.core import FormationSpec, FormationTask, Frame
 
 T = TypeVar("T")
 
-# -- limits (README "World files"): each protects something built later --------------------
+# -- limits (docs/world-files.md): each protects something built later --------------------
 MIN_SIDE = 1.0
 """Shortest side of the map [units] (the rasters need at least a few nodes across)."""
 MAX_SIDE = 10_000.0

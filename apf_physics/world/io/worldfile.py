@@ -1,4 +1,4 @@
-"""World files: reading, validating and writing the YAML world-file contract (README "World files").
+"""World files: reading, validating and writing the YAML world-file contract (docs/world-files.md).
 
 :func:`load_world` reads a file (YAML, or JSON being YAML) and :func:`world_from_dict`
 validates a mapping and builds the :class:`~apf_physics.world.World`: the schema
@@ -44,7 +44,7 @@ from apf_physics.world.io.schema import (MAX_FOLLOWERS, MAX_FORMATIONS, MAX_NAME
 from apf_physics.world.io.schema import (MAX_POTENTIAL, MIN_GOAL_TOLERANCE, MIN_ROBOT_RADIUS, Checker, TooMany,
                                      parse_world)
 
-# -- limits that depend on several values (README "World files") ---------------------------
+# -- limits that depend on several values (docs/world-files.md) ---------------------------
 
 
 MEMORY_BUDGET = 2 * 2**30
@@ -55,12 +55,10 @@ RASTER_MARGIN = 16.0
 """How far beyond the map rasters reach [units] (observation windows of up to 29 × 29)."""
 RASTER_BYTES_PER_UNIT2 = 4_000
 """Peak bytes per square unit of rasters (map plus margin) an evaluation builds, computed in
-chunks: measured 2,400–2,600 beyond the process's own (a 300 × 300 world of boxes with the
-window and map networks and A*; a 512 × 512 MovingAI map with the map network and A*), rounded
-up, when the physics still had a clearance raster at 8 nodes per unit. The physics now keeps an
-index of the static shapes instead (:mod:`apf_physics.sim.swept`), and the A* grid and the potential
-and observation rasters at 4 nodes per unit dominate: 1,100–1,600 bytes per square unit on
-150 × 150 maps (``tests/test_world.py``), so the figure is generous."""
+chunks. The A* grid and the potential and observation rasters at 4 nodes per unit dominate:
+1,100–1,600 bytes per square unit on 150 × 150 maps (``tests/test_world.py``). The budget keeps
+more than twice that, so that a world it admits never fails in an allocation whichever planners
+run on it (the physics indexes static shapes, :mod:`apf_physics.sim.swept`, and needs no raster)."""
 RASTER_BYTES_PER_TARGET = 1_500
 """Further peak bytes per square unit per target: U is computed from a column per target
 (measured 370 at the default 4 nodes per unit; 1,500 covers a model's observer at 8)."""
@@ -257,7 +255,7 @@ def _build(check: Checker, data: Any, source: str) -> World | None:
     parts = parse_world(check, data, source)
     if parts is None:
         return None
-    # everything in steps, from the map's lower-left corner (README, "Real maps": units)
+    # everything in steps, from the map's lower-left corner (docs/real-maps.md: units)
     frame, grid = parts.frame, parts.grid
     offset, u = np.asarray(frame.offset, float), frame.unit
     to_world = (lambda pts: (np.asarray(pts, float) - offset) / u)

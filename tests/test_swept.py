@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from apf_physics import load_world
 from apf_physics.world.obstacles import GridObstacle
 from apf_physics.sim.physics import CONTACT_MARGIN, Physics
-from apf_physics.sim.swept import Sweeps, _segment_distance
+from apf_physics.sim.swept import SweptDistances, _segment_distance
 from apf_physics.world.io.worldfile import world_from_dict
 
 ROWS = ["............",     # row 0 is the lowest y
@@ -58,7 +58,7 @@ def test_near_agrees_with_the_densely_sampled_clearance_along_the_move(which):
     p = world.random_free_positions(rng, n)
     move = rng.uniform(-1.0, 1.0, (n, 2)) * rng.uniform(0.0, 2.0, (n, 1))
     distance = rng.uniform(0.0, 1.5, n)
-    sweeps = Sweeps()
+    sweeps = SweptDistances()
     near = sweeps.near(np.full(n, sweeps.add(world)), p, move, distance)
     sampled = _sampled_distance(world, p, move)
     spacing = np.hypot(move[:, 0], move[:, 1]) / 2000
@@ -70,7 +70,7 @@ def test_near_agrees_with_the_densely_sampled_clearance_along_the_move(which):
 
 def test_near_serves_robots_of_several_worlds_in_one_call():
     worlds = _worlds()
-    sweeps = Sweeps()
+    sweeps = SweptDistances()
     numbers = [sweeps.add(w) for w in worlds]
     assert numbers == [0, 1, 2] and sweeps.add(worlds[1]) == 1
     rng = np.random.default_rng(7)
@@ -82,7 +82,7 @@ def test_near_serves_robots_of_several_worlds_in_one_call():
     distance = np.full(900, 0.5)
     together = sweeps.near(which, p, move, distance)
     for k, w in enumerate(worlds):
-        alone = Sweeps()
+        alone = SweptDistances()
         mine = which == k
         np.testing.assert_array_equal(together[mine], alone.near(np.full(mine.sum(), alone.add(w)), p[mine],
                                                                  move[mine], distance[mine]))
@@ -120,7 +120,7 @@ def test_the_physics_sends_to_pymunk_exactly_the_moves_that_come_near():
 
 def test_a_robot_pushed_into_a_corner_is_settled_against_both_walls():
     world = _grid_world()
-    sweeps = Sweeps()
+    sweeps = SweptDistances()
     w = sweeps.add(world)
     r = world.robot_radius
     # the inner corner under row 7's wall (y from 7 to 8) and beside column 2's (x from 2 to 3, rows 7-8):
@@ -137,7 +137,7 @@ def test_a_robot_in_a_gap_narrower_than_itself_goes_back_where_it_started():
     world = world_from_dict({"size": [10, 10], "field": "thesis-general", "targets": [[9, 9]], "starts": [],
                              "obstacles": [{"polygon": [[4, 4], [5, 4], [5, 6], [4, 6]]},
                                            {"polygon": [[5.4, 4], [6.4, 4], [6.4, 6], [5.4, 6]]}]})
-    sweeps = Sweeps()
+    sweeps = SweptDistances()
     r = world.robot_radius
     assert 2 * r > 0.4
     before = np.array([[5.2, 3.0]])
