@@ -319,6 +319,30 @@ def test_n_step_returns_sum_the_rewards_to_the_episodes_end_or_n_steps(n):
     np.testing.assert_allclose([g[3:] for g in got], [e[3:] for e in expected], rtol=1e-5, atol=1e-6)
 
 
+def test_failure_starts_are_drawn_where_searches_failed():
+    """Searches that failed from one cell make the share drawn by failure come from that cell; the rest
+    stay uniform over the pool, and the counts fade by half at each draw."""
+    from apf_physics.learning.dqn import DRAWN_STARTS, FailureStarts
+
+    world = tiny_world()
+    pool = training_starts(world, "reachable", seed=0, count=5_000)
+    starts = FailureStarts(pool, world, share=0.5)
+    cell = np.floor(pool[0])
+    in_cell = (np.floor(pool) == cell).all(axis=1)
+    assert 0 < in_cell.mean() < 0.1
+    ok = pool[~in_cell]   # every other cell: many searches, all reached
+    starts.record(np.vstack([pool[in_cell][:20], ok]), np.r_[np.zeros(20, bool), np.ones(len(ok), bool)])
+    drawn = starts.draw(np.random.default_rng(0))
+    share = (np.floor(drawn) == cell).all(axis=1).mean()
+    assert len(drawn) == DRAWN_STARTS and 0.45 < share < 0.5 + 0.1   # about half from the failing cell
+    assert starts.failures.sum() == pytest.approx(10.0) and starts.searches.sum() == pytest.approx((20 + len(ok)) / 2)
+    again = FailureStarts(pool, world, share=0.5)
+    again.load(starts.state())
+    np.testing.assert_array_equal(again.draw(np.random.default_rng(1)), starts.draw(np.random.default_rng(1)))
+    with pytest.raises(UserError, match="failure_starts needs train_starts 'reachable' or 'lattice'"):
+        tiny_config(failure_starts=0.5, train_starts="random")
+
+
 # ---------------------------------------------------------------------------- evaluation
 
 
@@ -399,9 +423,10 @@ def test_training_writes_log_plot_and_models_evaluated_as_eval_runs_them(tmp_pat
     np.testing.assert_array_equal(policy.act(obs), policy.q_values(obs).argmax(1))
 
 
-def test_resumed_run_continues_exactly_as_an_uninterrupted_one(tmp_path):
+@pytest.mark.parametrize("starts", [{}, {"train_starts": "reachable", "failure_starts": 0.5, "n_step": 3}])
+def test_resumed_run_continues_exactly_as_an_uninterrupted_one(tmp_path, starts):
     config = tiny_config(total_steps=3_000, checkpoint_every=1_500, eval_every=500, target_success=None,
-                         save_buffer=True)
+                         save_buffer=True, **starts)
     phases = phases_for_world(tiny_world(), config)
     straight = train(config, phases, out_dir=tmp_path / "straight")
     # stopped where the uninterrupted run writes its first checkpoint, then resumed

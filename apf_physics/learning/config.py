@@ -139,6 +139,10 @@ class EnvConfig:
     world_start_fraction: float = 0.0
     """Share of the environments whose searches start at the worlds' own starts; the others use
     ``train_starts``."""
+    failure_starts: float = 0.0
+    """Share of the ``train_starts`` drawn where recent training searches failed (weighted by the
+    failures of the one-unit cell each start lies in, redrawn every 100 vector steps); the rest are
+    drawn uniformly. Needs ``"reachable"`` or ``"lattice"`` starts (0: all uniform)."""
     num_envs: int = 1
     """Environments stepped in parallel (one vector step adds up to this many transitions)."""
 
@@ -149,6 +153,9 @@ class EnvConfig:
             (self.obs_size >= 3 and self.obs_size % 2 == 1, "obs_size must be odd and at least 3"),
             (reward_ok, f"reward must be one of {', '.join(REWARD_PRESETS)} or a dict of RewardWeights fields"),
             (0.0 <= self.world_start_fraction <= 1.0, "world_start_fraction must be in [0, 1]"),
+            (0.0 <= self.failure_starts <= 1.0, "failure_starts must be in [0, 1]"),
+            (not self.failure_starts or self.train_starts in ("reachable", "lattice"),
+             "failure_starts needs train_starts 'reachable' or 'lattice' (starts drawn from a pool)"),
             (min(self.num_envs, self.obs_resolution, self.memory_cap, self.max_episode_steps) >= 1,
              "num_envs, obs_resolution, memory_cap and max_episode_steps must be positive"),
         ])
