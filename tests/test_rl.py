@@ -15,6 +15,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -140,12 +141,17 @@ def test_thesis_presets_stay_as_written():
     assert curriculum.schedule.total_episodes is None
     fast = preset("fast")
     assert (fast.env.num_envs, fast.dqn.batch_size, fast.dqn.loss, fast.dqn.double_dqn, fast.dqn.target_update, fast.dqn.tau) == (
-        64, 64, "huber", True, "soft", 0.01)
+        64, 128, "huber", True, "soft", 0.01)
     assert (fast.dqn.reward_scale, fast.network.obs_transform, fast.env.train_starts, fast.schedule.target_success) == (
         1e-3, "relative-log", "reachable", 0.99)
-    # validated on 1,000 seeded random free starts never trained on: they pick best.pt and stop the run
+    assert (fast.dqn.gradient_steps, fast.dqn.n_step, fast.network.learning_rate, fast.dqn.eval_network) == (
+        4, 5, 5e-4, "target")
+    assert fast.env.failure_starts == 0.5
+    # validated on 1,000 seeded random free starts never trained on: they pick best.pt and stop the run, which
+    # stops by steps (the same run on any machine), not by the clock
     assert fast.evaluation.eval_random_starts == 1000 and fast.evaluation.select == ("success", "world_starts_success")
     assert not fast.evaluation.eval_shield
+    assert fast.schedule.total_steps == 300_000 and fast.schedule.time_limit is None
 
 
 def test_each_preset_is_its_base_changed_by_its_layer():
@@ -321,8 +327,8 @@ def test_n_step_returns_sum_the_rewards_to_the_episodes_end_or_n_steps(n):
 
 def test_failure_starts_are_drawn_where_searches_failed():
     """Searches that failed from one cell make the share drawn by failure come from that cell; the rest
-    stay uniform over the pool, and the counts fade by half at each draw."""
-    from apf_physics.learning.dqn import DRAWN_STARTS, FailureStarts
+    stay uniform over the pool, and the counts fade at each draw."""
+    from apf_physics.learning.dqn import DRAWN_STARTS, FAILURE_MEMORY, FailureStarts
 
     world = tiny_world()
     pool = training_starts(world, "reachable", seed=0, count=5_000)
@@ -335,12 +341,21 @@ def test_failure_starts_are_drawn_where_searches_failed():
     drawn = starts.draw(np.random.default_rng(0))
     share = (np.floor(drawn) == cell).all(axis=1).mean()
     assert len(drawn) == DRAWN_STARTS and 0.45 < share < 0.5 + 0.1   # about half from the failing cell
-    assert starts.failures.sum() == pytest.approx(10.0) and starts.searches.sum() == pytest.approx((20 + len(ok)) / 2)
+    assert starts.failures.sum() == pytest.approx(20 * FAILURE_MEMORY)
+    assert starts.searches.sum() == pytest.approx((20 + len(ok)) * FAILURE_MEMORY)
     again = FailureStarts(pool, world, share=0.5)
     again.load(starts.state())
     np.testing.assert_array_equal(again.draw(np.random.default_rng(1)), starts.draw(np.random.default_rng(1)))
-    with pytest.raises(UserError, match="failure_starts needs train_starts 'reachable' or 'lattice'"):
-        tiny_config(failure_starts=0.5, train_starts="random")
+    # with random starts, drawn from a pool of random free positions away from the target
+    from apf_physics.learning.dqn import start_pool
+    random = start_pool("random", world, seed=0, count=500)
+    assert random.shape == (500, 2) and world.is_free(random).all()
+    assert np.array_equal(start_pool("world", world, seed=0), world.starts)
+    from apf_physics.learning import phases_for_curriculum
+    from apf_physics.learning.curriculum import load_curriculum
+    with pytest.raises(UserError, match="failure_starts draws the starts of one world"):
+        phases_for_curriculum(load_curriculum(Path(__file__).parent.parent / "worlds" / "curricula" / "thesis.yaml"),
+                              preset("general", failure_starts=0.5))
 
 
 # ---------------------------------------------------------------------------- evaluation
@@ -421,6 +436,22 @@ def test_training_writes_log_plot_and_models_evaluated_as_eval_runs_them(tmp_pat
     policy = DQNPolicy.load(tmp_path / "best.pt")
     obs = np.random.default_rng(0).random((7, 1, 5, 5), dtype=np.float32) * 50
     np.testing.assert_array_equal(policy.act(obs), policy.q_values(obs).argmax(1))
+
+
+def test_the_same_seed_gives_the_same_run(tmp_path):
+    """Runs stop by steps and evaluations, not the clock: two runs of one configuration and seed write the same
+    train.csv (but for wall_time) and the same best.pt; another seed does not."""
+    config = tiny_config(total_steps=1_500, eval_every=500, target_success=None, train_starts="reachable",
+                         failure_starts=0.5, n_step=3, eval_network="target")
+    phases = phases_for_world(tiny_world(), config)
+    other = replace(config, seed=1)
+    for c, name in ((config, "a"), (config, "b"), (other, "c")):
+        train(c, phases if c is config else phases_for_world(tiny_world(), other), out_dir=tmp_path / name)
+    a, b, c = ([{k: v for k, v in row.items() if k != "wall_time"} for row in read_csv(tmp_path / name / "train.csv")]
+               for name in "abc")
+    assert a == b and a != c
+    best = [load_model(tmp_path / name / "best.pt").network.state_dict() for name in "ab"]
+    assert all(torch.equal(best[0][k], best[1][k]) for k in best[0])
 
 
 @pytest.mark.parametrize("starts", [{}, {"train_starts": "reachable", "failure_starts": 0.5, "n_step": 3}])

@@ -140,9 +140,9 @@ class EnvConfig:
     """Share of the environments whose searches start at the worlds' own starts; the others use
     ``train_starts``."""
     failure_starts: float = 0.0
-    """Share of the ``train_starts`` drawn where recent training searches failed (weighted by the
+    """Share of the training starts drawn where recent training searches failed (weighted by the
     failures of the one-unit cell each start lies in, redrawn every 100 vector steps); the rest are
-    drawn uniformly. Needs ``"reachable"`` or ``"lattice"`` starts (0: all uniform)."""
+    drawn as ``train_starts`` says (0: all of them). One world only."""
     num_envs: int = 1
     """Environments stepped in parallel (one vector step adds up to this many transitions)."""
 
@@ -154,8 +154,6 @@ class EnvConfig:
             (reward_ok, f"reward must be one of {', '.join(REWARD_PRESETS)} or a dict of RewardWeights fields"),
             (0.0 <= self.world_start_fraction <= 1.0, "world_start_fraction must be in [0, 1]"),
             (0.0 <= self.failure_starts <= 1.0, "failure_starts must be in [0, 1]"),
-            (not self.failure_starts or self.train_starts in ("reachable", "lattice"),
-             "failure_starts needs train_starts 'reachable' or 'lattice' (starts drawn from a pool)"),
             (min(self.num_envs, self.obs_resolution, self.memory_cap, self.max_episode_steps) >= 1,
              "num_envs, obs_resolution, memory_cap and max_episode_steps must be positive"),
         ])
@@ -596,10 +594,11 @@ LAYERS: dict[str, tuple[str | None, dict[str, Any], str]] = {
         loss="huber", double_dqn=True, target_update="soft", tau=0.01, max_grad_norm=10.0, reward_scale=1e-3),
         "the learner that learns a world fastest here (shared by fast and the general presets)"),
     "fast": ("fast learner", dict(
-        train_starts="reachable", eval_random_starts=1000, select=("success", "world_starts_success"),
-        exploration_episodes=3_000, total_episodes=None, total_steps=3_000_000, eval_every=3_200,
-        target_success=0.99, time_limit=900.0, checkpoint_every=128_000, log_every=6_400),
-        "a world, learnt fastest; validated on random starts"),
+        train_starts="reachable", failure_starts=0.5, batch_size=128, gradient_steps=4, n_step=5,
+        learning_rate=5e-4, eval_network="target", eval_random_starts=1000, select=("success", "world_starts_success"),
+        exploration_episodes=3_000, total_episodes=None, total_steps=300_000, eval_every=3_200,
+        target_success=0.99, checkpoint_every=128_000, log_every=6_400),
+        "a world, learnt fastest; validated on random starts, stopped by steps"),
     "thesis-general-world": (None, dict(
         obs_size=9, filters=(4, 4), reward="thesis-general", exploration_episodes=150, total_episodes=150,
         eval_every=2_000, checkpoint_every=5_000, log_every=500), "Table 4's network and weights on one world"),

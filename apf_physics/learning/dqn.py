@@ -183,10 +183,11 @@ class FailureStarts:
     """Training starts drawn where the policy fails: a share of them weighted by the recent failures near each.
 
     The map is divided into cells of one unit (one step); each cell keeps counts of the recent
-    training searches that started in it and of those that failed, halved at every draw (recent
-    searches count most). A draw of :data:`DRAWN_STARTS` starts takes a ``share`` of them from the
-    pool with weights ``(failures + 0.05) / (searches + 1)`` of their cells, and the rest
-    uniformly from the pool, so every start stays possible.
+    training searches that started in it and of those that failed, multiplied by
+    :data:`FAILURE_MEMORY` at every draw (recent searches count most). A draw of
+    :data:`DRAWN_STARTS` starts takes a ``share`` of them from the pool with weights
+    ``(failures + 0.05) / (searches + 1)`` of their cells, and the rest uniformly from the pool,
+    so every start stays possible.
 
     Args:
         pool: (S, 2) the training starts drawn from (in steps).
@@ -214,13 +215,13 @@ class FailureStarts:
             np.add.at(self.failures, cells, (~np.asarray(success, bool)).astype(float))
 
     def draw(self, rng: np.random.Generator) -> np.ndarray:
-        """(:data:`DRAWN_STARTS`, 2) starts for the next environments; the counts are then halved."""
+        """(:data:`DRAWN_STARTS`, 2) starts for the next environments; the counts then fade."""
         weights = ((self.failures + 0.05) / (self.searches + 1.0))[self.cells]
         by_failure = int(round(self.share * DRAWN_STARTS))
         rows = np.concatenate([rng.choice(len(self.pool), by_failure, p=weights / weights.sum()),
                                rng.integers(0, len(self.pool), DRAWN_STARTS - by_failure)])
-        self.searches *= 0.5
-        self.failures *= 0.5
+        self.searches *= FAILURE_MEMORY
+        self.failures *= FAILURE_MEMORY
         return self.pool[rows]
 
     def state(self) -> dict[str, list[float]]:
@@ -228,6 +229,20 @@ class FailureStarts:
 
     def load(self, state: dict[str, list[float]]) -> None:
         self.searches[:], self.failures[:] = state["searches"], state["failures"]
+
+
+FAILURE_MEMORY = 0.5
+"""What the counts of :class:`FailureStarts` keep at each draw: the last two or three draws' searches count,
+as the policy changes between draws (0.8 was measured too: on fixed20 it reached the target later)."""
+def start_pool(starts: Any, world: World, seed: int, count: int = 50_000) -> np.ndarray:
+    """The starts :class:`FailureStarts` draws from, for a phase's ``starts``: its array; the world's own
+    starts for ``"world"``; for ``"random"`` (or a world without starts) ``count`` random free positions
+    away from the targets (generator seeded ``[seed, 7]``, as ``"reachable"`` starts are drawn)."""
+    if not isinstance(starts, str):
+        return np.asarray(starts, float)
+    if starts == "world" and len(world.starts):
+        return np.asarray(world.starts, float)
+    return world.random_free_positions(np.random.default_rng([seed, 7]), count, away_from_targets=True)
 
 
 DRAWN_STARTS = 4096
@@ -297,7 +312,8 @@ class DQNLearner(Learner):
     def begin(self, worlds: Sequence[World], phase: Phase, seed: tuple[int, int]) -> None:
         self.worlds, self.phase = list(worlds), phase
         if self.config.env.failure_starts and self.failure_starts is None:
-            self.failure_starts = FailureStarts(phase.starts, worlds[0], self.config.env.failure_starts)
+            pool = start_pool(phase.starts, worlds[0], self.config.run.seed)
+            self.failure_starts = FailureStarts(pool, worlds[0], self.config.env.failure_starts)
             if self._failure_state is not None:
                 self.failure_starts.load(self._failure_state)
         self._open(seed)

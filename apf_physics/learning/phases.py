@@ -118,6 +118,8 @@ def phases_for_curriculum(stages: Sequence[Stage], config: TrainConfig) -> list[
     if not (staged and stages) and not config.schedule.families:
         raise UserError(f"preset {config.preset!r} trains one world: give it --world, or set stage_episodes, "
                         "stage_steps or families for a curriculum")
+    if config.env.failure_starts:
+        raise UserError("failure_starts draws the starts of one world; a curriculum trains with failure_starts=0")
     validation = validation_set(config)
     phases = []
     if staged:
