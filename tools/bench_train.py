@@ -15,7 +15,9 @@ Then (``--sb3``) trains Stable-Baselines3's DQN on the same vector env (``SB3Vec
 the same network (``WindowCNN``), training starts and the hyper-parameters SB3 has, for the
 median training time of our runs (its evaluations on our validation starts, every 6,400
 env steps, left out of that time), and measures its best model on the same fresh draws.
-``--profile`` prints a torch profile of a short training run.
+``--profile`` prints a torch profile of a short training run; ``--updates`` times one update of the
+network computed four ways (its 2×2 convolutions as they are, in channels-last memory, by torch's
+native convolution, and as four shifted slices and one matmul), side by side.
 
 Usage::
 
@@ -39,6 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from apf_physics.cli.train import parse_overrides  # noqa: E402
 from apf_physics.learning import validation  # noqa: E402
 from apf_physics.learning.config import preset  # noqa: E402
+from apf_physics.learning.dqn import q_network  # noqa: E402
 from apf_physics.learning.phases import phases_for_world, training_starts  # noqa: E402
 from apf_physics.learning.trainer import train  # noqa: E402
 from apf_physics.models.files import load_model  # noqa: E402
@@ -206,6 +209,86 @@ def bench_sb3(world, seconds: float, seed: int, overrides: dict, eval_every: int
           flush=True)
 
 
+def _shifted_slices_forward(net, obs: torch.Tensor) -> torch.Tensor:
+    """The window network's forward with each 2×2 convolution as four shifted slices, channels last, and one
+    matmul, and the 2×2 stride-1 max-pool as a max of shifted views (the same values, summed in another order)."""
+    import torch.nn.functional as F
+
+    from apf_physics.models.network import relative_log
+
+    def conv(x, weight, bias):   # x (N, H, W, C), weight (F, C, 2, 2)
+        patches = torch.cat([x[:, :-1, :-1], x[:, :-1, 1:], x[:, 1:, :-1], x[:, 1:, 1:]], dim=-1)
+        matrix = weight.permute(2, 3, 1, 0).reshape(-1, weight.shape[0])   # rows (dy, dx, c)
+        out = torch.addmm(bias, patches.reshape(-1, patches.shape[-1]), matrix)
+        return out.view(*patches.shape[:-1], weight.shape[0])
+
+    def pool(x):
+        cols = torch.maximum(x[:, :, :-1], x[:, :, 1:])
+        return torch.maximum(cols[:, :-1], cols[:, 1:])
+
+    x = relative_log(obs).permute(0, 2, 3, 1)
+    for i, layer in enumerate(net.convs):
+        x = F.leaky_relu(conv(x, layer.weight, layer.bias), net.negative_slope)
+        if i < net.pooled_convs:
+            x = pool(x)
+    x = x.permute(0, 3, 1, 2).flatten(1)
+    for layer in net.hidden:
+        x = F.leaky_relu(layer(x), net.negative_slope)
+    return net.head(x)
+
+
+def bench_updates(overrides: dict, batches=(64, 128, 256), repeats: int = 5, updates: int = 40) -> None:
+    """Milliseconds of one double-DQN update of the window network (three forward passes, a backward, Adam), as
+    it is (oneDNN's 2×2 convolutions) and three other ways to compute the same network, interleaved in one
+    process; the median of ``repeats`` blocks of ``updates`` updates, and the ratio to the first."""
+    import copy
+
+    import torch.nn.functional as F
+
+    config = preset("fast", **overrides)
+    torch.set_num_threads(config.run.threads)
+    ways = {"as it is (oneDNN)": None, "channels-last memory": "channels_last", "native convolution": "native",
+            "shifted slices + matmul": "slices"}
+    for batch in batches:
+        runs = {}
+        for name, way in ways.items():
+            torch.manual_seed(0)
+            net = q_network(config)
+            if way == "channels_last":
+                net = net.to(memory_format=torch.channels_last)
+            target = copy.deepcopy(net).requires_grad_(False)
+            optimizer = torch.optim.Adam(net.parameters(), 1e-3, fused=True)
+            obs, next_obs = (torch.randn(batch, *config.observer.shape) * 30 for _ in range(2))
+            if way == "channels_last":
+                obs, next_obs = (o.contiguous(memory_format=torch.channels_last) for o in (obs, next_obs))
+            actions = torch.randint(0, 9, (batch, 1))
+            forward = _shifted_slices_forward if way == "slices" else (lambda n, x: n(x))
+
+            def update(net=net, target=target, optimizer=optimizer, obs=obs, next_obs=next_obs, actions=actions,
+                       forward=forward):
+                with torch.no_grad():
+                    chosen = forward(net, next_obs).argmax(1, keepdim=True)
+                    td = forward(target, next_obs).gather(1, chosen).squeeze(1)
+                loss = F.smooth_l1_loss(forward(net, obs).gather(1, actions).squeeze(1), td)
+                optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                optimizer.step()
+            runs[name] = (update, way == "native", [])
+        for _ in range(repeats):
+            for update, native, times in runs.values():
+                with torch.backends.mkldnn.flags(enabled=not native):
+                    for _ in range(5):
+                        update()
+                    t = time.perf_counter()
+                    for _ in range(updates):
+                        update()
+                    times.append((time.perf_counter() - t) / updates * 1e3)
+        base = statistics.median(runs["as it is (oneDNN)"][2])
+        print(f"batch {batch}: " + ", ".join(f"{name} {statistics.median(times):.2f} ms "
+                                             f"({statistics.median(times) / base:.2f}x)"
+                                             for name, (_, _, times) in runs.items()), flush=True)
+
+
 def profile(world, overrides: dict, steps: int = 40_000) -> None:
     from torch.profiler import ProfilerActivity, profile as torch_profile
 
@@ -229,11 +312,19 @@ def main() -> None:
                         help="change a field of the recipe (as `apf-physics train --set`)")
     parser.add_argument("--sb3", action="store_true", help="also train Stable-Baselines3 DQN for the median time")
     parser.add_argument("--profile", action="store_true", help="profile a short training run instead")
+    parser.add_argument("--updates", action="store_true",
+                        help="time one update of the network computed four ways instead (convolutions as they are, "
+                             "channels-last, native, shifted slices)")
     args = parser.parse_args()
     world = load_world(args.world)
     overrides = {**RECIPES[args.recipe], **parse_overrides(args.set)}
     if args.profile:
         profile(world, overrides)
+        return
+    if args.updates:
+        print(f"load average at start: {os.getloadavg()[0]:.2f}", flush=True)
+        bench_updates(overrides)
+        print(f"load average at end: {os.getloadavg()[0]:.2f}")
         return
     print(f"load average at start: {os.getloadavg()[0]:.2f}; torch threads {preset('fast', **overrides).run.threads}; "
           f"recipe {args.recipe}: changes to fast: {overrides or 'none'}", flush=True)
