@@ -95,13 +95,16 @@ def _train(data: dict) -> str:
     n = random[0]["episodes"]
     collisions = sum(round(r["collision_rate"] * r["episodes"]) for r in random)
     own = [run["starts"]["successes"] for run in runs]
-    minutes = [run["train_seconds"] / 60 for run in runs]
+    seconds = [round(run["train_seconds"]) for run in runs]
+    steps = [run["steps"] for run in runs]
     seeds = [run["seed"] for run in runs]
+    loads = [v for run in runs for v in run["load_average"]]
     return (f"seeds {_range(seeds)}: **{_range([r['successes'] for r in random])} of {n}** random free starts "
-            f"it never trained or validated on ({len(random) // len(runs)} draws each; median "
-            f"{_pct(data['median_random_success'])}), {_n(collisions, 'collision')}, {_range(own)}/"
-            f"{runs[0]['starts']['episodes']} of the thesis's starts; {min(minutes):.0f}–{max(minutes):.0f} min "
-            f"of training each")
+            f"no run saw ({len(random) // len(runs)} draws each; median {_pct(data['median_random_success'])}), "
+            f"{_n(collisions, 'collision')}, {_range(own)}/{runs[0]['starts']['episodes']} of the world starts; "
+            f"stopped after {min(steps) / 1000:.0f}–{max(steps) / 1000:.0f}k steps (median "
+            f"{data['median_steps'] / 1000:.0f}k), {_range(seconds)} s of training each (load "
+            f"{min(loads):.1f}–{max(loads):.1f})")
 
 
 def _formation(data: dict) -> str:

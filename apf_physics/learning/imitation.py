@@ -306,7 +306,7 @@ class ImitationLearner(Learner):
     def log_values(self, c: Counters) -> dict[str, Any]:
         loss = float(np.mean(self.losses)) if self.losses else None
         self.losses = []
-        return {"epsilon": "", "mean_return": "", "success_rate": "", "loss": loss}
+        return {"epsilon": "", "mean_return": "", "training_success": "", "loss": loss}
 
     def state(self, with_buffer: bool) -> tuple[dict[str, Any], dict[str, Any]]:
         return {"losses": self.losses, "updates": self.updates}, {"q_network": self.network.state_dict(),
