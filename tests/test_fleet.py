@@ -168,7 +168,7 @@ def test_fleet_values_are_the_map_networks_action_values_for_a_robot_alone():
     goal = lattice.nearest(world.targets)
     nodes = lattice.nearest(positions)
     fleet = planner.fleet_values(lattice, nodes, np.repeat(goal, 3))
-    policy = planner._policy
+    policy = planner.policy
     alone = world.with_task(lattice.points(goal), np.zeros((0, 2)))
     # the same nine moves scored by the policy itself, V read at the nodes they end on
     view, _ = policy.values(alone)

@@ -360,8 +360,7 @@ def test_skipping_arbiter_reads_on_untouched_substeps_changes_nothing():
         rng = np.random.default_rng(0)
         stepper = Stepper([world], 32, max_steps=40)
         if always_read:   # never count: read after every substep
-            stepper.physics._touching.count = lambda counting: None
-            stepper.physics._touching.counting = False
+            stepper.physics.count_at_most = -1
         stepper.start(np.arange(32), world.random_free_positions(rng, 32)[:, None, :])
         log = []
         for _ in range(120):

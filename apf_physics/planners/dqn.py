@@ -114,6 +114,11 @@ class DQNPlanner(Planner):
         return f"{self.name}: {NETWORKS[self.network_kind]} ({source})"
 
     @property
+    def policy(self) -> DQNPolicy | MapPolicy | None:
+        """The greedy policy of the network loaded (None before :meth:`reset`)."""
+        return self._policy
+
+    @property
     def network_kind(self) -> str | None:
         """``"map"`` or ``"window"``: the kind of network loaded (None before :meth:`reset`)."""
         if self._policy is None:
