@@ -11,7 +11,9 @@ Two checks of the learned planner where the robot barely fits, each beside A* in
 
 Usage::
 
-    python tools/bench_scale.py [--maps 4] [--door 2] [--boxes 3573] [--planners dqn,astar] [--keep DIR]
+    python tools/bench_scale.py [--maps 4] [--door 2] [--boxes 3573] [--planners dqn,astar] [--model PATH] [--keep DIR]
+
+``--model`` gives the learned planners a model file of your own (an earlier ``map.pt``, say).
 """
 
 from __future__ import annotations
@@ -83,6 +85,7 @@ def main() -> None:
     parser.add_argument("--door", type=int, default=2, help="door width in cells (2 at --cell 0.5: one step)")
     parser.add_argument("--boxes", type=int, default=3573, help="the clutter world's box count")
     parser.add_argument("--planners", default="dqn,astar")
+    parser.add_argument("--model", help="a model file for the learned planners (default: the shipped one)")
     parser.add_argument("--keep", type=Path, help="write the maps here (default: a temporary folder)")
     args = parser.parse_args()
     names = args.planners.split(",")
@@ -95,7 +98,7 @@ def main() -> None:
             t = time.perf_counter()
             outcomes = []
             for map_path, scen_path in files:
-                ev = evaluate_trials(make_planner(name), scenario_trials(map_path, scen_path, cell=0.5))
+                ev = evaluate_trials(make_planner(name, args.model), scenario_trials(map_path, scen_path, cell=0.5))
                 outcomes += [e.outcome for e in ev.episodes]
             print(f"  {name:<16} {outcomes.count('reached')}/{len(outcomes)} reached, "
                   f"{outcomes.count('collision')} collisions  ({time.perf_counter() - t:.1f} s)", flush=True)
@@ -103,7 +106,7 @@ def main() -> None:
     print(f"dense clutter: {len(world.obstacles):,} boxes, {len(world.starts)} starts", flush=True)
     for name in names:
         t = time.perf_counter()
-        outcomes = [e.outcome for e in evaluate(make_planner(name), [world]).episodes]
+        outcomes = [e.outcome for e in evaluate(make_planner(name, args.model), [world]).episodes]
         print(f"  {name:<16} {outcomes.count('reached')}/{len(outcomes)} reached, "
               f"{outcomes.count('collision')} collisions, outcomes {outcomes}  ({time.perf_counter() - t:.1f} s)",
               flush=True)
