@@ -949,6 +949,16 @@ def read_movingai_scen(path: str | Path) -> list[Scenario]:
     return read_scenarios(path).scenarios
 
 
+def scen_text(scenarios: list[Scenario]) -> str:
+    """A MovingAI scenario file's text (``version 1``, then one tab-separated line per scenario):
+    what :func:`read_movingai_scen` reads back."""
+    lines = ["version 1"]
+    for s in scenarios:
+        lines.append("\t".join([str(s.bucket), s.map_name, str(s.width), str(s.height), str(s.start[0]),
+                                str(s.start[1]), str(s.goal[0]), str(s.goal[1]), repr(float(s.optimal))]))
+    return "\n".join(lines) + "\n"
+
+
 def scenario_points(scen: Scenario, grid: OccupancyMap) -> tuple[np.ndarray, np.ndarray]:
     """World coordinates of a scenario's start and goal on ``grid``: the centres of their cells.
 
