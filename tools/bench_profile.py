@@ -81,11 +81,12 @@ ENV_FILES = ("/envs/", "/world.py", "/world/", "/kinematics.py", "/actions.py", 
 def part_of(filename: str, function: str) -> str:
     """The part of a step that a function (cProfile's file name and function name) belongs to."""
     filename = filename.replace("\\", "/")
-    if "cpSpaceStep" in function:
+    builtin = filename == "~"   # a C function: cProfile names it by its module and name only
+    if builtin and "cpSpaceStep" in function:
         return PYMUNK_STEP
-    if "/pymunk/" in filename or "pymunk" in function or "_cffi_backend" in function or "cpSpace" in function:
+    if "/pymunk/" in filename or (builtin and ("pymunk" in function or "_cffi_backend" in function)):
         return PYMUNK_IO
-    if "remap" in function:
+    if builtin and "remap" in function:
         return OBSERVATION
     if "/apf_physics/" in filename:
         if any(f in filename for f in RULES_FILES):
