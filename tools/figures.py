@@ -195,8 +195,9 @@ def _barn(data: dict) -> str:
     collisions = sum(r["summary"]["collisions"] for r in runs)
     scores = [r["summary"]["mean_score"] for r in runs]
     reached = sum(r["summary"]["successes"] for r in astar)
+    score = f"{min(scores):.4f}" if min(scores) == max(scores) else f"{min(scores):.4f}–{max(scores):.4f}"
     return (f"the `dqn` default (`map.pt`) **{'; '.join(parts)}**; {_n(collisions, 'collision')}; the challenge's "
-            f"score {min(scores):.4f}–{max(scores):.4f} (0.25 at most); A* {reached}/{sum(r['summary']['worlds'] for r in astar)}")
+            f"score {score} (0.25 at most); A* {reached}/{sum(r['summary']['worlds'] for r in astar)}")
 
 
 def _crossing_what(data: dict) -> str:

@@ -135,12 +135,11 @@ def random_starts(world, count: int, seed: int) -> np.ndarray:
     return out[:count]
 
 
-def run(args: argparse.Namespace) -> int:
-
+def _check_options(args: argparse.Namespace) -> None:
+    """Every option that can be judged before any work: one message each, naming the option."""
     if args.json:
         check_writable(args.json, create_parent=True)
     if args.html:
-
         check_writable(Path(args.html) / PAGE, create_parent=True)
     if args.ray is not None and args.ray and Path(args.ray).exists():
         raise UserError(f"--ray: {args.ray!r} is a file, not a Ray address; put --ray after the worlds, "
@@ -157,6 +156,58 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--kinematics: not with --scen (MovingAI scenarios run holonomic robots)")
     if args.lifelong is not None and args.lifelong < 1:
         raise UserError(f"--lifelong: must be at least 1 step, got {args.lifelong}")
+
+
+def _starts(args: argparse.Namespace, worlds: list) -> dict | None:
+    """``--random-starts``' starts by world name, or None for the worlds' own (each must have some)."""
+    if args.random_starts is None:
+        empty = [w.label for w in worlds if not len(w.starts)]
+        if empty:
+            raise UserError(f"{', '.join(empty)}: no starts to run from (add 'starts: [[x, y], ...]' to the "
+                            f"world file, or use --random-starts N)")
+        return None
+    for world in worlds:
+        if not len(world.start_cells()):
+            raise UserError(f"{world.label}: no free position for a robot farther than goal_tolerance "
+                            f"{show_length(world.frame, world.goal_tolerance)} from every target, so no random start")
+    return {w.name: random_starts(w, args.random_starts, args.seed) for w in worlds}
+
+
+def _evaluate_here(args: argparse.Namespace, names: list[str], worlds: list, starts: dict | None) -> tuple[list, list]:
+    """Each planner over the worlds in this process, with a progress bar: evaluations, and which network
+    each learned planner ran."""
+    evaluations, notes = [], []
+    for name in names:
+        planner = make_planner(name, model=args.model)
+        count = sum(len(w.formations) if args.formation and w.formations
+                    else len(w.starts if starts is None else starts[w.name]) for w in worlds)
+        progress = EvalProgress(planner.name, len(worlds), count, enabled=not args.no_progress)
+        try:
+            evaluations.append(evaluate(planner, worlds, starts, max_steps=args.max_steps,
+                                        formation=args.formation, progress=progress, kinematics=args.kinematics))
+        finally:
+            progress.close()
+        if hasattr(planner, "describe"):   # a learned planner: say which network ran
+            notes.append(planner.describe())
+    return evaluations, notes
+
+
+def _evaluate_on_ray(args: argparse.Namespace, names: list[str], worlds: list, starts: dict | None) -> tuple[list, list]:
+    """:func:`_evaluate_here` as tasks on Ray."""
+    evaluations = evaluate_on_ray(names, worlds, starts, model=args.model, max_steps=args.max_steps,
+                                  formation=args.formation, address=args.ray or None,
+                                  worlds_per_task=args.ray_batch, kinematics=args.kinematics)
+    notes = []
+    for name in names:   # which network each learned planner ran (on the last world, as a local run says)
+        planner = make_planner(name, model=args.model)
+        if hasattr(planner, "describe"):
+            planner.reset(worlds[-1], np.zeros((1, 2)))
+            notes.append(planner.describe())
+    return evaluations, notes
+
+
+def run(args: argparse.Namespace) -> int:
+    _check_options(args)
     if args.scen is not None and args.agents is not None:
         return run_fleets(args, None)
     if args.scen is not None:
@@ -175,44 +226,9 @@ def run(args: argparse.Namespace) -> int:
         return run_fleets(args, fleets)
     if args.lifelong is not None:
         raise UserError("--lifelong: only for fleets (with --scen and --agents, or a world file with 'robots:')")
-    starts = None
-    if args.random_starts is not None:
-        for world in worlds:
-            if not len(world.start_cells()):
-                raise UserError(f"{world.label}: no free position for a robot farther than goal_tolerance "
-                                f"{show_length(world.frame, world.goal_tolerance)} from every target, so no random start")
-        starts = {w.name: random_starts(w, args.random_starts, args.seed) for w in worlds}
-    else:
-        empty = [w.label for w in worlds if not len(w.starts)]
-        if empty:
-            raise UserError(f"{', '.join(empty)}: no starts to run from (add 'starts: [[x, y], ...]' to the "
-                            f"world file, or use --random-starts N)")
+    starts = _starts(args, worlds)
     names = [n.strip() for n in args.planner.split(",") if n.strip()]
-    if args.ray is not None:
-        evaluations = evaluate_on_ray(names, worlds, starts, model=args.model, max_steps=args.max_steps,
-                                      formation=args.formation, address=args.ray or None,
-                                      worlds_per_task=args.ray_batch, kinematics=args.kinematics)
-        notes = []
-        for name in names:   # which network each learned planner ran (on the last world, as a local run says)
-            planner = make_planner(name, model=args.model)
-            if hasattr(planner, "describe"):
-                planner.reset(worlds[-1], np.zeros((1, 2)))
-                notes.append(planner.describe())
-    else:
-        evaluations, notes = [], []
-        for name in names:
-            planner = make_planner(name, model=args.model)
-            count = sum(len(w.formations) if args.formation and w.formations
-                        else len(w.starts if starts is None else starts[w.name]) for w in worlds)
-            progress = EvalProgress(planner.name, len(worlds), count, enabled=not args.no_progress)
-            try:
-                evaluations.append(evaluate(planner, worlds, starts, max_steps=args.max_steps,
-                                            formation=args.formation, progress=progress,
-                                            kinematics=args.kinematics))
-            finally:
-                progress.close()
-            if hasattr(planner, "describe"):   # a learned planner: say which network ran
-                notes.append(planner.describe())
+    evaluations, notes = (_evaluate_on_ray if args.ray is not None else _evaluate_here)(args, names, worlds, starts)
     print(format_table(evaluations))
     for note in notes:
         print(note)
@@ -220,7 +236,6 @@ def run(args: argparse.Namespace) -> int:
         write_json(evaluations, args.json)
         print(f"wrote {args.json}")
     if args.html:
-
         page = write_results(args.html, evaluations, worlds, title=f"apf-physics eval: {', '.join(names)}",
                              progress=not args.no_progress)
         print(f"wrote {page} (open it in a browser)")
