@@ -274,22 +274,8 @@ def sample_values(v: torch.Tensor, free: torch.Tensor, origin: Sequence[float], 
         (K,) values and (K,) bool: whether any of the four nodes around the point was usable
         (else the value is :data:`UNREACHED`).
     """
-    rows, cols = v.shape
-    ij = (points - torch.as_tensor(origin, dtype=points.dtype)) * resolution
-    c0, r0 = torch.floor(ij[:, 0]), torch.floor(ij[:, 1])
-    fx, fy = ij[:, 0] - c0, ij[:, 1] - r0
-    c0, r0 = c0.long(), r0.long()
-    best = torch.full((len(points),), UNREACHED, dtype=v.dtype)
-    usable = free & (v > UNREACHED / 2)
-    for dr, dc in ((0, 0), (0, 1), (1, 0), (1, 1)):
-        r, c = r0 + dr, c0 + dc
-        inside = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
-        rc, cc = r.clamp(0, rows - 1), c.clamp(0, cols - 1)
-        ok = inside & usable[rc, cc]
-        distance = torch.hypot(fx - dc, fy - dr).to(v.dtype) / resolution
-        best = torch.maximum(best, torch.where(ok, v[rc, cc] - distance, torch.full_like(best, UNREACHED)))
-    found = best > UNREACHED / 2
-    return best, found
+    best = _best_corner(v, None, free, origin, resolution, points)
+    return best, best > UNREACHED / 2
 
 
 def values_between(v: torch.Tensor, kappa: torch.Tensor, free: torch.Tensor, origin: Sequence[float], resolution: int,
@@ -301,6 +287,13 @@ def values_between(v: torch.Tensor, kappa: torch.Tensor, free: torch.Tensor, ori
     The map network that moves onto nodes reads V at its moves' ends on nodes; this is V where the
     robot stands when it is not on one (at its start), in the same units, so that no move looks
     like a loss against a value read at another rate (:func:`sample_values` charges 1 per unit)."""
+    return _best_corner(v, kappa, free, origin, resolution, points)
+
+
+def _best_corner(v: torch.Tensor, kappa: torch.Tensor | None, free: torch.Tensor, origin: Sequence[float],
+                 resolution: int, points: torch.Tensor) -> torch.Tensor:
+    """``max_n V(n) − rate(n)·|q − n|`` over the four nodes ``n`` around each point ``q`` that are free
+    and reached (``rate``: ``kappa``, or 1 per unit when None); :data:`UNREACHED` where none is."""
     rows, cols = v.shape
     ij = (points - torch.as_tensor(origin, dtype=points.dtype)) * resolution
     c0, r0 = torch.floor(ij[:, 0]), torch.floor(ij[:, 1])
@@ -314,7 +307,8 @@ def values_between(v: torch.Tensor, kappa: torch.Tensor, free: torch.Tensor, ori
         rc, cc = r.clamp(0, rows - 1), c.clamp(0, cols - 1)
         ok = inside & usable[rc, cc]
         distance = torch.hypot(fx - dc, fy - dr).to(v.dtype) / resolution
-        best = torch.maximum(best, torch.where(ok, v[rc, cc] - kappa[rc, cc] * distance, torch.full_like(best, UNREACHED)))
+        cost = distance if kappa is None else kappa[rc, cc] * distance
+        best = torch.maximum(best, torch.where(ok, v[rc, cc] - cost, torch.full_like(best, UNREACHED)))
     return best
 
 

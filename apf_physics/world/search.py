@@ -101,6 +101,41 @@ def shortest_paths(free: np.ndarray, sources: np.ndarray, steps, dtype=np.float6
 
 
 @kernel
+def _heap_push(heap_cost, heap_node, size, value, node):
+    """Add ``(value, node)`` to the binary min-heap of ``size`` entries (it then holds ``size + 1``)."""
+    i = size
+    while i > 0:
+        parent = (i - 1) // 2
+        if heap_cost[parent] <= value:
+            break
+        heap_cost[i], heap_node[i] = heap_cost[parent], heap_node[parent]
+        i = parent
+    heap_cost[i], heap_node[i] = value, node
+
+
+@kernel
+def _heap_pop(heap_cost, heap_node, size):
+    """The root ``(cost, node)`` of the binary min-heap of ``size`` entries, removed (it then holds
+    ``size − 1``): the last entry sifted down from the root."""
+    c, u = heap_cost[0], heap_node[0]
+    size -= 1
+    last_c, last_u = heap_cost[size], heap_node[size]
+    i = 0
+    while True:
+        child = 2 * i + 1
+        if child >= size:
+            break
+        if child + 1 < size and heap_cost[child + 1] < heap_cost[child]:
+            child += 1
+        if heap_cost[child] >= last_c:
+            break
+        heap_cost[i], heap_node[i] = heap_cost[child], heap_node[child]
+        i = child
+    heap_cost[i], heap_node[i] = last_c, last_u
+    return c, u
+
+
+@kernel
 def node_distances(ok, offsets, lengths, source):
     """Dijkstra over a graph of nodes with up to M moves each: every node's cost to reach ``source``.
 
@@ -124,22 +159,8 @@ def node_distances(ok, offsets, lengths, source):
     heap_cost[0], heap_node[0] = 0.0, source
     size = 1
     while size > 0:
-        c, u = heap_cost[0], heap_node[0]
+        c, u = _heap_pop(heap_cost, heap_node, size)
         size -= 1
-        # sift the last entry down from the root
-        last_c, last_u = heap_cost[size], heap_node[size]
-        i = 0
-        while True:
-            child = 2 * i + 1
-            if child >= size:
-                break
-            if child + 1 < size and heap_cost[child + 1] < heap_cost[child]:
-                child += 1
-            if heap_cost[child] >= last_c:
-                break
-            heap_cost[i], heap_node[i] = heap_cost[child], heap_node[child]
-            i = child
-        heap_cost[i], heap_node[i] = last_c, last_u
         if done[u]:
             continue
         done[u] = True
@@ -150,16 +171,8 @@ def node_distances(ok, offsets, lengths, source):
             value = c + lengths[m]
             if value < cost[v]:
                 cost[v] = value
-                # sift up
-                i = size
+                _heap_push(heap_cost, heap_node, size, value, v)
                 size += 1
-                while i > 0:
-                    parent = (i - 1) // 2
-                    if heap_cost[parent] <= value:
-                        break
-                    heap_cost[i], heap_node[i] = heap_cost[parent], heap_node[parent]
-                    i = parent
-                heap_cost[i], heap_node[i] = value, v
     return cost
 
 
@@ -192,28 +205,11 @@ def _settle_costs(free, rows, cols, sources, dr, dc, edges, cost):
     size = 0
     for s in sources:
         cost[s] = 0
-        i = size
+        _heap_push(heap_cost, heap_node, size, cost[s], s)
         size += 1
-        while i > 0 and heap_cost[(i - 1) // 2] > 0:
-            heap_cost[i], heap_node[i] = heap_cost[(i - 1) // 2], heap_node[(i - 1) // 2]
-            i = (i - 1) // 2
-        heap_cost[i], heap_node[i] = cost[s], s
     while size > 0:
-        c, y = heap_cost[0], heap_node[0]
+        c, y = _heap_pop(heap_cost, heap_node, size)
         size -= 1
-        last_c, last_u = heap_cost[size], heap_node[size]
-        i = 0
-        while True:
-            child = 2 * i + 1
-            if child >= size:
-                break
-            if child + 1 < size and heap_cost[child + 1] < heap_cost[child]:
-                child += 1
-            if heap_cost[child] >= last_c:
-                break
-            heap_cost[i], heap_node[i] = heap_cost[child], heap_node[child]
-            i = child
-        heap_cost[i], heap_node[i] = last_c, last_u
         if done[y] or c > cost[y]:
             continue
         done[y] = True
@@ -228,15 +224,8 @@ def _settle_costs(free, rows, cols, sources, dr, dc, edges, cost):
             value = cost[y] + edges[k, x]
             if value < cost[x]:
                 cost[x] = value
-                i = size
+                _heap_push(heap_cost, heap_node, size, value, x)
                 size += 1
-                while i > 0:
-                    parent = (i - 1) // 2
-                    if heap_cost[parent] <= value:
-                        break
-                    heap_cost[i], heap_node[i] = heap_cost[parent], heap_node[parent]
-                    i = parent
-                heap_cost[i], heap_node[i] = value, x
 
 
 class SearchGrid:
