@@ -219,3 +219,15 @@ def test_a_start_within_the_goal_tolerance_is_reached_at_once_and_reported_by_th
     np.testing.assert_allclose(report.positions[:2, 0], [[4.0, 5.0], [5.0, 5.5]])    # not moved
     report = stepper.step(np.array([[[1.0, 0.0]], [[1.0, 0.0]], [[0.0, 1.0]]]))
     assert report.ended.tolist() == [False, False, False] and report.reached.tolist() == [False, False, False]
+
+
+def test_a_start_reported_reached_is_not_reported_again_when_another_slot_starts():
+    world = _open(targets=[[5.0, 5.0]], goal_tolerance=1.0)
+    stepper = Stepper([world], 3, max_steps=10)
+    stepper.start(np.arange(3), np.array([[[5.0, 5.0]], [[2.0, 5.0]], [[2.0, 2.0]]]))
+    up = np.array([[[0.0, 1.0]]] * 3)
+    assert stepper.step(up).reached.tolist() == [True, False, False]
+    stepper.start(np.array([1]), np.array([[[2.0, 8.0]]]))        # a new episode in slot 1, away from the target
+    report = stepper.step(up)
+    assert report.ended.tolist() == [False, False, False] and report.reached.tolist() == [False, False, False]
+    assert stepper.outcome.tolist() == [REACHED, RUNNING, RUNNING]
