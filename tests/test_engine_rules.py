@@ -231,3 +231,14 @@ def test_a_start_reported_reached_is_not_reported_again_when_another_slot_starts
     report = stepper.step(up)
     assert report.ended.tolist() == [False, False, False] and report.reached.tolist() == [False, False, False]
     assert stepper.outcome.tolist() == [REACHED, RUNNING, RUNNING]
+
+
+def test_a_start_without_world_ids_among_several_worlds_is_in_the_first():
+    near = _open(name="near", targets=[[5.0, 5.0]], goal_tolerance=0.5)
+    far = _open(name="far", targets=[[15.0, 5.0]], goal_tolerance=1.5)
+    stepper = Stepper([near, far], 2, max_steps=20)
+    stepper.start(np.array([0, 1]), np.array([[[2.0, 5.0]], [[4.0, 5.0]]]))
+    assert stepper.world(0) is near and stepper.world(1) is near
+    np.testing.assert_allclose(stepper.last_distance, [3.0, 1.0])
+    report = stepper.step(np.array([[[1.0, 0.0]], [[0.5, 0.0]]]))
+    assert report.reached.tolist() == [False, True]              # within near's 0.5 (far's target is 10 away)
