@@ -210,3 +210,4 @@ def test_lengths_convert_one_or_many():
     assert isinstance(length_to_file(frame, 0.8), float)
     assert show_point(frame, [29.0, 7.0]) == "[6.25, -0.25]"
     assert show_point(Frame(), [1 / 3, 2 / 3]) == "[0.3333, 0.6667]"       # four digits unless told
+    assert show_length(Frame(), 1 / 3) == "0.3333" and show_length(frame, 4 / 3, 2) == "0.33 m"
