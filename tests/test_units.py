@@ -138,10 +138,11 @@ def file_in_steps_of(step):
             "goal_tolerance": 1.0 * step, "field": "thesis-general",
             "obstacles": [{"circle": {"center": s(12, 4), "radius": 1.0 * step}, "name": "pillar",
                            "motion": {"path": [s(0, 8)], "speed": 0.5 * step, "phase": 2.0 * step}},
-                          {"polygon": [s(20, 12), s(24, 12), s(24, 16)]}],
+                          {"polygon": [s(20, 12), s(24, 12), s(24, 16)], "name": "cart",
+                           "motion": {"path": [s(4, -4)], "speed": 0.25 * step, "loop": True}}],
             "targets": [s(36, 16)], "starts": [s(4, 4)],
             "formation": {"followers": 2, "comm_range": 4.0 * step, "spacing": 2.0 * step, "shape": "offsets",
-                          "offsets": [s(-2, 0), s(-4, 0)]}}
+                          "offsets": [s(-2, 1), s(-4, -1)]}}
 
 
 @pytest.mark.parametrize("step", [0.5, 2.0])
@@ -158,10 +159,12 @@ def test_a_world_file_in_other_units_is_read_in_steps_and_written_back_as_given(
     np.testing.assert_allclose(circle.motion.path, [[0, 8]])
     assert (circle.motion.speed, circle.motion.phase) == (0.5, 2.0)
     np.testing.assert_allclose(polygon.vertices, [[20, 12], [24, 12], [24, 16]])
+    assert polygon.name == "cart" and polygon.motion.loop and polygon.motion.speed == 0.25
+    np.testing.assert_allclose(polygon.motion.path, [[4, -4]])
     np.testing.assert_allclose(world.targets, [[36, 16]])
     np.testing.assert_allclose(world.starts, [[4, 4]])
     assert (world.formation.comm_range, world.formation.spacing) == (4.0, 2.0)
-    assert world.formation.offsets == ((-2.0, 0.0), (-4.0, 0.0))
+    assert world.formation.offsets == ((-2.0, 1.0), (-4.0, -1.0))
     # written back: the file's own values, the field's parameters in its units too
     written = world_to_file(world)
     assert {k: v for k, v in written.items() if k != "field"} == {k: v for k, v in data.items() if k != "field"}
