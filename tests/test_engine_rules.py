@@ -8,6 +8,7 @@ import numpy as np
 
 from apf_physics import world_from_dict
 from apf_physics.sim.engine import COLLISION, REACHED, RUNNING, TIMEOUT, TRAPPED, Stepper, TrapDetector, TrapWatch
+from apf_physics.world.kinematics import UnicycleLimits
 
 from conftest import simple_world_dict
 
@@ -242,3 +243,18 @@ def test_a_start_without_world_ids_among_several_worlds_is_in_the_first():
     np.testing.assert_allclose(stepper.last_distance, [3.0, 1.0])
     report = stepper.step(np.array([[[1.0, 0.0]], [[0.5, 0.0]]]))
     assert report.reached.tolist() == [False, True]              # within near's 0.5 (far's target is 10 away)
+
+
+def test_unicycles_start_at_rest_headed_as_given_or_toward_the_target_nearest_their_leader():
+    world = _open(targets=[[15.0, 5.0], [5.0, 15.0]])
+    stepper = Stepper([world], 3, robots_per_slot=2, unicycle=UnicycleLimits())
+    start = np.array([[[5.0, 5.0], [4.0, 5.0]], [[14.0, 12.0], [13.0, 12.0]], [[5.0, 12.0], [5.0, 11.0]]])
+    stepper.start(np.arange(3), start)
+    # the nearest target of slot 0's leader is [15, 5] (east), of slot 1's [15, 5] too (7.1 away; [5, 15] is
+    # 9.5), of slot 2's [5, 15] (north); a follower faces where its leader does
+    toward = np.array([0.0, np.arctan2(-7.0, 1.0), np.pi / 2])
+    np.testing.assert_allclose(stepper.poses()[..., 2], np.repeat(toward[:, None], 2, axis=1), atol=1e-12)
+    np.testing.assert_array_equal(stepper.states()[..., 3:], 0.0)
+    stepper.start(np.array([1]), start[1:2], headings=np.array([[1.0, 7.0]]))     # given, wrapped to [-π, π)
+    np.testing.assert_allclose(stepper.poses()[1, :, 2], [1.0, 7.0 - 2 * np.pi])
+    np.testing.assert_allclose(stepper.poses()[[0, 2], :, 2], np.repeat(toward[[0, 2], None], 2, axis=1), atol=1e-12)
