@@ -28,7 +28,7 @@ TINY = {
 TINY_OPTIONS = dict(obs_size=5, filters=(8, 8), num_envs=16, batch_size=64, learning_starts=200,
                     exploration_episodes=300, max_episode_steps=30, train_starts="random",
                     total_steps=3_000, eval_every=1_000, log_every=500, checkpoint_every=1_000,
-                    eval_random_starts=0, select=("success", "random_success"), target_success=1.0)
+                    eval_random_starts=0, select=("success", "world_starts_success"), target_success=1.0)
 """The ``fast`` preset scaled to the tiny world."""
 
 

@@ -275,3 +275,42 @@ def test_a_crowd_pressed_into_a_narrow_v_of_bars_holds(half_angle):
         before = physics.positions
         physics.step(np.tile([math.sqrt(2), 0.0], (slots * m, 1)) + rng.normal(0, 0.3, (slots * m, 2)))
         assert_contacts_hold(physics, before)
+
+def test_hundreds_of_fleet_robots_crossing_in_corridors_never_touch(tmp_path):
+    # a warehouse of aisles two cells wide: 300 robots, the western half's bound east and the eastern
+    # half's west; every step, every pair of discs keeps 2r + SAFETY apart all along the moves
+    from apf_physics.control.fleet import Lattice
+    from apf_physics.control.shield import SAFETY
+    from apf_physics.experiments.fleet import rollout_fleet
+    from apf_physics.experiments.movingai import map_world
+    from apf_physics.planners import make_planner
+    from apf_physics.world.core import Fleet
+    from conftest import write_warehouse_map
+
+    path = tmp_path / "wh.map"
+    write_warehouse_map(path, blocks=(6, 5), shelf=8, aisle=2, border=2)
+    world = map_world(path)
+    lattice = Lattice.of(world, (0.5, 0.5))
+    free = np.flatnonzero(lattice.free)
+    points = lattice.points(free)
+    middle = world.size[0] / 2
+    rng = np.random.default_rng(0)
+    west, east = rng.permutation(free[points[:, 0] < middle]), rng.permutation(free[points[:, 0] >= middle])
+    count = 150
+    starts = np.concatenate([west[:count], east[:count]])
+    goals = np.concatenate([east[count:2 * count], west[count:2 * count]])
+    run = rollout_fleet(world, make_planner("astar"), Fleet(lattice.points(starts), lattice.points(goals)))
+    s = run.summary()
+    assert s["robot_robot_collisions"] == 0 and s["robot_obstacle_collisions"] == 0
+    assert s["arrived"] >= 0.99 * 2 * count
+    p = run.positions
+    for t in range(run.steps):
+        before, move = p[t], p[t + 1] - p[t]
+        d = before[:, None, :] - before[None, :, :]
+        v = move[:, None, :] - move[None, :, :]
+        a = np.sum(v * v, axis=-1)
+        u = np.clip(np.where(a > 0, -np.sum(d * v, axis=-1) / np.where(a > 0, a, 1.0), 0.0), 0.0, 1.0)
+        gap = np.hypot(*(d + u[..., None] * v).transpose(2, 0, 1))
+        np.fill_diagonal(gap, np.inf)
+        assert gap.min() >= 2 * world.robot_radius + SAFETY - 1e-6
+        assert np.all(world.static_clearance(p[t + 1]) >= world.robot_radius)

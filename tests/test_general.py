@@ -144,7 +144,7 @@ def test_shipped_general_model_loads_and_runs_the_test_worlds_without_collisions
     assert model.meta["config"]["dqn"]["reward"]["revisit"] < 0        # the general-revisit recipe
     planner, episodes, per_world = _shipped_on_test_worlds()
     # the episodes are the window network's (potential + visit memory), with its long trap window
-    assert isinstance(planner._policy, DQNPolicy) and planner._policy.obs_shape == (2, 11, 11)
+    assert isinstance(planner.policy, DQNPolicy) and planner.policy.obs_shape == (2, 11, 11)
     assert planner.shield and planner.trap_window == planner.MEMORY_TRAP_WINDOW
     assert len(episodes) == 20 and [len(v) for v in per_world.values()] == [5, 5, 5, 5]
     # documented (models/README.md): no collision from any of the 20 starts

@@ -36,12 +36,13 @@ def reference_add_near(self, values: np.ndarray, mine: np.ndarray, local: np.nda
     """
     k, h = self.config.size, self.config.size // 2
     field = world.field
-    if lattice:   # window columns dx / rows dy within p0 of each shape's box, clipped to the window
-        first = np.clip(np.ceil(lo - field.p0 - local), -h, h + 1).astype(np.intp)
-        last = np.clip(np.floor(hi + field.p0 - local), -h - 1, h).astype(np.intp)
+    reach = max(field.p0, world.robot_radius)   # p0, and the cap where the robot touches (Model §1)
+    if lattice:   # window columns dx / rows dy within reach of each shape's box, clipped to the window
+        first = np.clip(np.ceil(lo - reach - local), -h, h + 1).astype(np.intp)
+        last = np.clip(np.floor(hi + reach - local), -h - 1, h).astype(np.intp)
     else:
         first = np.zeros(local.shape, np.intp)
-        inside_box = np.all((local >= lo - field.p0) & (local <= hi + field.p0), axis=-1)
+        inside_box = np.all((local >= lo - reach) & (local <= hi + reach), axis=-1)
         last = np.where(inside_box[..., None], first, -1)
     robot, shape = np.nonzero((first[..., 0] <= last[..., 0]) & (first[..., 1] <= last[..., 1]))
     if not len(robot):
@@ -61,7 +62,7 @@ def reference_add_near(self, values: np.ndarray, mine: np.ndarray, local: np.nda
         dist, _ = shapes[index].signed_distance(np.stack([px[pairs], py[pairs]], -1).reshape(-1, 2))
         d[pairs] = dist.reshape(-1, dx.shape[1])
     d = d[valid]
-    term = apf.repulsive_term(d, field.krep, field.p0, field.u_max)
+    term = apf.repulsive_term(apf.contact_distance(d, world.robot_radius), field.krep, field.p0, field.u_max)
     flat = (h - dy) * k + (dx + h) if lattice else np.zeros_like(dx)                # window point [h - dy, h + dx]
     q = values.shape[1]
     cell = (mine[robot][:, None] * q + flat)[valid]        # index into values as one (n·Q,) row
@@ -87,12 +88,13 @@ def numpy_add_near(self, values: np.ndarray, mine: np.ndarray, local: np.ndarray
     """
     k, h = self.config.size, self.config.size // 2
     field = world.field
-    if lattice:   # window columns dx / rows dy within p0 of each shape's box, clipped to the window
-        first = np.clip(np.ceil(lo - field.p0 - local), -h, h + 1).astype(np.intp)
-        last = np.clip(np.floor(hi + field.p0 - local), -h - 1, h).astype(np.intp)
+    reach = max(field.p0, world.robot_radius)   # p0, and the cap where the robot touches (Model §1)
+    if lattice:   # window columns dx / rows dy within reach of each shape's box, clipped to the window
+        first = np.clip(np.ceil(lo - reach - local), -h, h + 1).astype(np.intp)
+        last = np.clip(np.floor(hi + reach - local), -h - 1, h).astype(np.intp)
     else:
         first = np.zeros(local.shape, np.intp)
-        inside_box = np.all((local >= lo - field.p0) & (local <= hi + field.p0), axis=-1)
+        inside_box = np.all((local >= lo - reach) & (local <= hi + reach), axis=-1)
         last = np.where(inside_box[..., None], first, -1)
     robot, shape = np.nonzero((first[..., 0] <= last[..., 0]) & (first[..., 1] <= last[..., 1]))
     if not len(robot):
@@ -111,7 +113,7 @@ def numpy_add_near(self, values: np.ndarray, mine: np.ndarray, local: np.ndarray
     for index in (np.unique(shape[polygon]).tolist() if polygon.any() else ()):
         mine_ = shape == index
         d[mine_], _ = shapes[index].signed_distance(np.stack([px[mine_], py[mine_]], -1))
-    term = apf.repulsive_term(d, field.krep, field.p0, field.u_max)
+    term = apf.repulsive_term(apf.contact_distance(d, world.robot_radius), field.krep, field.p0, field.u_max)
     n, q = values.shape
     cell = mine[robot[pair]] * q + ((h - dy) * k + (dx + h) if lattice else 0)    # window point [h - dy, h + dx]
     # each point's terms summed in the order above (bincount adds in input order), then added to

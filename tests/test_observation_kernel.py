@@ -34,7 +34,9 @@ def random_case(rng: np.random.Generator, size: int, lattice: bool, polygons: bo
     the numpy implementations' arguments, ``local = where[:, None] − table[steps]``."""
     field = FIELDS[int(rng.integers(len(FIELDS)))]
     u_wall = float(rng.choice([field.u_max * 3 + 0.1, 311.3, 1e3 / 3]))
-    world = SimpleNamespace(field=field, u_wall=u_wall)
+    # the robot's size: none, small, one that touches beyond p0 (the cap where it touches: Model §1)
+    radius_of_robot = float(rng.choice([0.0, 0.25, 0.8, field.p0 + 0.3]))
+    world = SimpleNamespace(field=field, u_wall=u_wall, robot_radius=radius_of_robot)
     robots, count = int(rng.integers(1, 40)), int(rng.integers(1, 9))
     n = robots + int(rng.integers(0, 5))
     mine = rng.permutation(n)[:robots]
@@ -109,7 +111,7 @@ def test_many_points_at_once():
     """Thousands of robots among hundreds of discs: hypot and the term over ~10⁵ points, as numpy gives them."""
     observer = Observer(ObserverConfig(size=11), 1)
     rng = np.random.default_rng(7)
-    world = SimpleNamespace(field=FIELDS[1], u_wall=250.0)
+    world = SimpleNamespace(field=FIELDS[1], u_wall=250.0, robot_radius=0.3)
     robots, count = 3000, 40
     centre = rng.uniform(0, 30, (count, 2))
     radius = rng.uniform(0.1, 1.0, count)
@@ -189,7 +191,7 @@ def test_points_at_the_edges_of_the_shortcut_read_as_by_hypot(field):
     (a few ulps to a relative 1e-6 either side, and on the rim and at ``p0`` exactly), in every
     direction, read as the numpy implementations read them."""
     observer = Observer(ObserverConfig(size=1), 1)
-    world = SimpleNamespace(field=field, u_wall=field.u_max * 3 + 0.1)
+    world = SimpleNamespace(field=field, u_wall=field.u_max * 3 + 0.1, robot_radius=0.0)   # the shortcut's edges
     radius = np.array([0.25, 0.5, 1.0 / 3.0, 0.7])
     centre = np.array([[0.0, 0.0], [3.0, -2.0], [-1.5, 0.5], [0.1, 0.2]])
     shaped_for = []

@@ -360,8 +360,7 @@ def test_skipping_arbiter_reads_on_untouched_substeps_changes_nothing():
         rng = np.random.default_rng(0)
         stepper = Stepper([world], 32, max_steps=40)
         if always_read:   # never count: read after every substep
-            stepper.physics._touching.count = lambda counting: None
-            stepper.physics._touching.counting = False
+            stepper.physics.count_at_most = -1
         stepper.start(np.arange(32), world.random_free_positions(rng, 32)[:, None, :])
         log = []
         for _ in range(120):
@@ -408,3 +407,19 @@ def test_the_contact_log_names_what_each_robot_touched(worlds_dir, robots_per_sl
                 assert other // robots_per_slot == robot // robots_per_slot
                 assert np.hypot(*(p[other] - p[robot])) <= 2 * r + 2 * reach
     assert {0, 1} <= kinds and (robots_per_slot == 1 or 2 in kinds)   # obstacles, walls (and robots) were touched
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_a_crowds_free_move_test_by_cells_decides_as_the_dense_one(seed):
+    from apf_physics.sim.freemove import close_under_touch, crowd_needs, may_touch
+    rng = np.random.default_rng(seed)
+    n = 200
+    p = rng.uniform(0, 12 + 4 * seed, (n, 2))
+    dp = rng.choice([-1.0, 0.0, 1.0], (n, 2)) * rng.uniform(0.5, 1.0, (n, 1))
+    radius = np.full(n, 0.25)
+    needs = rng.random(n) < 0.05
+    bend = rng.uniform(0, 0.1, n) if seed % 2 else None
+    both, near = may_touch(p[None], dp[None], radius[None, :, None], np.ones((1, n), bool), 2.8,
+                           None if bend is None else bend[None])
+    dense = close_under_touch(needs[None], both, near)[0]
+    assert np.array_equal(crowd_needs(p, dp, radius, needs, 2.8, bend), dense)

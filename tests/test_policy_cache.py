@@ -82,7 +82,7 @@ def test_forty_worlds_on_one_policy_leave_nothing_in_the_policy():
     one = entry_bytes(make_world())
     growth = grown(lambda i: ask(policy, make_world()), 40)
     assert growth < one, f"{growth:,} bytes for 30 worlds (one's values: {one:,})"
-    assert vars(policy).keys() == {"network", "model", "moves", "lengths"}   # no cache of its own
+    assert vars(policy).keys() == {"network", "model", "on_nodes", "moves", "lengths"}   # no cache of its own
 
 
 def test_views_share_the_values_and_copies_start_without():

@@ -75,11 +75,12 @@ def test_readme_snippets_print_what_they_say(monkeypatch):
     source, lines, names = _snippet("gym.make_vec(")
     assert lines == ["(64, 1, 11, 11)"] and names["obs"].shape == (64, 1, 11, 11)
 
-    # -- Stable-Baselines3: DQN and PPO train on the env as the README shows
-    source, lines, names = _snippet("from stable_baselines3 import DQN, PPO")
-    assert lines == ["2000 1024"] and "# 2000 1024" in source
-    assert names["dqn"].observation_space.shape == (1, 11, 11)
-    assert names["dqn"].observation_space.low.min() == -1.0 and names["dqn"].observation_space.high.max() == 1.0
+    # -- Stable-Baselines3: DQN (the window network), PPO and SAC train on the vector env as the README shows
+    for algorithm, steps, shape in (("DQN", 2048, (1, 11, 11)), ("PPO", 1024, (1, 11, 11)), ("SAC", 400, (69,))):
+        source, lines, names = _snippet(f"from stable_baselines3 import {algorithm}\n")
+        assert lines == [str(steps)] and f"# {steps}" in source, algorithm
+        assert names["model"].observation_space.shape == shape and names["model"].num_timesteps == steps
+    assert names["model"].observation_space.low.min() == -1.0 and names["model"].observation_space.high.max() == 1.0
 
     # -- a unicycle with continuous commands and the range sensor: the spaces the README names
     source, lines, names = _snippet('kinematics="unicycle", observation="lidar"')
@@ -96,6 +97,28 @@ def test_readme_snippets_print_what_they_say(monkeypatch):
     assert lines == ["(21.6, 21.6) 0.25", "[[1.65 0.55]]", str(["reached"] * 5)]
     assert "# (21.6, 21.6) in steps; 0.25 m per step" in source and "# [[1.65 0.55]]" in source
     assert "# 5 x 'reached'" in source
+
+
+def test_sb3_check_env_warnings_are_quoted_as_they_are():
+    """SB3's ``check_env`` on ``Navigate-v0``: the README says how many warnings it gives and quotes the first
+    sentence of each; docs/environments.md quotes each whole (whitespace aside)."""
+    import warnings
+
+    import gymnasium as gym
+    from stable_baselines3.common.env_checker import check_env
+
+    import apf_physics  # noqa: F401  (registers the ids)
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(gym.make("apf_physics/Navigate-v0", world="fixed20"))
+    said = [re.sub(r"\s+", " ", str(w.message)).strip() for w in caught]
+    readme, docs = (re.sub(r"\s+", " ", path.read_text(encoding="utf-8"))
+                    for path in (ROOT / "README.md", ROOT / "docs" / "environments.md"))
+    counts = {1: "once", 2: "twice", 3: "three times", 4: "four times"}
+    assert f"SB3's `check_env` warns {counts[len(said)]}" in readme
+    for message in said:
+        assert message.split(". ")[0] in readme and message in docs, message
 
 
 def _figures_tool():

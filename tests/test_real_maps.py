@@ -42,6 +42,8 @@ def scaled(data: dict, k: float) -> dict:
                         {"circle": {"center": pts(o["circle"]["center"]), "radius": o["circle"]["radius"] * k}}
                         for o in data["obstacles"]]
     f = data["field"]
+    if isinstance(f, str):   # a preset by name: its values are in steps, whatever the file's unit
+        return out
     out["field"] = dict(f, katt=f["katt"] / k**2, krep=f["krep"] * k**2, kstr=f["kstr"] / k**2, p0=f["p0"] * k,
                         ps=f["ps"] * k)
     return out

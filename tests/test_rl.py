@@ -15,6 +15,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -39,11 +40,14 @@ from apf_physics.learning import (
     train,
 )
 from apf_physics.learning import validation
+from apf_physics.learning.buffer import NStepReturns
 from apf_physics.learning.config import replace
 from apf_physics.learning.phases import reachable_mask, training_starts, validation_starts
 from apf_physics.learning.rundir import RunDir
 from apf_physics.learning.config import load_config
 from apf_physics.learning.dqn import q_network
+from apf_physics.learning.learner import Counters
+from apf_physics.learning.progress import Progress
 from apf_physics.learning.trainer import CSV_COLUMNS
 from rl_worlds import TINY_OPTIONS, tiny_world, write_tiny_world
 
@@ -137,12 +141,17 @@ def test_thesis_presets_stay_as_written():
     assert curriculum.schedule.total_episodes is None
     fast = preset("fast")
     assert (fast.env.num_envs, fast.dqn.batch_size, fast.dqn.loss, fast.dqn.double_dqn, fast.dqn.target_update, fast.dqn.tau) == (
-        64, 64, "huber", True, "soft", 0.01)
+        64, 128, "huber", True, "soft", 0.01)
     assert (fast.dqn.reward_scale, fast.network.obs_transform, fast.env.train_starts, fast.schedule.target_success) == (
         1e-3, "relative-log", "reachable", 0.99)
-    # validated on 1,000 seeded random free starts never trained on: they pick best.pt and stop the run
-    assert fast.evaluation.eval_random_starts == 1000 and fast.evaluation.select == ("random_success", "success")
+    assert (fast.dqn.gradient_steps, fast.dqn.n_step, fast.network.learning_rate, fast.dqn.eval_network) == (
+        4, 5, 5e-4, "target")
+    assert fast.env.failure_starts == 0.5
+    # validated on 1,000 seeded random free starts never trained on: they pick best.pt and stop the run, which
+    # stops by steps (the same run on any machine), not by the clock
+    assert fast.evaluation.eval_random_starts == 1000 and fast.evaluation.select == ("success", "world_starts_success")
     assert not fast.evaluation.eval_shield
+    assert fast.schedule.total_steps == 300_000 and fast.schedule.time_limit is None
 
 
 def test_each_preset_is_its_base_changed_by_its_layer():
@@ -218,7 +227,7 @@ def test_a_configuration_saves_to_yaml_and_loads_back(tmp_path):
     config = preset("map", hidden=(16, 16), total_steps=40)
     path = config.to_yaml(tmp_path / "config.yaml")
     text = path.read_text()
-    assert "imitation:\n" in text and "  map_moves: fine\n" in text and "network:\n" in text
+    assert "imitation:\n" in text and "  map_moves: nodes\n" in text and "network:\n" in text
     assert load_config(path) == config
     # a flat file (or an old model file's configuration) reads the same
     flat = tmp_path / "flat.yaml"
@@ -255,7 +264,7 @@ def test_replay_buffer_wraps_samples_and_round_trips():
     for start in (0, 3):
         ids = np.arange(start, start + 3)
         obs = np.broadcast_to(ids[:, None, None, None], (3, 1, 3, 3)).astype(np.float32)
-        buffer.add(obs, obs + 100, ids, ids * 10.0, ids % 2 == 0)
+        buffer.add(obs, obs + 100, ids, ids * 10.0, np.where(ids % 2 == 0, 0.0, 0.9))
     assert len(buffer) == 5 and buffer.pos == 1
     assert sorted(buffer.actions.tolist()) == [1, 2, 3, 4, 5]  # 0 was overwritten
     batch = buffer.sample(np.random.default_rng(0))
@@ -264,11 +273,89 @@ def test_replay_buffer_wraps_samples_and_round_trips():
     np.testing.assert_array_equal(batch.observations[:, 0, 0, 0].numpy(), a)
     np.testing.assert_array_equal(batch.next_observations[:, 0, 1, 1].numpy(), a + 100)
     np.testing.assert_array_equal(batch.rewards.numpy(), a * 10.0)
-    np.testing.assert_array_equal(batch.dones.numpy(), a % 2 == 0)
+    np.testing.assert_allclose(batch.discounts.numpy(), np.where(a % 2 == 0, 0.0, 0.9))
     copy = ReplayBuffer(capacity=5, obs_shape=(1, 3, 3), batch_size=4)
     copy.load_state_dict(buffer.state_dict())
     assert (copy.pos, copy.size) == (buffer.pos, buffer.size)
     np.testing.assert_array_equal(copy.next_observations, buffer.next_observations)
+
+
+def _n_step_reference(episodes: list[list[tuple]], n: int, gamma: float) -> list[tuple]:
+    """The n-step transitions of whole episodes, one by one: ``(obs, action, return, next obs, discount)``."""
+    out = []
+    for steps, open_ended in episodes:
+        for i, (obs, action, *_) in enumerate(steps):
+            seen = steps[i:i + n]
+            ret = sum(gamma ** k * r for k, (_, _, r, _, _) in enumerate(seen))
+            *_, last_next, last_terminal = seen[-1]
+            ends_there = i + len(seen) == len(steps) and not open_ended
+            out.append((obs, action, last_next, ret, 0.0 if ends_there and last_terminal else gamma ** len(seen)))
+    return sorted(out)
+
+
+@pytest.mark.parametrize("n", [1, 3])
+def test_n_step_returns_sum_the_rewards_to_the_episodes_end_or_n_steps(n):
+    """Random episodes of three environments stepped together (ends by termination and by the step limit,
+    NEXT_STEP autoreset steps, a flush mid-episode), against the returns written out episode by episode."""
+    rng, gamma, envs = np.random.default_rng(n), 0.9, 3
+    returns = NStepReturns(n, gamma, envs, (1, 1, 1))
+    obs = np.arange(envs, dtype=np.float32).reshape(envs, 1, 1, 1)
+    restarting = np.zeros(envs, bool)
+    episodes, current, made, label = [], [[] for _ in range(envs)], [], envs
+    for _ in range(60):
+        actions, rewards = rng.integers(0, 9, envs), rng.normal(size=envs)
+        terminated = rng.random(envs) < 0.1
+        ended = (terminated | (rng.random(envs) < 0.05)) & ~restarting
+        next_obs = np.arange(label, label + envs, dtype=np.float32).reshape(envs, 1, 1, 1)
+        label += envs
+        made.append(returns.add(obs, actions, rewards, next_obs, terminated, ended, ~restarting))
+        for e in np.flatnonzero(~restarting):
+            current[e].append((obs[e].item(), int(actions[e]), rewards[e], next_obs[e].item(), bool(terminated[e])))
+            if ended[e]:
+                episodes.append((current[e], False))
+                current[e] = []
+        restarting, obs = ended, next_obs
+    made.append(returns.flush())
+    episodes += [(steps, True) for steps in current if steps]
+    got = sorted((float(o), int(a), float(x), float(r), float(d))
+                 for m in made for o, x, a, r, d in zip(m.observations.ravel(), m.next_observations.ravel(),
+                                                           m.actions, m.rewards, m.discounts))
+    expected = _n_step_reference(episodes, n, gamma)
+    assert [g[:3] for g in got] == [e[:3] for e in expected] and len(got) > 100   # each observation once
+    np.testing.assert_allclose([g[3:] for g in got], [e[3:] for e in expected], rtol=1e-5, atol=1e-6)
+
+
+def test_failure_starts_are_drawn_where_searches_failed():
+    """Searches that failed from one cell make the share drawn by failure come from that cell; the rest
+    stay uniform over the pool, and the counts fade at each draw."""
+    from apf_physics.learning.dqn import DRAWN_STARTS, FAILURE_MEMORY, FailureStarts
+
+    world = tiny_world()
+    pool = training_starts(world, "reachable", seed=0, count=5_000)
+    starts = FailureStarts(pool, world, share=0.5)
+    cell = np.floor(pool[0])
+    in_cell = (np.floor(pool) == cell).all(axis=1)
+    assert 0 < in_cell.mean() < 0.1
+    ok = pool[~in_cell]   # every other cell: many searches, all reached
+    starts.record(np.vstack([pool[in_cell][:20], ok]), np.r_[np.zeros(20, bool), np.ones(len(ok), bool)])
+    drawn = starts.draw(np.random.default_rng(0))
+    share = (np.floor(drawn) == cell).all(axis=1).mean()
+    assert len(drawn) == DRAWN_STARTS and 0.45 < share < 0.5 + 0.1   # about half from the failing cell
+    assert starts.failures.sum() == pytest.approx(20 * FAILURE_MEMORY)
+    assert starts.searches.sum() == pytest.approx((20 + len(ok)) * FAILURE_MEMORY)
+    again = FailureStarts(pool, world, share=0.5)
+    again.load(starts.state())
+    np.testing.assert_array_equal(again.draw(np.random.default_rng(1)), starts.draw(np.random.default_rng(1)))
+    # with random starts, drawn from a pool of random free positions away from the target
+    from apf_physics.learning.dqn import start_pool
+    random = start_pool("random", world, seed=0, count=500)
+    assert random.shape == (500, 2) and world.is_free(random).all()
+    assert np.array_equal(start_pool("world", world, seed=0), world.starts)
+    from apf_physics.learning import phases_for_curriculum
+    from apf_physics.learning.curriculum import load_curriculum
+    with pytest.raises(UserError, match="failure_starts draws the starts of one world"):
+        phases_for_curriculum(load_curriculum(Path(__file__).parent.parent / "worlds" / "curricula" / "thesis.yaml"),
+                              preset("general", failure_starts=0.5))
 
 
 # ---------------------------------------------------------------------------- evaluation
@@ -295,7 +382,7 @@ def test_score_orders_by_the_selected_figures():
     b = {"success": 1.0, "collisions": 2, "spl": 0.8}
     assert validation.score(b, ("success",)) > validation.score(a, ("success",))
     assert validation.score(a, ("-collisions", "spl")) > validation.score(b, ("-collisions", "spl"))
-    assert validation.score(a, ("success", "random_success")) == (0.9, -np.inf)  # a missing figure ranks lowest
+    assert validation.score(a, ("success", "world_starts_success")) == (0.9, -np.inf)  # a missing figure ranks lowest
 
 
 # ---------------------------------------------------------------------------- training
@@ -305,10 +392,24 @@ def test_training_learns_the_tiny_world():
     """Can fail: the greedy policy must reach the target from every start, trap starts included."""
     config = tiny_config(total_steps=20_000)
     result = train(config, phases_for_world(tiny_world(), config))
-    evaluations = [row["eval_success"] for row in result.history if row["eval_success"] != ""]
+    evaluations = [row["validation_success"] for row in result.history if row["validation_success"] != ""]
     assert evaluations[0] < 1.0                                   # not solved before learning
     assert result.best["success"] == 1.0 and result.best["trap_success"] == 1.0 and result.stopped_early
     assert result.counters.time_to_target is not None and result.global_step < 20_000
+
+
+def test_the_target_network_is_evaluated_and_kept_when_asked(tmp_path):
+    """``eval_network: target``: the network evaluated and written to best.pt is the target network (the average
+    of the online weights), not the online one; the checkpoint holds both."""
+    config = tiny_config(total_steps=1_000, eval_every=1_000, target_success=None, eval_network="target")
+    train(config, phases_for_world(tiny_world(), config), out_dir=tmp_path)   # one evaluation: at the end
+    _, tensors = read_file(tmp_path / "last.pt")
+    best = load_model(tmp_path / "best.pt").network.state_dict()
+    for name, value in best.items():
+        assert torch.equal(value, tensors["target_network"][name]), name
+    assert not all(torch.equal(value, tensors["q_network"][name]) for name, value in best.items())
+    with pytest.raises(UserError, match="eval_network 'target' needs a target network"):
+        tiny_config(eval_network="target", target_update="none")
 
 
 def test_training_writes_log_plot_and_models_evaluated_as_eval_runs_them(tmp_path):
@@ -337,9 +438,26 @@ def test_training_writes_log_plot_and_models_evaluated_as_eval_runs_them(tmp_pat
     np.testing.assert_array_equal(policy.act(obs), policy.q_values(obs).argmax(1))
 
 
-def test_resumed_run_continues_exactly_as_an_uninterrupted_one(tmp_path):
+def test_the_same_seed_gives_the_same_run(tmp_path):
+    """Runs stop by steps and evaluations, not the clock: two runs of one configuration and seed write the same
+    train.csv (but for wall_time) and the same best.pt; another seed does not."""
+    config = tiny_config(total_steps=1_500, eval_every=500, target_success=None, train_starts="reachable",
+                         failure_starts=0.5, n_step=3, eval_network="target")
+    phases = phases_for_world(tiny_world(), config)
+    other = replace(config, seed=1)
+    for c, name in ((config, "a"), (config, "b"), (other, "c")):
+        train(c, phases if c is config else phases_for_world(tiny_world(), other), out_dir=tmp_path / name)
+    a, b, c = ([{k: v for k, v in row.items() if k != "wall_time"} for row in read_csv(tmp_path / name / "train.csv")]
+               for name in "abc")
+    assert a == b and a != c
+    best = [load_model(tmp_path / name / "best.pt").network.state_dict() for name in "ab"]
+    assert all(torch.equal(best[0][k], best[1][k]) for k in best[0])
+
+
+@pytest.mark.parametrize("starts", [{}, {"train_starts": "reachable", "failure_starts": 0.5, "n_step": 3}])
+def test_resumed_run_continues_exactly_as_an_uninterrupted_one(tmp_path, starts):
     config = tiny_config(total_steps=3_000, checkpoint_every=1_500, eval_every=500, target_success=None,
-                         save_buffer=True)
+                         save_buffer=True, **starts)
     phases = phases_for_world(tiny_world(), config)
     straight = train(config, phases, out_dir=tmp_path / "straight")
     # stopped where the uninterrupted run writes its first checkpoint, then resumed
@@ -410,16 +528,22 @@ def test_progress_bar_measures_the_stop_rule_and_shows_the_latest_evaluation(mon
     target, timed = texts
     # a target_success run shows its step budget and says it stops at the target; it ends on 100 %
     assert "/20000 [" in target and "until 100% of the validation starts" in target
-    assert "eval -" in target and "eval 100%" in target.split("\r")[-1]
+    assert "validation starts -" in target and "validation starts 100.0%" in target.split("\r")[-1]
     # a time-limited run counts seconds up to its limit, and says nothing of a target
-    assert re.search(r"2\.0/2\.0 \[.*s/s", timed) and "until" not in timed and re.search(r"eval \d+%", timed)
+    assert re.search(r"2\.0/2\.0 \[.*s/s", timed) and "until" not in timed
+    assert re.search(r"validation starts [\d.]+%", timed) and "world starts" not in timed  # they are the same
     logged = io.StringIO()  # not a terminal (nohup, CI, a notebook): no bar, a plain line per row of train.csv
     monkeypatch.setattr(sys, "stderr", logged)
     result = train(config, phases_for_world(world, config), progress=True)
     lines = logged.getvalue().splitlines()
     assert "\r" not in logged.getvalue() and len(lines) == len(result.history) >= 2
     assert all(re.fullmatch(r"train: step [\d,]+, phase tiny, episodes [\d,]+, .*\d+ s", line) for line in lines)
-    assert "eval success" in lines[-1] and "loss" in lines[-1]
+    assert re.search(r", validation starts [\d.]+%, ", lines[-1]) and "loss" in lines[-1]
+    # with random validation starts, the world's own starts are shown beside them, by the same names as train.csv
+    config = tiny_config(eval_random_starts=20)
+    shown = Progress(config, phases_for_world(world, config), Counters(), stream=io.StringIO())
+    assert shown.figures({"success": 0.95, "world_starts_success": 5 / 6}, 0) == "validation starts 95.0%, world starts 5/6"
+    assert shown.figures(None, 0) == "validation starts -"
 
 
 def test_tensorboard_logs_beside_train_csv(tmp_path):
@@ -430,9 +554,9 @@ def test_tensorboard_logs_beside_train_csv(tmp_path):
     result = train(config, phases_for_world(tiny_world(), config), out_dir=tmp_path)
     events = EventAccumulator(str(tmp_path / "tensorboard"))
     events.Reload()
-    rows = [r for r in read_csv(tmp_path / "train.csv") if r["eval_success"] != ""]
-    assert [(e.step, round(e.value, 4)) for e in events.Scalars("eval_success")] == \
-        [(int(r["global_step"]), float(r["eval_success"])) for r in rows]
+    rows = [r for r in read_csv(tmp_path / "train.csv") if r["validation_success"] != ""]
+    assert [(e.step, round(e.value, 4)) for e in events.Scalars("validation_success")] == \
+        [(int(r["global_step"]), float(r["validation_success"])) for r in rows]
     assert tmp_path / "tensorboard" in result.written
 
 
@@ -455,7 +579,7 @@ def _wait_for(condition, proc: subprocess.Popen, timeout: float = 120) -> None:
 def test_kill_9_leaves_loadable_models_and_resume_carries_on(tmp_path):
     world = write_tiny_world(tmp_path)
     out = tmp_path / "run"
-    options = [f"--set={k}={v}" for k, v in {**TINY_OPTIONS, "filters": "[8, 8]", "select": "[success, random_success]", "total_steps": 10**7,
+    options = [f"--set={k}={v}" for k, v in {**TINY_OPTIONS, "filters": "[8, 8]", "select": "[success, world_starts_success]", "total_steps": 10**7,
                                              "target_success": "null", "checkpoint_every": 500}.items()]
     proc = _cli("--world", str(world), "--out", str(out), "--no-progress", *options)
     _wait_for(lambda: (out / "best.pt").exists() and (out / "last.pt").exists(), proc)
@@ -478,7 +602,7 @@ def test_kill_9_leaves_loadable_models_and_resume_carries_on(tmp_path):
 def test_interrupt_saves_and_prints_the_resume_command_and_a_second_run_is_refused(tmp_path):
     world = write_tiny_world(tmp_path)
     out = tmp_path / "run"
-    options = [f"--set={k}={v}" for k, v in {**TINY_OPTIONS, "filters": "[8, 8]", "select": "[success, random_success]", "total_steps": 10**7,
+    options = [f"--set={k}={v}" for k, v in {**TINY_OPTIONS, "filters": "[8, 8]", "select": "[success, world_starts_success]", "total_steps": 10**7,
                                              "target_success": "null", "eval_every": 10**6}.items()]
     proc = _cli("--world", str(world), "--out", str(out), *options)
     _wait_for(lambda: len(read_csv(out / "train.csv")) >= 2 if (out / "train.csv").exists() else False, proc)
@@ -491,6 +615,23 @@ def test_interrupt_saves_and_prints_the_resume_command_and_a_second_run_is_refus
     assert f"apf-physics train --world {world} --out {out} --resume" in stderr
     assert not (out / "best.pt").exists() and "wrote" not in stdout       # no evaluation ran
     assert read_file(out / "last.pt")[0]["trainer"]["counters"]["global_step"] > 0
+
+
+@pytest.mark.parametrize("options", [["--set", "batch_sise=64"], ["--set", "batch_size=-1"], ["--preset", "general"],
+                                     ["--config", "missing.yaml"], ["--resume"]])
+def test_a_refused_train_command_leaves_nothing_behind(tmp_path, capsys, options):
+    """A mistyped option, a bad value, a preset for curricula, a missing file, nothing to resume: refused in
+    one line (status 2) before the output folder is made."""
+    from apf_physics.cli import main
+
+    world = write_tiny_world(tmp_path)
+    out = tmp_path / "runs" / "new"
+    assert main(["train", "--world", str(world), "--out", str(out), *options]) == 2
+    assert capsys.readouterr().err.count("apf-physics: error:") == 1
+    assert not (tmp_path / "runs").exists()
+    out.mkdir(parents=True)   # an existing folder is left as it was
+    assert main(["train", "--world", str(world), "--out", str(out), *options]) == 2
+    assert list(out.iterdir()) == []
 
 
 def test_cli_overrides_are_read_as_yaml():
@@ -600,7 +741,10 @@ def test_lattice_reachable_and_validation_starts(worlds_dir):
     assert np.array_equal(val, validation_starts(world, 50, seed=0))
     assert not np.isin(val, reachable).any()  # a stream of its own
     (phase,) = phases_for_world(world, preset("fast", eval_random_starts=20))
-    assert phase.random_validation.starts == 20 and phase.validation.starts == 40
+    assert phase.validation.starts == 20 and phase.world_starts.starts == 40
+    assert phase.validation.trapped is None     # random validation starts are not labelled: success and collisions
+    (own,) = phases_for_world(world, preset("fast", eval_random_starts=0))
+    assert own.validation is own.world_starts and own.validation.starts == 40
 
 
 def test_a_list_of_whole_numbers_sets_a_tuple_of_floats():
@@ -643,21 +787,17 @@ def test_train_prints_progress_lines_and_a_finished_run_names_the_limit_to_lift(
     assert f"--resume --set {reason}" in again.stdout
 
 
-def test_the_target_is_measured_on_the_held_out_starts_when_there_are_some():
+def test_the_target_is_measured_on_the_validation_starts_not_the_world_starts():
     from apf_physics.learning.learner import Counters
     from apf_physics.learning.trainer import Evaluations, stop_reason
     config = tiny_config(target_success=0.9, eval_random_starts=20)
     phases = phases_for_world(tiny_world(), config)
     c, evals = Counters(), Evaluations()
     net = torch.nn.Linear(1, 1)
-    evals.record({"success": 1.0, "random_success": 0.5}, c, net, config)   # all training-world starts, few others
+    evals.record({"success": 0.5, "world_starts_success": 1.0}, c, net, config)   # every world start, few others
     assert c.top_success == 0.5 and stop_reason(config, phases, c, 0.0) is None
-    evals.record({"success": 0.8, "random_success": 0.95}, c, net, config)
+    evals.record({"success": 0.95, "world_starts_success": 0.8}, c, net, config)
     assert stop_reason(config, phases, c, 0.0) == "target_success 0.9 reached"
-    # without held-out starts the validation starts are the measure
-    c2 = Counters()
-    evals.record({"success": 0.95}, c2, net, config)
-    assert c2.top_success == 0.95
 
 
 def test_show_config_names_the_layer_each_value_comes_from():

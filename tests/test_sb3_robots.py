@@ -3,21 +3,19 @@
 - SB3's ``check_env`` passes for every combination of action × kinematics × observation, with
   no warning but the ones SB3 gives every float window of shape (1, k, k) (it takes any 3-D
   ``Box`` for an image; ``MlpPolicy`` flattens it, ``CnnPolicy`` is not for these windows).
-- ``tools/train_sb3.py``'s ``SB3Vector`` (the vector env seen by SB3) steps as SB3's
-  ``DummyVecEnv`` of single envs does, to the last bit.
+- ``apf_physics.envs.sb3.SB3VecEnv`` (the vector env seen by SB3) steps as SB3's ``DummyVecEnv``
+  of single envs does, to the last bit.
 - Observations stay inside the observation space over random episodes (SAC and PPO do not
   check it, and a lidar value outside the ``Box`` would go unnoticed).
 - SAC (continuous actions, lidar of 8 beams) and PPO (nine moves, the 5 × 5 potential window on
   the log scale) learn to reach the target of an open 8 × 8 world from random starts within a
   few thousand env steps (8 copies of ``NavigateVectorEnv`` seen by SB3 through
-  ``tools/train_sb3.py``'s ``SB3Vector``; rewards: ``thesis-fixed`` × 0.01): their deterministic
+  ``SB3VecEnv``; rewards: ``thesis-fixed`` × 0.01): their deterministic
   success over 30 evaluation episodes (the same 30 random starts) rises to a floor of 20 that
   the same model, untrained, stays far below (at most 10; measured in the same test).
 """
 
-import importlib.util
 import warnings
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -31,8 +29,7 @@ from stable_baselines3.common.env_checker import check_env  # noqa: E402
 import apf_physics  # noqa: E402,F401  (registers the ids)
 from apf_physics import world_from_dict  # noqa: E402
 from apf_physics.envs import NavigateVectorEnv  # noqa: E402
-
-TOOLS = Path(__file__).resolve().parent.parent / "tools"
+from apf_physics.envs.sb3 import SB3VecEnv, WindowCNN  # noqa: E402
 
 COMBINATIONS = [(a, k, o) for a in ("discrete", "continuous") for k in ("holonomic", "unicycle")
                 for o in ("window", "lidar", "window+lidar")]
@@ -79,14 +76,6 @@ def open_world():
                             "obstacles": [], "targets": [[7, 7]]})
 
 
-def train_sb3():
-    """``tools/train_sb3.py`` as a module (its ``SB3Vector``: the vector env seen by SB3)."""
-    spec = importlib.util.spec_from_file_location("train_sb3", TOOLS / "train_sb3.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 ROBOTS = {   # the robot, what it sees, and its learner
     "sac": dict(action="continuous", observation="lidar", lidar={"beams": 8}),
     "ppo": dict(action="discrete", observation="window", obs_scale="log", obs_size=5),
@@ -113,8 +102,7 @@ def learner(algo, seed):
     """An untrained SB3 learner of ``algo`` on 8 copies of the open world (rewards × 0.01)."""
     env = NavigateVectorEnv(num_envs=8, world=open_world(), starts="random", reward="thesis-fixed",
                             max_episode_steps=STEP_LIMIT, autoreset_mode="same_step", **ROBOTS[algo])
-    vec = train_sb3().SB3Vector(env, reward_scale=0.01)
-    vec.seed(seed)
+    vec = SB3VecEnv(env, reward_scale=0.01, seed=seed)
     if algo == "sac":
         return SAC("MlpPolicy", vec, learning_rate=1e-3, learning_starts=400, batch_size=128, train_freq=1,
                    gradient_steps=2, policy_kwargs={"net_arch": [64, 64]}, seed=seed, device="cpu")
@@ -163,13 +151,13 @@ def flat(observation):
                                    dict(action="continuous", kinematics="unicycle", observation="window+lidar",
                                         lidar={"beams": 16})])
 def test_the_vector_env_seen_by_sb3_steps_as_sb3s_own_vector_of_single_envs(robot):
-    """``SB3Vector`` (one ``NavigateVectorEnv``, ended copies restarted in the same step) and SB3's
+    """``SB3VecEnv`` (one ``NavigateVectorEnv``, ended copies restarted in the same step) and SB3's
     ``DummyVecEnv`` of ``Navigate-v0`` copies, seeded alike and given the same actions, return
     the same observations, rewards, ends and final observations."""
     from stable_baselines3.common.env_util import make_vec_env
 
     kwargs = dict(world="fixed20", starts="random", **robot)
-    ours = train_sb3().SB3Vector(NavigateVectorEnv(num_envs=4, autoreset_mode="same_step", **kwargs))
+    ours = SB3VecEnv(num_envs=4, **kwargs)
     theirs = make_vec_env("apf_physics/Navigate-v0", n_envs=4, env_kwargs=kwargs)
     ours.seed(7)
     theirs.seed(7)
@@ -187,3 +175,37 @@ def test_the_vector_env_seen_by_sb3_steps_as_sb3s_own_vector_of_single_envs(robo
             assert ia[i]["TimeLimit.truncated"] == ib[i].get("TimeLimit.truncated", False)
             np.testing.assert_array_equal(flat(ia[i]["terminal_observation"]), flat(ib[i]["terminal_observation"]))
     assert ended > 4
+
+
+def test_sb3_vec_env_refuses_an_env_that_resets_on_the_next_step_and_two_ways_of_building_it():
+    with pytest.raises(ValueError, match="autoreset_mode='same_step'"):
+        SB3VecEnv(NavigateVectorEnv(num_envs=2, world="fixed20"))
+    with pytest.raises(ValueError, match="either a vector env or its options"):
+        SB3VecEnv(NavigateVectorEnv(num_envs=2, world="fixed20", autoreset_mode="same_step"), world="fixed20")
+
+
+def test_window_cnn_is_the_window_networks_convolutions_and_first_layer():
+    """SB3's DQN with ``WindowCNN`` has the layers of the ``fast`` preset's network (the thesis's Table 3
+    convolutions, 32 and 32 hidden units, nine actions) and reads the raw windows through the same
+    observation transform."""
+    from stable_baselines3 import DQN
+
+    from apf_physics.learning import preset
+    from apf_physics.learning.dqn import q_network
+
+    env = SB3VecEnv(num_envs=2, world="fixed20", seed=0)
+    model = DQN("CnnPolicy", env, policy_kwargs=WindowCNN.policy_kwargs(), device="cpu")
+    ours = q_network(preset("fast"))
+    theirs = model.q_net
+    assert sum(p.numel() for p in theirs.parameters()) == sum(p.numel() for p in ours.parameters())
+    window = theirs.features_extractor.window
+    assert window.arch["filters"] == [10, 10, 20] and window.obs_transform == ours.obs_transform == "relative-log"
+    obs = torch.as_tensor(env.reset())
+    with torch.no_grad():   # the same weights give the same action values
+        for mine, sb3 in zip(ours.convs, window.convs):
+            sb3.weight.copy_(mine.weight), sb3.bias.copy_(mine.bias)
+        window.head.weight.copy_(ours.hidden[0].weight), window.head.bias.copy_(ours.hidden[0].bias)
+        linear = [m for m in theirs.q_net if isinstance(m, torch.nn.Linear)]
+        linear[0].weight.copy_(ours.hidden[1].weight), linear[0].bias.copy_(ours.hidden[1].bias)
+        linear[1].weight.copy_(ours.head.weight), linear[1].bias.copy_(ours.head.bias)
+        np.testing.assert_allclose(theirs(obs).numpy(), ours(obs).numpy(), rtol=1e-5, atol=1e-6)

@@ -12,6 +12,7 @@ from apf_physics.world.generate import FAMILIES, generate_world
 from apf_physics.experiments.worldsets import generate_set
 from apf_physics.planners import GradientPlanner, make_planner
 from apf_physics.planners.astar import AStarPlanner
+from apf_physics.world.search import shortest_costs, shortest_paths
 from apf_physics.world.search import reachable, shortest_path, shortest_path_length
 from apf_physics.planners.escape import EscapePlanner
 from apf_physics.experiments.rollout import rollout
@@ -283,3 +284,16 @@ def test_vectorised_shortest_paths_are_dijkstras(seed):
     want_cost, want_next = _dijkstra(free, sources, steps)
     np.testing.assert_array_equal(cost, want_cost)
     np.testing.assert_array_equal(nxt, want_next)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_the_compiled_search_gives_the_label_correcting_costs_to_the_bit(seed):
+    rng = np.random.default_rng(seed)
+    rows, cols = rng.integers(3, 50, 2)
+    free = rng.random((rows, cols)) > rng.uniform(0, 0.5)
+    sources = rng.choice(rows * cols, rng.integers(1, 4), replace=False)
+    steps = [(dr, dc, (rng.random((rows, cols)).astype(np.float32) * 3 + 0.1) if seed % 2 else np.float32(np.hypot(dr, dc)))
+             for dr in (-1, 0, 1) for dc in (-1, 0, 1) if dr or dc]
+    expected, _ = shortest_paths(free, sources, steps, np.float32)
+    got = shortest_costs(free, sources, steps, np.float32)
+    assert got.dtype == expected.dtype and np.array_equal(got, expected)

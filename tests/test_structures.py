@@ -1,4 +1,4 @@
-"""The structure families of issue 12 (rooms, maze, nested_cups, narrow_gap, dense_clutter, mixed),
+"""The structure families (rooms, maze, nested_cups, narrow_gap, dense_clutter, mixed),
 and the older families' worlds, which must stay what they were for a seed (held-out and
 validation sets are defined by seeds)."""
 

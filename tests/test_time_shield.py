@@ -1,4 +1,4 @@
-"""The shield over time (issue 26): moves checked against where moving obstacles go, a continuation
+"""The shield over time: moves checked against where moving obstacles go, a continuation
 for a few steps, the avoidability search, the time-aware baseline, and no change among static obstacles."""
 
 from __future__ import annotations

@@ -24,7 +24,7 @@ Prints, from one process:
   to VMAS with ``--vmas``;
 - the cost of an observation in fixed20 with 8 moving discs beside the same discs frozen
   (aim ≤ 2×);
-- with ``--contacts``, whether contacts hold (issue 25): robots driven at random headings
+- with ``--contacts``, whether contacts hold: robots driven at random headings
   (each held about ten steps) among thin walls, alone in their slots and in crowds of 64 per
   world, counting the robot-steps that end more than 0.01 inside an obstacle or past the
   map's edge, more than 0.02 into another robot, or with a centre through another robot.

@@ -1,6 +1,6 @@
 """The README's figures: each made by a command, kept in a results file, and written into the README from it.
 
-    python tools/figures.py run [ROW ...] [--data DIR] [--movingai DIR]   # run the commands, write tools/results/
+    python tools/figures.py run [ROW ...] [--data DIR] [--movingai DIR] [--barn DIR]   # run the commands, write tools/results/
     python tools/figures.py show ROW                                      # print a row's commands
     python tools/figures.py readme                                        # rewrite the README's table from the results
     python tools/figures.py check                                         # exit 1 if the README's table differs
@@ -14,7 +14,8 @@ files, so a figure in the README cannot go stale: to change one, re-run its row 
 Held-out worlds are generated into ``--data`` (default ``/tmp/apf-figures``) by the row's own
 ``apf-physics generate`` command, with the seed no training or validation used. The MovingAI
 row needs the benchmark's maps, fetched by the user (``--movingai DIR``; sources in
-BENCHMARKS.md, "Real maps"); nothing is downloaded.
+BENCHMARKS.md, "Real maps"), and the BARN row the challenge's repository (``--barn DIR``:
+``Daffan/nav-competition-icra2022``); nothing is downloaded.
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ class Row:
 
     key: str
     commands: tuple[str, ...]
-    """Shell commands, run from the repository's root; ``{data}``, ``{movingai}`` and ``{out}``
+    """Shell commands, run from the repository's root; ``{data}``, ``{movingai}``, ``{barn}`` and ``{out}``
     (where the last command writes its full results) are filled in. The row's results file,
     ``tools/results/<row>.json``, is that file without the per-episode records."""
     what: Callable[[dict], str]
@@ -94,13 +95,16 @@ def _train(data: dict) -> str:
     n = random[0]["episodes"]
     collisions = sum(round(r["collision_rate"] * r["episodes"]) for r in random)
     own = [run["starts"]["successes"] for run in runs]
-    minutes = [run["train_seconds"] / 60 for run in runs]
+    seconds = [round(run["train_seconds"]) for run in runs]
+    steps = [run["steps"] for run in runs]
     seeds = [run["seed"] for run in runs]
+    loads = [v for run in runs for v in run["load_average"]]
     return (f"seeds {_range(seeds)}: **{_range([r['successes'] for r in random])} of {n}** random free starts "
-            f"it never trained or validated on ({len(random) // len(runs)} draws each; median "
-            f"{_pct(data['median_random_success'])}), {_n(collisions, 'collision')}, {_range(own)}/"
-            f"{runs[0]['starts']['episodes']} of the thesis's starts; {min(minutes):.0f}–{max(minutes):.0f} min "
-            f"of training each")
+            f"no run saw ({len(random) // len(runs)} draws each; median {_pct(data['median_random_success'])}), "
+            f"{_n(collisions, 'collision')}, {_range(own)}/{runs[0]['starts']['episodes']} of the world starts; "
+            f"stopped after {min(steps) / 1000:.0f}–{max(steps) / 1000:.0f}k steps (median "
+            f"{data['median_steps'] / 1000:.0f}k), {_range(seconds)} s of training each (load "
+            f"{min(loads):.1f}–{max(loads):.1f})")
 
 
 def _formation(data: dict) -> str:
@@ -172,6 +176,30 @@ def _movingai(data: dict) -> str:
             f"{u['episodes']}; A* {a['successes']}/{a['episodes']}, {a['path_over_optimal']:.3f}×")
 
 
+def _barn_what(data: dict) -> str:
+    meta = data["barn"]
+    return (f"BARN in 2-D (the ICRA challenge's worlds, a Jackal-sized disc of {meta['robot_radius_m']:g} m; "
+            f"its {len(meta['indices'])} development worlds, the other 200 held out for judging)")
+
+
+def _barn(data: dict) -> str:
+    runs = [r for r in data["runs"] if r["planner"] == "dqn"]
+    astar = [r for r in data["runs"] if r["planner"] == "astar"]
+    steps = list(dict.fromkeys(r["step_m"] for r in runs))
+    parts = []
+    for step in steps:
+        mine = [r for r in runs if r["step_m"] == step]
+        cells = ", ".join(f"{r['summary']['successes']}/{r['summary']['worlds']} {r['kinematics']}" for r in mine)
+        ratio = max(r["summary"]["path_over_astar"] or 0 for r in mine)
+        parts.append(f"{step:g} m steps: {cells}, paths ≤ {ratio:.2f}× A*")
+    collisions = sum(r["summary"]["collisions"] for r in runs)
+    scores = [r["summary"]["mean_score"] for r in runs]
+    reached = sum(r["summary"]["successes"] for r in astar)
+    score = f"{min(scores):.4f}" if min(scores) == max(scores) else f"{min(scores):.4f}–{max(scores):.4f}"
+    return (f"the `dqn` default (`map.pt`) **{'; '.join(parts)}**; {_n(collisions, 'collision')}; the challenge's "
+            f"score {score} (0.25 at most); A* {reached}/{sum(r['summary']['worlds'] for r in astar)}")
+
+
 def _crossing_what(data: dict) -> str:
     return f"several formations crossing (held out, {_eval(data, 'dqn+formation')['worlds']} worlds)"
 
@@ -218,6 +246,9 @@ ROWS = [
         _moving_what, _moving),
     Row("movingai", ("python tools/bench_movingai.py {movingai} --planners dqn,dqn-unshielded,astar --json {out}",),
         _movingai_what, _movingai),
+    Row("barn", ("python tools/barn.py --barn {barn} --worlds dev --step 0.15,0.07,0.42 --kinematics holonomic,unicycle "
+                 "--planner dqn,astar --json {out}",),
+        _barn_what, _barn),
     Row("crossing", ("apf-physics generate --family crossing --count 60 --seed 314 --out {data}/crossing --no-label --force",
                      "apf-physics eval {data}/crossing --planner dqn --formation --json {out} --no-progress"),
         _crossing_what, _crossing),
@@ -261,9 +292,10 @@ def full_results(row: Row, data: str) -> Path:
     return Path(data) / "results" / f"{row.key}.json"
 
 
-def commands(row: Row, data: str, movingai: str) -> list[str]:
+def commands(row: Row, data: str, movingai: str, barn: str = "barn") -> list[str]:
     out = shlex.quote(str(full_results(row, data)))
-    return [c.format(data=shlex.quote(data), movingai=shlex.quote(movingai), out=out) for c in row.commands]
+    return [c.format(data=shlex.quote(data), movingai=shlex.quote(movingai), barn=shlex.quote(barn), out=out)
+            for c in row.commands]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -272,6 +304,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("rows", nargs="*", metavar="ROW", help=f"rows (default: all): {', '.join(BY_KEY)}")
     parser.add_argument("--data", default="/tmp/apf-figures", help="where held-out worlds and runs are made")
     parser.add_argument("--movingai", default="maps/movingai", help="the MovingAI maps and scenarios, fetched by you")
+    parser.add_argument("--barn", default="barn", help="BARN (nav-competition-icra2022's root), fetched by you")
     args = parser.parse_args(argv)
     unknown = [k for k in args.rows if k not in BY_KEY]
     if unknown:
@@ -281,7 +314,7 @@ def main(argv: list[str] | None = None) -> int:
         for row in rows:
             if args.action == "run":
                 full_results(row, args.data).parent.mkdir(parents=True, exist_ok=True)
-            for command in commands(row, args.data, args.movingai):
+            for command in commands(row, args.data, args.movingai, args.barn):
                 print(f"$ {command}", flush=True)
                 if args.action == "run":
                     subprocess.run(command, shell=True, check=True, cwd=ROOT)

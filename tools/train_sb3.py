@@ -6,7 +6,7 @@
         --observation lidar
 
 Training: ``--envs`` copies of ``Navigate-v0`` in one :class:`NavigateVectorEnv` seen by SB3 through
-:class:`SB3Vector` (``--vector dummy``: SB3's ``make_vec_env``, a ``DummyVecEnv`` of single envs),
+:class:`apf_physics.envs.sb3.SB3VecEnv` (``--vector dummy``: SB3's ``make_vec_env``, a ``DummyVecEnv`` of single envs),
 random starts (``starts="random"``), the robot given by ``--action`` (default: continuous for SAC,
 discrete for PPO), ``--kinematics`` and ``--observation`` (lidar of ``--beams`` beams), the
 env's reward preset ``--reward`` (``apf_physics/envs/reward.py``; default ``general``: on fixed20
@@ -36,14 +36,12 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
-from gymnasium.vector import AutoresetMode
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from stable_baselines3.common.vec_env import VecEnv  # noqa: E402
-
 import apf_physics  # noqa: E402,F401  (registers the ids)
 from apf_physics.envs import NavigateVectorEnv  # noqa: E402
+from apf_physics.envs.sb3 import SB3VecEnv  # noqa: E402
 
 ENV_ID = "apf_physics/Navigate-v0"
 
@@ -67,77 +65,9 @@ class ScaleReward(gym.RewardWrapper):
         return reward * self.scale
 
 
-def sb3_vec_env(args, starts: str = "random", seed: int = 0) -> "SB3Vector":
+def sb3_vec_env(args, starts: str = "random", seed: int = 0) -> SB3VecEnv:
     """``NavigateVectorEnv`` (``--envs`` copies in one batch) as an SB3 ``VecEnv``."""
-    vec = SB3Vector(NavigateVectorEnv(num_envs=args.envs, autoreset_mode="same_step", **env_kwargs(args, starts)),
-                    args.reward_scale)
-    vec.seed(seed)
-    return vec
-
-
-class SB3Vector(VecEnv):
-    """A :class:`~apf_physics.envs.NavigateVectorEnv` seen by Stable-Baselines3 (one batch for all copies).
-
-    SB3 resets an ended copy in the step that ends it (the final observation goes to
-    ``info["terminal_observation"]``, a step limit's end is marked ``"TimeLimit.truncated"``):
-    the env's ``autoreset_mode="same_step"`` (required) does that reset, and its
-    ``info["final_obs"]`` gives the final observations. ``infos`` also carry
-    ``success``/``is_success`` and ``collision`` of the episodes that ended. Rewards are
-    multiplied by ``reward_scale``. ``seed(s)`` seeds copy ``i`` with ``s + i`` at the next
-    reset, as SB3's vector envs do.
-    """
-
-    def __init__(self, env: NavigateVectorEnv, reward_scale: float = 1.0):
-        if env.autoreset_mode != AutoresetMode.SAME_STEP:
-            raise ValueError("SB3Vector needs NavigateVectorEnv(..., autoreset_mode='same_step')")
-        self.env = env
-        self.reward_scale = float(reward_scale)
-        self.render_mode = None
-        super().__init__(env.num_envs, env.single_observation_space, env.single_action_space)
-        self._actions = None
-
-    def reset(self):
-        seeds = None if self._seeds[0] is None else [int(s) for s in self._seeds]
-        obs, _ = self.env.reset(seed=seeds)
-        self._reset_seeds()
-        return obs
-
-    def step_async(self, actions) -> None:
-        self._actions = actions
-
-    def step_wait(self):
-        obs, reward, terminated, truncated, info = self.env.step(self._actions)
-        done = terminated | truncated
-        infos = [{} for _ in range(self.num_envs)]
-        ended = np.flatnonzero(done)
-        for i in ended.tolist():   # the env has restarted them (same_step); what they ended with:
-            success = bool(info["success"][i])
-            infos[i] = {"terminal_observation": info["final_obs"][i],
-                        "TimeLimit.truncated": bool(truncated[i] and not terminated[i]),
-                        "success": success, "is_success": success, "collision": bool(info["collision"][i])}
-        return obs, reward * self.reward_scale, done, infos
-
-    def close(self) -> None:
-        self.env.close()
-
-    def get_attr(self, attr_name, indices=None):
-        if attr_name == "render_mode":
-            return [None] * len(self._indices(indices))
-        return [getattr(self.env, attr_name)] * len(self._indices(indices))
-
-    def set_attr(self, attr_name, value, indices=None) -> None:
-        setattr(self.env, attr_name, value)
-
-    def env_method(self, method_name, *method_args, indices=None, **method_kwargs):
-        return [getattr(self.env, method_name)(*method_args, **method_kwargs)]
-
-    def env_is_wrapped(self, wrapper_class, indices=None):
-        return [False] * len(self._indices(indices))
-
-    def _indices(self, indices):
-        if indices is None:
-            return range(self.num_envs)
-        return [indices] if isinstance(indices, int) else indices
+    return SB3VecEnv(num_envs=args.envs, reward_scale=args.reward_scale, seed=seed, **env_kwargs(args, starts))
 
 
 def atomic_save(model, path: Path) -> None:

@@ -22,6 +22,7 @@ COMMANDS = {
     "train": "train a DQN planner on a world or a curriculum; write best.pt, last.pt, train.csv",
     "sweep": "compare training recipes on Ray Tune: grids, seeds, early stopping; the best model copied out",
     "generate": "generate random worlds where gradient descent tends to be trapped",
+    "draw_scen": "draw a MovingAI scenario file as the MAPF benchmark's random ones (for fleets)",
     "render": "render a planner's run in a world to a video (and optionally a PNG of the last frame)",
     "plot_field": "plot a world's potential field: heatmap, level lines, descent paths",
     "plot_curve": "plot a training run's curve from its train.csv",

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from collections import Counter
 
+import numpy as np
+
 from apf_physics.errors import UserError
 from apf_physics.planners import make_planner
 from apf_physics.render.drawing import CAPTIONS
@@ -12,7 +14,10 @@ from apf_physics.render.episodes import write_episode_video
 from apf_physics.common.safefile import check_writable
 from apf_physics.render.video import VIDEO_EXTENSIONS, choose_codec
 from apf_physics.world.kinematics import KINEMATICS
+from apf_physics.experiments.fleet import rollout_fleet
+from apf_physics.experiments.movingai import scenario_fleet
 from apf_physics.experiments.rollout import kinematics_option, rollout, rollout_formations
+from apf_physics.render.fleet import write_fleet_video
 from apf_physics.world.io.worldfile import load_world
 
 
@@ -32,7 +37,14 @@ def add_parser(subparsers) -> None:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The subcommand's options, on any parser (the CLI's subparser or ``tools/render_video.py``)."""
-    parser.add_argument("world", help="world file (.yaml), or a bundled world's name (fixed20, thesis/test1)")
+    parser.add_argument("world", help="world file (.yaml), or a bundled world's name (fixed20, thesis/test1); with "
+                                      "--scen, a MovingAI .map")
+    parser.add_argument("--scen", metavar="FILE.scen", help="with --agents: a fleet of the first N lines of FILE on "
+                                                            "the .map (a world file with 'robots:' is a fleet already)")
+    parser.add_argument("--agents", type=int, metavar="N", help="with --scen: robots in the fleet")
+    parser.add_argument("--lifelong", type=int, metavar="STEPS",
+                        help="fleets: run STEPS steps, each robot given its next goal as soon as it arrives")
+    parser.add_argument("--seed", type=int, default=0, help="fleets: the lifelong goal streams' seed (default 0)")
     parser.add_argument("--planner", default="gradient", help="planner name (default: gradient)")
     parser.add_argument("--model", default=None, help="model file for learned planners")
     parser.add_argument("--formation", action="store_true",
@@ -46,7 +58,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, help="output video (.mp4, .webm or .avi); a missing folder is created")
     parser.add_argument("--png", default=None, help="also write the last frame to this .png file")
     parser.add_argument("--fps", type=float, default=10.0, help="frames (control steps) per second (default 10)")
-    parser.add_argument("--size", type=int, default=512, help="pixels along the world's longer side (default 512)")
+    parser.add_argument("--size", type=int, default=None,
+                        help="pixels along the world's longer side (default 512; a fleet's 2048)")
     parser.add_argument("--hold", type=float, default=1.0, help="seconds the last frame stays on screen (default 1)")
     parser.add_argument("--max-steps", type=int, default=None, help="step limit per episode (default: the rollout's)")
     parser.add_argument("--kinematics", default=None, metavar="KIND",
@@ -71,9 +84,19 @@ def run(args: argparse.Namespace) -> int:
     png = check_writable(args.png, (".png",), create_parent=True) if args.png else None
     if args.fps <= 0:
         raise UserError(f"--fps must be positive, got {args.fps:g}")
-    if args.size < 16:
+    if args.size is not None and args.size < 16:
         raise UserError(f"--size must be at least 16 pixels, got {args.size}")
+    if (args.scen is None) != (args.agents is None):
+        raise UserError("--scen and --agents: give both (a fleet of the first N lines of a scenario file)")
+    if args.scen is not None:
+        world, fleet = scenario_fleet(args.world, args.scen, args.agents)
+        return render_fleet(args, world, fleet, out, codec, png)
     world = load_world(args.world)
+    if world.robots is not None:
+        return render_fleet(args, world, world.robots, out, codec, png)
+    if args.lifelong is not None:
+        raise UserError("--lifelong: only for fleets (--scen and --agents, or a world file with 'robots:')")
+    args.size = 512 if args.size is None else args.size
     if not len(world.starts):
         raise UserError(f"{world.source or world.name}: the world has no starts to run from")
     if args.all_starts:
@@ -101,5 +124,35 @@ def run(args: argparse.Namespace) -> int:
         else " (PyAV is not installed: pip install av for H.264)")
     print(f"wrote {out} ({codec.label}{playable}; {written} frames at {args.fps:g} fps; "
           + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) + ")"
+          + (f" and {png}" if png is not None else ""))
+    return 0
+
+
+def render_fleet(args: argparse.Namespace, world, fleet, out, codec, png) -> int:
+    """A fleet's run (:func:`~apf_physics.experiments.fleet.rollout_fleet`) as a video: every robot in a
+    colour of its own, its goal a square of that colour (:mod:`apf_physics.render.fleet`)."""
+    if args.formation or args.all_starts or args.kinematics is not None:
+        raise UserError("--formation, --all-starts, --kinematics: not with fleets")
+    planner = make_planner(args.planner, model=args.model)
+    run = rollout_fleet(world, planner, fleet, max_steps=args.max_steps, lifelong=args.lifelong, seed=args.seed)
+    summary = run.summary()
+    positions, goals = run.drawn()
+    home = np.hypot(*(run.positions - goals[:, :len(fleet)]).transpose(2, 0, 1)) < 1e-6
+    reached = np.concatenate([[0], np.cumsum(np.sum(home[1:] & ((run.goals[1:] != run.goals[:-1]) | ~home[:-1]), axis=1))])
+
+    def caption(step: int) -> list[str]:
+        tally = (f"goals reached {reached[step]}" if run.lifelong is not None
+                 else f"on their goal {int(home[step].sum())}/{len(fleet)}")
+        return [f"{world.name}  planner {planner.name}  step {step}/{run.steps}",
+                f"{len(fleet)} robots: {tally}; robot-robot collisions {summary['robot_robot_collisions']}, "
+                f"robot-obstacle {summary['robot_obstacle_collisions']}"]
+
+    written = write_fleet_video(world, positions, goals, out, fps=args.fps, size=args.size or 2048, hold=args.hold,
+                                caption=caption, caption_place=args.caption, codec=codec.name,
+                                progress=not args.no_progress, png=png)
+    tally = (f"{summary['goals_reached']} goals, {summary['throughput']:.3f} per step" if run.lifelong is not None
+             else f"{summary['arrived']}/{len(fleet)} on their goal")
+    print(f"wrote {out} ({codec.label}; {written} frames at {args.fps:g} fps; {tally}, collisions robot-robot "
+          f"{summary['robot_robot_collisions']}, robot-obstacle {summary['robot_obstacle_collisions']})"
           + (f" and {png}" if png is not None else ""))
     return 0

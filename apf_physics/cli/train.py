@@ -15,7 +15,7 @@ from apf_physics.learning.config import (CURRICULUM_DEFAULT, OPTIONS, PRESETS, W
                                          replace)
 from apf_physics.learning.phases import phases_for_curriculum, phases_for_world
 from apf_physics.learning.rundir import RunDir
-from apf_physics.learning.trainer import CSV_COLUMNS, load_checkpoint_config, train
+from apf_physics.learning.trainer import CSV_COLUMNS, check_phases, load_checkpoint_config, train
 from apf_physics.world.io.worldfile import load_world
 
 
@@ -117,23 +117,27 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("train: give --out DIR, the folder to train into")
     world = load_world(args.world) if args.world else None
     stages = None if args.world else load_curriculum(args.curriculum)
-    with RunDir(args.out, CSV_COLUMNS) as out:  # locked from here on: a second run into --out is refused
-        if args.resume:
-            if not out.last.is_file():
-                raise UserError(f"{out.last}: nothing to resume (no checkpoint there)")
-            saved = load_checkpoint_config(out.last)
-            if args.preset is not None and args.preset != saved.preset:
-                raise UserError(f"{out.last}: was trained with preset {saved.preset!r}, not {args.preset!r}")
-            config = replace(saved, **overrides)
+    # Everything that can be refused is checked before the output folder is made: a refused command leaves nothing.
+    if args.resume:
+        if not Path(args.out).is_dir():
+            raise UserError(f"{Path(args.out) / 'last.pt'}: nothing to resume (no checkpoint there)")
+        run_dir = RunDir(args.out, CSV_COLUMNS)  # the folder is there: locked first, so a run in it is named
+        try:
+            config, phases = _resumed(run_dir, args, overrides, world, stages)
+        except BaseException:
+            run_dir.close()
+            raise
+    else:
+        if (Path(args.out) / "last.pt").exists():
+            raise UserError(f"{Path(args.out)} already holds a training run; continue it with --resume "
+                            "or train into another --out")
+        if args.config is not None:
+            config = replace(load_config(args.config), **overrides)
         else:
-            if out.last.exists():
-                raise UserError(f"{out.path} already holds a training run; continue it with --resume "
-                                "or train into another --out")
-            if args.config is not None:
-                config = replace(load_config(args.config), **overrides)
-            else:
-                config = preset(args.preset or (WORLD_DEFAULT if args.world else CURRICULUM_DEFAULT), **overrides)
-        phases = phases_for_world(world, config) if world is not None else phases_for_curriculum(stages, config)
+            config = preset(args.preset or (WORLD_DEFAULT if args.world else CURRICULUM_DEFAULT), **overrides)
+        phases = _phases(config, world, stages)
+        run_dir = RunDir(args.out, CSV_COLUMNS)  # locked from here on: a second run into --out is refused
+    with run_dir as out:
         config.to_yaml(out.path / "config.yaml")
         try:
             result = train(config, phases, out_dir=out, resume=args.resume, progress=not args.no_progress)
@@ -151,20 +155,49 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if result.diverged:
         print(f"training stopped: {result.stop_reason}", file=sys.stderr)
+    print(f"trained {c.global_step:,} steps, {c.episodes:,} episodes, {result.updates:,} updates in "
+          f"{c.wall_time:.1f} s ({result.stop_reason})")
     best = result.best
-    summary = "never evaluated" if best is None else (
-        f"{best['success']:.1%} of the validation starts, {best['collisions']} collisions"
-        + ("" if best.get("spl") is None else f", SPL {best['spl']:.3f}")
-        + (f", {best['random_success']:.1%} of the random starts" if "random_success" in best else "")
-        + f" (at step {c.best_step})")
-    print(f"trained {c.global_step} steps, {c.episodes} episodes, {result.updates} updates in {c.wall_time:.1f} s "
-          f"({result.stop_reason}); best evaluation: {summary}")
+    if best is None:
+        print("never evaluated")
+    else:
+        print(f"best.pt (step {c.best_step:,}): {_figures(best, phases[0])}")
     if c.time_to_target is not None:
         print(f"reached the target success rate after {c.time_to_target:.1f} s")
     names = [Path(p).name for p in result.written]
     use = " (best.pt is the network to use)" if "best.pt" in names else ""
     print(f"wrote {', '.join(names)} in {out.path}{use}")
     return 1 if result.diverged else 0
+
+
+def _phases(config, world, stages) -> list:
+    phases = phases_for_world(world, config) if world is not None else phases_for_curriculum(stages, config)
+    check_phases(phases)
+    return phases
+
+
+def _resumed(out: RunDir, args: argparse.Namespace, overrides: dict, world, stages) -> tuple:
+    """The configuration and phases of the run in ``out`` to resume, with ``overrides``."""
+    if not out.last.is_file():
+        raise UserError(f"{out.last}: nothing to resume (no checkpoint there)")
+    saved = load_checkpoint_config(out.last)
+    if args.preset is not None and args.preset != saved.preset:
+        raise UserError(f"{out.last}: was trained with preset {saved.preset!r}, not {args.preset!r}")
+    config = replace(saved, **overrides)
+    return config, _phases(config, world, stages)
+
+
+def _figures(best: dict, phase) -> str:
+    """What an evaluation measured, named as train.csv names it: the validation starts, then the world starts."""
+    n = phase.validation.starts
+    text = (f"{best['success']:.1%} of the {n:,} validation starts, {best['collisions']} "
+            f"collision{'' if best['collisions'] == 1 else 's'}")
+    if best.get("spl") is not None:
+        text += f", SPL {best['spl']:.3f}"
+    if best.get("world_starts_success") is not None and phase.world_starts is not phase.validation:
+        k = phase.world_starts.starts
+        text += f"; {round(best['world_starts_success'] * k)}/{k} world starts"
+    return text
 
 
 def _train_on_hint(result, args: argparse.Namespace) -> str:

@@ -380,13 +380,14 @@ class Formations:
         self.followed = [task.spec.followed for task in self.tasks]
 
     def starts(self) -> np.ndarray:
-        """(F, m, 2) every robot's start: each leader at its start, its followers behind it, clear of the others.
+        """(F, m, 2) every robot's start: each leader at its start, its followers behind it, clear of the others
+        (and of the bystanders).
 
         Raises:
             UserError: A follower finds no free position near its leader.
         """
         out = np.zeros((self.count, self.robots, 2))
-        placed = np.array([task.start for task in self.tasks])
+        placed = np.concatenate([np.array([task.start for task in self.tasks]).reshape(-1, 2), self.bystanders])
         for f, task in enumerate(self.tasks):
             others = np.delete(placed, f, axis=0)
             followers = initial_followers(self.worlds[f].among(others), task.spec, task.start)
@@ -409,11 +410,15 @@ class Formations:
 
     reach = 12.0     # other robots farther than this from all of a formation's robots do not count for it
 
+    bystanders: np.ndarray = np.zeros((0, 2))
+    """(B, 2) robots of no formation (a fleet's, :mod:`apf_physics.control.fleet`), where they stand this
+    step: every formation keeps clear of them as of the others' robots, and they are not moved here."""
+
     def others(self, positions: np.ndarray, f: int) -> np.ndarray:
-        """(K, 2) the robots of every formation but ``f``."""
+        """(K, 2) the robots of every formation but ``f``, and the bystanders."""
         mask = self.present.copy()
         mask[f] = False
-        return positions[mask]
+        return np.concatenate([positions[mask], self.bystanders]) if len(self.bystanders) else positions[mask]
 
     def view(self, positions: np.ndarray, f: int) -> World:
         """Formation ``f``'s world with the other formations' robots near it in it, as they stand.
@@ -436,9 +441,12 @@ class Formations:
             proposed[f, 1:size] = self.controllers[f].act(positions[f, :size], leader_moves[f], self.view(positions, f))
         order = sorted(range(self.count), key=lambda f: (self.first_until[f] < step, f))
         robots = np.array([f * self.robots + r for f in order if active[f] for r in range(self.sizes[f])], np.intp)
-        flat = right_of_way(self.world, positions.reshape(-1, 2), proposed.reshape(-1, 2), robots, step,
-                            exists=self.present.ravel())
-        return flat.reshape(positions.shape)
+        # the bystanders take part as robots that stand (left out of the order)
+        stand = self.bystanders
+        flat = right_of_way(self.world, np.concatenate([positions.reshape(-1, 2), stand]),
+                            np.concatenate([proposed.reshape(-1, 2), np.zeros_like(stand)]), robots, step,
+                            exists=np.concatenate([self.present.ravel(), np.ones(len(stand), bool)]))
+        return flat[:positions.shape[0] * positions.shape[1]].reshape(positions.shape)
 
     def watch(self, positions: np.ndarray, active: np.ndarray, step: int) -> None:
         """After a step: note each leader's progress; a stalled leader with company is in a deadlock."""

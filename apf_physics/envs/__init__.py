@@ -1,11 +1,12 @@
 """Gymnasium environments: ``apf_physics/Navigate-v0`` (and its vectorised version) and ``apf_physics/Formation-v0``;
-several formations as a PettingZoo ``ParallelEnv`` (:class:`FormationsParallelEnv`, with the ``[pettingzoo]`` extra)."""
+several formations and a fleet as PettingZoo ``ParallelEnv`` classes (:class:`FormationsParallelEnv`,
+:class:`FleetParallelEnv`, with the ``[pettingzoo]`` extra)."""
 
 from gymnasium.envs.registration import register, registry
 
 from apf_physics.envs.navigate import ACTIONS, NavigateEnv
 from apf_physics.envs.formation import FormationEnv
-from apf_physics.envs.parallel import FormationsParallelEnv
+from apf_physics.envs.parallel import FleetParallelEnv, FormationsParallelEnv
 from apf_physics.envs.vector import NavigateVectorEnv
 
 
@@ -26,4 +27,4 @@ def register_envs() -> None:
         )
 
 
-__all__ = ["ACTIONS", "FormationEnv", "FormationsParallelEnv", "NavigateEnv", "NavigateVectorEnv", "register_envs"]
+__all__ = ["ACTIONS", "FleetParallelEnv", "FormationEnv", "FormationsParallelEnv", "NavigateEnv", "NavigateVectorEnv", "register_envs"]

@@ -1,4 +1,5 @@
-"""``FormationsParallelEnv``: several formations in one world, as a PettingZoo ``ParallelEnv``.
+"""PettingZoo ``ParallelEnv`` classes: several formations in one world (``FormationsParallelEnv``), and a
+fleet of robots each with its own goal (``FleetParallelEnv``).
 
 PettingZoo is an optional extra (``pip install "apf-physics[pettingzoo]"``); this module
 needs it only to subclass ``ParallelEnv`` when it is installed.
@@ -12,12 +13,14 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
 
+from apf_physics.control.fleet import STAY
 from apf_physics.control.shield import ACTIONS
 from apf_physics.envs.options import FileUnits, observer_config, resolve_worlds
 from apf_physics.envs.reward import TERMS, reward_weights
-from apf_physics.envs.task import FormationsTask, TrapOption
+from apf_physics.envs.task import FleetTask, FormationsTask, TrapOption
 from apf_physics.sensing.observation import ObserverConfig
 from apf_physics.render.drawing import Snapshot, draw_frame, field_image, formation_roles
+from apf_physics.render.fleet import fleet_colours, fleet_frame, fleet_image
 
 try:
     from pettingzoo import ParallelEnv
@@ -145,6 +148,117 @@ class FormationsParallelEnv(ParallelEnv):
         snapshot = Snapshot(positions, roles, (), (f"{self.world.name}  step {self.task.step_count}",),
                             self.task.step_count, families)
         return draw_frame(field_image(self.world), snapshot)
+
+    def close(self) -> None:
+        pass
+
+
+class FleetParallelEnv(ParallelEnv):
+    """A fleet on one map: every robot an agent with a goal of its own, as POGEMA's environments
+    are, through the physics.
+
+    ## Agents
+
+    ``robot_<i>`` for each of the world's ``robots:`` (or ``num_agents`` robots drawn at each reset
+    with ``starts="random"``, or for a world without robots).
+
+    ## Action Space
+
+    ``Discrete(9)`` per agent, Model Table 1 order (up, down, left, right, the four diagonals, stay),
+    one step from node to node of the fleet's lattice (:class:`~apf_physics.control.fleet.Lattice`).
+    A move into an obstacle, or that would bring two robots within ``2·radius + SAFETY`` of each
+    other (the shield among robots, :func:`~apf_physics.control.fleet.fleet_moves`, in an order drawn
+    each step), is refused and the agent stays: POGEMA's soft collisions, with bodies that never touch
+    (``infos[agent]["refused"]``).
+
+    ## Observation Space
+
+    ``Box(0, 1, (3, k, k), float32)``, ``k = 2·obs_radius + 1`` (POGEMA's): obstacles (and the map's
+    outside), the other robots, and the agent's goal (on the window's border when beyond it), in a
+    window of nodes around the agent, north up.
+
+    ## Rewards
+
+    POGEMA's: 1 when the agent reaches its goal, else 0.
+
+    ## Episode End
+
+    ``on_target="finish"`` (default): an agent terminates on reaching its goal; its robot stays
+    there, a body in the others' way. ``"restart"`` (lifelong): it is given its next goal at once
+    and goes on. Every agent is truncated after ``max_episode_steps``.
+
+    ## Arguments
+
+    ``world`` (a world file with ``robots:``, a world, or a map's world with ``num_agents``),
+    ``num_agents``, ``starts`` (``"world"`` or ``"random"``), ``obs_radius`` (5), ``on_target``,
+    ``max_episode_steps`` (256), ``render_mode``.
+
+    ``infos[agent]`` holds its ``position`` and ``goal`` (the world file's units), ``success``,
+    ``refused`` and ``collision`` (the physics' contact log: never, by the rule above).
+    """
+
+    metadata = {"name": "apf_physics_fleet_v0", "render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(self, world: Any = None, num_agents: int | None = None, starts: str = "world", obs_radius: int = 5,
+                 on_target: str = "finish", max_episode_steps: int = 256, render_mode: str | None = None):
+        (self.world,) = resolve_worlds(world)
+        if starts not in ("world", "random"):
+            raise ValueError(f"starts must be 'world' or 'random', got {starts!r}")
+        self.random_starts = starts == "random" or self.world.robots is None
+        self.task = FleetTask(self.world, num_agents, obs_radius, on_target, max_episode_steps)
+        self.possible_agents = [f"robot_{i}" for i in range(self.task.count)]
+        self.agents: list[str] = []
+        self.render_mode = render_mode
+        self._observation_space = spaces.Box(0.0, 1.0, self.task.shape, np.float32)
+        self._action_space = spaces.Discrete(len(ACTIONS))
+        self._units = FileUnits([self.world])
+        self.np_random, _ = seeding.np_random(None)
+
+    def observation_space(self, agent: str) -> spaces.Space:
+        return self._observation_space
+
+    def action_space(self, agent: str) -> spaces.Space:
+        return self._action_space
+
+    def reset(self, seed: int | None = None, options: dict | None = None):
+        if seed is not None:
+            self.np_random, _ = seeding.np_random(seed)
+        self.task.start(self.np_random, self.random_starts)
+        self.agents = list(self.possible_agents)
+        obs = self.task.observe()
+        return ({a: obs[i] for i, a in enumerate(self.possible_agents)},
+                {a: self._info(i) for i, a in enumerate(self.possible_agents)})
+
+    def step(self, actions: dict):
+        chosen = np.full(self.task.count, STAY, np.intp)   # agents no longer playing: stay
+        for agent, action in actions.items():
+            chosen[int(agent.rsplit("_", 1)[1])] = int(action)
+        reward, terminated, truncated, refused, collided = self.task.step(chosen)
+        obs = self.task.observe()
+        live = list(self.agents)
+        index = {a: int(a.rsplit("_", 1)[1]) for a in live}
+        infos = {a: {**self._info(i), "success": bool(reward[i] > 0), "refused": bool(refused[i]),
+                     "collision": bool(collided[i])} for a, i in index.items()}
+        out = ({a: obs[i] for a, i in index.items()}, {a: float(reward[i]) for a, i in index.items()},
+               {a: bool(terminated[i]) for a, i in index.items()}, {a: bool(truncated[i]) for a, i in index.items()},
+               infos)
+        self.agents = [a for a in live if not (terminated[index[a]] or truncated[index[a]])]
+        return out
+
+    def _info(self, i: int) -> dict:
+        task = self.task
+        return {"position": self._units.points(task.lattice.points(task.nodes[i:i + 1])[0], 0),
+                "goal": self._units.points(task.lattice.points(task.goals[i:i + 1])[0], 0), "units": self._units.names[0]}
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        task = self.task
+        positions = task.lattice.points(task.nodes)[None]
+        goals = task.lattice.points(task.goals)[None]
+        image = fleet_image(self.world, 1024)
+        return fleet_frame(image, positions, goals, 0, fleet_colours(task.count),
+                           (f"{self.world.name}  step {task.steps}",))
 
     def close(self) -> None:
         pass

@@ -17,6 +17,7 @@ from typing import Sequence, Union
 import numpy as np
 from gymnasium import spaces
 
+from apf_physics.control.fleet import STAY, GoalStream, Lattice, fleet_moves, place_fleet
 from apf_physics.control.shield import ACTIONS
 from apf_physics.sim.engine import TIMEOUT, TRAPPED, Stepper, TrapDetector
 from apf_physics.envs.options import RobotOptions
@@ -407,3 +408,103 @@ class FormationsTask:
         robot_contact = report.contacts.robot[self._robot]
         return TaskStep(self._obs, reward, terminated, truncated, terms, reached, touched, moved,
                         robot_contact, trapped)
+
+
+class FleetTask:
+    """A fleet on one map (:mod:`apf_physics.control.fleet`): every robot an agent with a goal of its own,
+    the observations and rewards of POGEMA (what :class:`~apf_physics.envs.parallel.FleetParallelEnv` steps).
+
+    Each step the agents' moves (:data:`~apf_physics.world.kinematics.ACTIONS`) go through the fleet's
+    rule with each agent's own move first and staying second
+    (:func:`~apf_physics.control.fleet.fleet_moves`, in an order drawn each step): a move that would bring
+    two robots within ``2·radius + SAFETY`` of each other, or into an obstacle, is refused and the agent
+    stays (POGEMA's soft collisions, with bodies); then one :class:`~apf_physics.sim.engine.Stepper` step
+    moves them all, one crowd in one pymunk space.
+
+    Args:
+        world: The map (and its ``robots:``, the default starts and goals).
+        num_agents: Robots when the starts are drawn (default: the world's robots).
+        obs_radius: The window's half side in steps (POGEMA's ``obs_radius``).
+        on_target: ``"finish"``: an agent that reaches its goal is done (its robot stays there, a body
+            in the others' way); ``"restart"``: it is given its next goal at once (lifelong).
+        max_steps: Truncate every agent after this many steps.
+    """
+
+    def __init__(self, world: World, num_agents: int | None = None, obs_radius: int = 5, on_target: str = "finish",
+                 max_steps: int = 256):
+        if on_target not in ("finish", "restart"):
+            raise UserError(f"on_target must be 'finish' or 'restart', got {on_target!r}")
+        if world.robots is None and num_agents is None:
+            raise UserError(f"{world.label}: no robots: give the world 'robots:' or the environment num_agents=N")
+        self.world, self.on_target, self.max_steps = world, on_target, int(max_steps)
+        self.count = len(world.robots) if num_agents is None else int(num_agents)
+        origin = world.robots.starts[0] if world.robots is not None else (0.5, 0.5)
+        self.lattice = Lattice.of(world, origin)
+        self.radius = int(obs_radius)
+        self.shape = (3, 2 * self.radius + 1, 2 * self.radius + 1)
+        self.blocked = np.pad(~self.lattice.free.reshape(self.lattice.shape), self.radius, constant_values=True)
+
+    def draw(self, rng: np.random.Generator, random_starts: bool) -> tuple[np.ndarray, np.ndarray]:
+        """Start and goal nodes: the world's robots', or drawn (distinct, in the largest connected region)."""
+        if not random_starts and self.world.robots is not None:
+            placed = place_fleet(self.world, self.world.robots.first(self.count), self.on_target == "finish")
+            return placed.starts, placed.goals
+        regions = self.lattice.regions()
+        region = np.flatnonzero(regions == np.bincount(regions[regions >= 0]).argmax())
+        if self.count > len(region):
+            raise UserError(f"{self.world.label}: {self.count} agents, but the map's largest region has {len(region)} nodes")
+        starts, goals = rng.choice(region, self.count, replace=False), rng.choice(region, self.count, replace=False)
+        return starts, goals
+
+    def start(self, rng: np.random.Generator, random_starts: bool = False) -> None:
+        self.rng = rng
+        starts, self.goals = self.draw(rng, random_starts)
+        self.stream = GoalStream(self.lattice, starts, int(rng.integers(2**31))) if self.on_target == "restart" else None
+        n = self.count
+        self.stepper = Stepper([self.world], n, 1, crowds=[0] * n, arrival="continue")
+        self.stepper.start(np.arange(n), self.lattice.points(starts)[:, None, :])
+        self.nodes = starts.copy()
+        self.done = np.zeros(n, bool)
+        self.steps = 0
+
+    def observe(self) -> np.ndarray:
+        """(N, 3, k, k) float32: obstacles (and the map's outside), the other robots, the goal (on the
+        window's border when beyond it); row 0 is the window's top (north up), as POGEMA's."""
+        rows, cols = self.lattice.shape
+        r, c = np.divmod(self.nodes, cols)
+        k = 2 * self.radius + 1
+        windows = np.lib.stride_tricks.sliding_window_view(self.blocked, (k, k))
+        agents = np.zeros((rows + 2 * self.radius, cols + 2 * self.radius), bool)
+        agents[r + self.radius, c + self.radius] = True
+        out = np.zeros((self.count, *self.shape), np.float32)
+        out[:, 0] = windows[r, c]
+        out[:, 1] = np.lib.stride_tricks.sliding_window_view(agents, (k, k))[r, c]
+        out[:, 1, self.radius, self.radius] = 0.0            # not itself
+        gr, gc = np.divmod(self.goals, cols)
+        dr = np.clip(gr - r, -self.radius, self.radius) + self.radius
+        dc = np.clip(gc - c, -self.radius, self.radius) + self.radius
+        out[np.arange(self.count), 2, dr, dc] = 1.0
+        return out[:, :, ::-1, :].copy()                       # north up
+
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The agents' moves; returns ``(reward, terminated, truncated, refused, collided)``, each (N,)."""
+        actions = np.asarray(actions, np.intp).reshape(self.count)
+        prefs = np.full((self.count, 9), -1, np.intp)
+        prefs[:, 0], prefs[:, 1] = actions, STAY
+        prefs[~self.lattice.ok[self.nodes, actions] & (actions != STAY), 0] = STAY
+        moves = fleet_moves(self.lattice, self.nodes, prefs, self.rng.permutation(self.count), pinned=self.done)
+        report = self.stepper.step(ACTIONS[moves][:, None, :])
+        self.steps += 1
+        self.nodes = self.lattice.nearest(report.positions[:, 0])
+        arrived = (self.nodes == self.goals) & ~self.done
+        reward = arrived.astype(float)
+        if self.stream is not None:
+            for i in np.flatnonzero(arrived).tolist():
+                self.goals[i] = self.stream.next(i, int(self.nodes[i]))
+            terminated = np.zeros(self.count, bool)
+        else:
+            terminated = arrived
+            self.done |= arrived
+        truncated = np.full(self.count, self.steps >= self.max_steps) & ~terminated
+        collided = report.contacts.any.copy() if report.contacts.touched else np.zeros(self.count, bool)
+        return reward, terminated, truncated, (moves != actions), collided

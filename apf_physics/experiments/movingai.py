@@ -17,11 +17,13 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from apf_physics.control.fleet import Lattice
 from apf_physics.errors import UserError
 from apf_physics.experiments.evaluate import Episode, Evaluation, evaluate, figures
 from apf_physics.world.io.mapfiles import MAX_PROBLEMS, Scenario, read_movingai_map, read_scenarios, scenario_points
 from apf_physics.planners.base import Planner
-from apf_physics.world.core import World
+from apf_physics.world.core import Fleet, World
+from apf_physics.world.search import node_distances
 from apf_physics.world.io.worldfile import world_from_dict
 
 
@@ -164,4 +166,68 @@ def trials_json(evaluations: Sequence[Evaluation], trials: Sequence[Trial]) -> l
             episodes.append(data)
         out.append({"planner": ev.planner, "episodes": episodes, "summary": ev.summary(),
                     "buckets": bucket_summary(ev, trials)})
+    return out
+
+
+def map_world(map_path: str | Path, field: str = "thesis-general", cell: float = 1.0) -> World:
+    """A MovingAI map as a world (its first free cell's centre as the world's target, which no fleet uses)."""
+    grid = read_movingai_map(map_path, cell)
+    free = np.argwhere(~grid.occupied)
+    if not len(free):
+        raise UserError(f"{map_path}: the map has no free cell")
+    r, c = free[0]
+    target = [grid.origin[0] + (c + 0.5) * cell, grid.origin[1] + (r + 0.5) * cell]
+    return world_from_dict({"name": Path(map_path).stem, "grid": {"movingai": str(Path(map_path).resolve()), "cell": cell},
+                            "field": field, "targets": [target]}, str(map_path), confine=False)
+
+
+def scenario_fleet(map_path: str | Path, scen_path: str | Path, agents: int, field: str = "thesis-general",
+                   cell: float = 1.0) -> tuple[World, Fleet]:
+    """The first ``agents`` lines of a scenario file as one fleet on its map (the MAPF convention).
+
+    Raises:
+        UserError: The files are unreadable, a scenario does not fit the map, or the file has fewer
+            than ``agents`` scenarios.
+    """
+    world = map_world(map_path, field, cell)
+    grid = read_movingai_map(map_path, cell)
+    rows, cols = grid.occupied.shape
+    scenarios = read_scenarios(scen_path, map_name=Path(map_path).name, map_size=(cols, rows)).scenarios
+    if agents > len(scenarios):
+        raise UserError(f"{scen_path}: --agents {agents}: the file has only {len(scenarios)} scenarios")
+    chosen = scenarios[:agents]
+    points = np.array([scenario_points(s, grid) for s in chosen]).reshape(-1, 2, 2)
+    labels = tuple(f"{scen_path}: line {s.line}" for s in chosen)
+    optimal = np.array([s.optimal * cell for s in chosen])
+    return world, Fleet(points[:, 0], points[:, 1], labels, optimal)
+
+
+def draw_scenarios(map_path: str | Path, count: int, seed: int = 0) -> list[Scenario]:
+    """``count`` scenarios drawn as the MAPF benchmark's random ones: distinct free starts, distinct free
+    goals (none on its own start), all in the map's largest connected region (8-connected, no corner
+    cut), each with its octile optimal length; buckets of 4 cells of length.
+
+    Raises:
+        UserError: The region has fewer than ``count`` free cells.
+    """
+    world = map_world(map_path)
+    lattice = Lattice.of(world, (0.5, 0.5))
+    regions = lattice.regions()
+    largest = np.bincount(regions[regions >= 0]).argmax()
+    region = np.flatnonzero(regions == largest)
+    if count > len(region) or count < 1:
+        raise UserError(f"{map_path}: --count {count}: the largest connected region has {len(region)} free cells")
+    rng = np.random.default_rng(seed)
+    starts = rng.choice(region, count, replace=False)
+    goals = rng.choice(region, count, replace=False)
+    for i in np.flatnonzero(starts == goals).tolist():   # none on its own start: trade goals with a neighbour
+        j = (i + 1) % count
+        goals[i], goals[j] = goals[j], goals[i]
+    rows, cols = lattice.shape
+    name = Path(map_path).name
+    out = []
+    for start, goal in zip(starts.tolist(), goals.tolist()):
+        optimal = float(node_distances(lattice.ok, lattice.offsets, lattice.lengths, goal)[start])
+        (sr, sc), (gr, gc) = divmod(start, cols), divmod(goal, cols)
+        out.append(Scenario(int(optimal // 4), name, cols, rows, (sc, rows - 1 - sr), (gc, rows - 1 - gr), optimal))
     return out

@@ -400,15 +400,7 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
     while stepper.running.any():
         active = stepper.running
         positions = stepper.positions
-        leader = np.zeros((count, 2))
-        gave_up = np.zeros(count, bool)
-        views = {}
-        for f in np.flatnonzero(active).tolist():
-            view = planners[f].world = formations.view(positions, f)
-            views[f] = view.at(step)
-            leader[f] = planners[f].act(positions[f, :1], np.ones(1, bool), views[f])[0]
-            stuck = planners[f].stuck()
-            gave_up[f] = bool(stuck[0]) if stuck is not None else False
+        leader, gave_up, views = leader_moves(formations, planners, positions, active, step)
         if limits is None:
             commands = formations.commands(positions, leader, active & ~gave_up, step)
         else:
@@ -443,6 +435,24 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
                                 positions[:, 0].copy(), trace.contacts[f], record,
                                 headings=None if theta is None else theta[:, 0].copy(), frame=world.frame))
     return episodes
+
+
+def leader_moves(formations: Formations, planners: Sequence[Planner], positions: np.ndarray, active: np.ndarray,
+                 step: int) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Each active formation's leader's move, by its own planner in its own view (its target, the other
+    formations' robots and the bystanders as discs where they stand): ``(moves (F, 2), gave up (F,),
+    views {f: the view at this step})``."""
+    count = formations.count
+    leader = np.zeros((count, 2))
+    gave_up = np.zeros(count, bool)
+    views = {}
+    for f in np.flatnonzero(active[:count]).tolist():
+        view = planners[f].world = formations.view(positions, f)
+        views[f] = view.at(step)
+        leader[f] = planners[f].act(positions[f, :1], np.ones(1, bool), views[f])[0]
+        stuck = planners[f].stuck()
+        gave_up[f] = bool(stuck[0]) if stuck is not None else False
+    return leader, gave_up, views
 
 
 def formations_unicycle_commands(formations: Formations, states: np.ndarray, leader_moves: np.ndarray, moving: np.ndarray,

@@ -68,10 +68,10 @@ from typing import Any, Literal, Optional, Union
 
 import yaml
 
-from apf_physics.control.shield import MOVE_SETS
 from apf_physics.envs.reward import REWARD_PRESETS, RewardWeights
 from apf_physics.errors import UserError, did_you_mean
-from apf_physics.world.generate import FAMILIES, MOVING_FAMILIES, STRUCTURE_FAMILIES
+from apf_physics.world.generate import FAMILIES, MOVING_FAMILIES, SCALED_FAMILIES, STRUCTURE_FAMILIES
+from apf_physics.world.kinematics import MOVE_KINDS
 from apf_physics.models.network import OBS_TRANSFORMS
 from apf_physics.sensing.observation import SCALES, ObserverConfig
 from apf_physics.common.safefile import atomic_path, read_text_file
@@ -87,12 +87,15 @@ ObsScale = Literal[SCALES]
 ObsTransform = Literal[OBS_TRANSFORMS]
 Loss = Literal["mse", "huber"]
 TargetUpdate = Literal["none", "hard", "soft"]
-MoveSet = Literal[tuple(MOVE_SETS)]
-EVAL_FIGURES = ("success", "trap_success", "collisions", "length_ratio", "spl", "random_success")
-"""Figures of an evaluation that :attr:`EvalConfig.select` may name (see :mod:`apf_physics.learning.validation`)."""
+EvalNetwork = Literal["online", "target"]
+MoveSet = Literal[tuple(MOVE_KINDS)]
+EVAL_FIGURES = ("success", "trap_success", "collisions", "length_ratio", "spl", "world_starts_success",
+                "world_starts_collisions")
+"""Figures of an evaluation that :attr:`EvalConfig.select` may name: on the validation starts (the first five,
+``validation_*`` in ``train.csv``; see :mod:`apf_physics.learning.validation`), and on a world's own starts."""
 HELDOUT_SEED = 100
 """Seed of the project's held-out generated test set; training and validation never use it."""
-TRAIN_FAMILIES = FAMILIES + MOVING_FAMILIES + STRUCTURE_FAMILIES
+TRAIN_FAMILIES = FAMILIES + MOVING_FAMILIES + STRUCTURE_FAMILIES + SCALED_FAMILIES
 """Generator families a training pool may draw from (single-robot worlds)."""
 RESUMABLE = frozenset({"total_steps", "total_episodes", "time_limit", "target_success", "threads", "eval_every",
                        "checkpoint_every", "log_every", "save_buffer", "loss_limit"})
@@ -136,6 +139,10 @@ class EnvConfig:
     world_start_fraction: float = 0.0
     """Share of the environments whose searches start at the worlds' own starts; the others use
     ``train_starts``."""
+    failure_starts: float = 0.0
+    """Share of the training starts drawn where recent training searches failed (weighted by the
+    failures of the one-unit cell each start lies in, redrawn every 100 vector steps); the rest are
+    drawn as ``train_starts`` says (0: all of them). One world only."""
     num_envs: int = 1
     """Environments stepped in parallel (one vector step adds up to this many transitions)."""
 
@@ -146,6 +153,7 @@ class EnvConfig:
             (self.obs_size >= 3 and self.obs_size % 2 == 1, "obs_size must be odd and at least 3"),
             (reward_ok, f"reward must be one of {', '.join(REWARD_PRESETS)} or a dict of RewardWeights fields"),
             (0.0 <= self.world_start_fraction <= 1.0, "world_start_fraction must be in [0, 1]"),
+            (0.0 <= self.failure_starts <= 1.0, "failure_starts must be in [0, 1]"),
             (min(self.num_envs, self.obs_resolution, self.memory_cap, self.max_episode_steps) >= 1,
              "num_envs, obs_resolution, memory_cap and max_episode_steps must be positive"),
         ])
@@ -194,6 +202,8 @@ class DQNConfig:
 
     gamma: float = 0.95
     """γ: discount rate."""
+    n_step: int = 1
+    """Rewards summed into each TD target before bootstrapping (1: eq. 32 as written)."""
     batch_size: int = 7
     """m: transitions per update."""
     buffer_size: int = 100_000
@@ -215,6 +225,10 @@ class DQNConfig:
     """Updates between copies of a hard target network."""
     tau: float = 0.01
     """Soft target update rate: target ← (1 − τ)·target + τ·online."""
+    eval_network: EvalNetwork = "online"
+    """The network evaluated and kept as ``best.pt``: ``"online"`` (the one being updated) or ``"target"``
+    (with soft updates, the average of the online weights over about 1/τ updates: its greedy choices
+    change smoothly from one evaluation to the next, where the online network's jump)."""
     reward_scale: float = 1.0
     """Rewards are multiplied by this before learning (logged returns are unscaled)."""
     epsilon_initial: float = 0.95
@@ -229,12 +243,14 @@ class DQNConfig:
     def __post_init__(self):
         _check([
             (0 < self.tau <= 1, "tau must be in (0, 1]"),
+            (self.eval_network == "online" or self.target_update != "none",
+             "eval_network 'target' needs a target network (target_update 'soft' or 'hard')"),
             (0 <= self.gamma <= 1, "gamma must be in [0, 1]"),
             (0 <= self.epsilon_final <= 1 and 0 <= self.epsilon_initial <= 1, "epsilons must be in [0, 1]"),
             (min(self.batch_size, self.buffer_size, self.exploration_episodes, self.train_frequency,
-                 self.gradient_steps, self.target_update_every) >= 1,
-             "batch_size, buffer_size, exploration_episodes, train_frequency, gradient_steps and "
-             "target_update_every must be positive"),
+                 self.gradient_steps, self.target_update_every, self.n_step) >= 1,
+             "batch_size, buffer_size, exploration_episodes, train_frequency, gradient_steps, "
+             "target_update_every and n_step must be positive"),
         ])
 
 
@@ -247,7 +263,12 @@ class ImitationConfig:
     map_channels: int = 8
     """Hidden channels of the map network's cost map."""
     map_moves: MoveSet = "fine"
-    """The network's move set (:data:`~apf_physics.control.shield.MOVE_SETS`)."""
+    """The network's moves (:data:`~apf_physics.world.kinematics.MOVE_KINDS`: a fixed set, or "nodes")."""
+    map_dv_clip: float = 4.0
+    """|ΔV| the map network's head reads is clipped to this (:attr:`~apf_physics.models.mapnet.MapNetwork.dv_clip`)."""
+    map_least_resolution: Optional[int] = None
+    """Moves onto nodes: the graph the network learns and plans on has at least this many nodes per
+    step (:func:`~apf_physics.sim.nodegraph.resolution_for`; None: ``map_resolution``)."""
     grad_iterations: int = 24
     """Value-iteration (Bellman) updates back-propagated through, after the fixed point."""
     demo_positions: int = 256
@@ -259,6 +280,9 @@ class ImitationConfig:
         _check([(1 <= self.map_resolution <= 8, "map_resolution must be 1 to 8"),
                 (self.map_channels >= 1 and self.demo_positions >= 1, "map_channels and demo_positions must be positive"),
                 (self.grad_iterations >= 0, "grad_iterations must not be negative"),
+                (0 < self.map_dv_clip <= 1e3, "map_dv_clip must be from 0 to 1,000"),
+                (self.map_least_resolution is None or 1 <= self.map_least_resolution <= 16,
+                 "map_least_resolution must be 1 to 16"),
                 (self.label_temperature > 0, "label_temperature must be positive")])
 
 
@@ -289,8 +313,7 @@ class ScheduleConfig:
     time_limit: Optional[float] = None
     """Seconds of training over all resumed sessions (None: no limit)."""
     target_success: Optional[float] = None
-    """Stop once a greedy evaluation reaches this share of the held-out starts (``eval_random_starts``)
-    when there are any, else of the validation starts (None: never early)."""
+    """Stop once a greedy evaluation succeeds from this share of the validation starts (None: never early)."""
     loss_limit: Optional[float] = 1e12
     """Stop, as diverged, when a logged mean loss exceeds this (a non-finite loss always stops; None:
     no limit)."""
@@ -317,12 +340,13 @@ class EvalConfig:
     eval_shield: bool = False
     """Evaluate with the DQN planner's shield (``apf-physics eval --planner dqn``) rather than the
     network's choices as they are (``dqn-unshielded``)."""
-    select: tuple[str, ...] = ("success", "random_success")
+    select: tuple[str, ...] = ("success", "world_starts_success")
     """Which evaluation is best: compared figure by figure, in this order (a leading ``-``: lower is
     better; figures of :data:`EVAL_FIGURES`, rounded to 6 decimals); the first of equals is kept."""
     eval_random_starts: int = 0
-    """On a world: also evaluate from this many random free starts that can reach a target, drawn
-    once from a generator of their own (their success is the figure ``random_success``)."""
+    """On a world: the validation starts (which choose ``best.pt``) are this many random free starts
+    that can reach a target, drawn once from a generator of their own and never trained from; the
+    world's own starts are evaluated beside them (0: the world's own starts are the validation starts)."""
     validation_worlds: int = 30
     """On a curriculum: generated worlds of the validation set (all families in turn)."""
     validation_starts: int = 4
@@ -578,10 +602,11 @@ LAYERS: dict[str, tuple[str | None, dict[str, Any], str]] = {
         loss="huber", double_dqn=True, target_update="soft", tau=0.01, max_grad_norm=10.0, reward_scale=1e-3),
         "the learner that learns a world fastest here (shared by fast and the general presets)"),
     "fast": ("fast learner", dict(
-        train_starts="reachable", eval_random_starts=1000, select=("random_success", "success"),
-        exploration_episodes=3_000, total_episodes=None, total_steps=3_000_000, eval_every=3_200,
-        target_success=0.99, time_limit=900.0, checkpoint_every=128_000, log_every=6_400),
-        "a world, learnt fastest; validated on random starts"),
+        train_starts="reachable", failure_starts=0.5, batch_size=128, gradient_steps=4, n_step=5,
+        learning_rate=5e-4, eval_network="target", eval_random_starts=1000, select=("success", "world_starts_success"),
+        exploration_episodes=3_000, total_episodes=None, total_steps=300_000, eval_every=3_200,
+        target_success=0.99, checkpoint_every=128_000, log_every=6_400),
+        "a world, learnt fastest; validated on random starts, stopped by steps"),
     "thesis-general-world": (None, dict(
         obs_size=9, filters=(4, 4), reward="thesis-general", exploration_episodes=150, total_episodes=150,
         eval_every=2_000, checkpoint_every=5_000, log_every=500), "Table 4's network and weights on one world"),
@@ -604,9 +629,9 @@ LAYERS: dict[str, tuple[str | None, dict[str, Any], str]] = {
                                        families=FAMILIES + MOVING_FAMILIES * len(FAMILIES), time_limit=2400.0),
                "general-revisit with the field a step earlier, half its pool moving: the shipped moving.pt"),
     "map": (None, dict(
-        method="imitation", reward="thesis-general", families=FAMILIES + STRUCTURE_FAMILIES,
-        map_sizes=(50.0, 100.0, 250.0), pool_size=48, refresh_every=600, learning_rate=3e-3, total_episodes=None,
-        total_steps=1_000, time_limit=1_800.0, eval_every=125, eval_shield=False,
+        method="imitation", reward="thesis-general", families=FAMILIES + STRUCTURE_FAMILIES + SCALED_FAMILIES,
+        map_sizes=(50.0, 100.0, 250.0), map_moves="nodes", map_dv_clip=8.0, pool_size=48, refresh_every=600,
+        learning_rate=3e-3, total_episodes=None, total_steps=1_250, time_limit=5_400.0, eval_every=125, eval_shield=False,
         select=("-collisions", "success", "spl"), validation_worlds=24, validation_starts=2, validation_seed=1,
         log_every=50, checkpoint_every=250, hidden=(32, 32), negative_slope=0.01),
         "the map network by imitation of A*: the shipped map.pt"),

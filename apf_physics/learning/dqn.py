@@ -20,7 +20,7 @@ from apf_physics.envs import NavigateVectorEnv
 from apf_physics.models.network import QNetwork
 from apf_physics.models.policy import DQNPolicy
 from apf_physics.planners.dqn import DQNPlanner
-from apf_physics.learning.buffer import ReplayBuffer
+from apf_physics.learning.buffer import NStepReturns, ReplayBuffer
 from apf_physics.learning.config import N_ACTIONS, TrainConfig, epsilon_schedule
 from apf_physics.learning.learner import Counters, Learner
 from apf_physics.learning.phases import Phase
@@ -78,8 +78,8 @@ class QLearning:
                 next_q = self.target_network(batch.next_observations).gather(1, next_actions).squeeze(1)
             else:
                 next_q = self.target_network(batch.next_observations).amax(1)
-            # TD target (eq. 32): R + γ·max Q(O_{n+1}), nothing beyond a terminal step
-            td_target = batch.rewards + c.gamma * (1.0 - batch.dones) * next_q
+            # TD target (eq. 32, over m steps): R + γ^m·max Q(O_{n+m}), nothing beyond a terminal step
+            td_target = batch.rewards + batch.discounts * next_q
         q_taken = self.q_network(batch.observations).gather(1, batch.actions).squeeze(1)
         if c.loss == "huber":  # Huber loss: less sensitive to outliers than the thesis's MSE
             loss = F.smooth_l1_loss(q_taken, td_target)
@@ -112,50 +112,145 @@ class Collector:
     Args:
         learning: Whose network acts and whose pool fills.
         reward_scale: Rewards are stored multiplied by it (returns are kept unscaled).
+        n_step: Steps per stored return (:class:`~apf_physics.learning.buffer.NStepReturns`).
+        gamma: γ, the discount rate of the returns.
         window: Recent episodes kept for :meth:`means`.
     """
 
-    def __init__(self, learning: QLearning, reward_scale: float = 1.0, window: int = 100):
+    def __init__(self, learning: QLearning, reward_scale: float = 1.0, n_step: int = 1, gamma: float = 1.0,
+                 window: int = 100):
         self.learning = learning
         self.reward_scale = reward_scale
+        self.n_step, self.gamma = n_step, gamma
         self.recent_returns: collections.deque = collections.deque(maxlen=window)
         self.recent_success: collections.deque = collections.deque(maxlen=window)
 
-    def begin(self, obs: np.ndarray) -> None:
-        """Start from freshly reset environments' observations."""
+    def begin(self, obs: np.ndarray, starts: np.ndarray) -> None:
+        """Start from freshly reset environments' observations and where their searches start."""
         self.obs = obs
+        self.starts = np.array(starts, float)
         self.prev_done = np.zeros(len(obs), bool)
         self.ep_return = np.zeros(len(obs))
+        self.returns = NStepReturns(self.n_step, self.gamma, len(obs), obs.shape[1:])
+        self.ended: list[tuple[np.ndarray, np.ndarray]] = []
+        """``(starts, success)`` of the searches that ended since :meth:`take_ended`."""
 
     def step(self, step: Callable[[np.ndarray], tuple], epsilon: float, rng: np.random.Generator) -> tuple[int, int]:
-        """One vector step; ``step(actions)`` returns ``(obs, rewards, terminated, truncated, success)``.
+        """One vector step; ``step(actions)`` returns ``(obs, rewards, terminated, truncated, success, positions)``.
 
         With NEXT_STEP autoreset the step right after an episode ends only returns the reset
-        observation: that transition is not stored.
+        observation (and the new search's start): that is no transition.
 
         Returns:
-            Transitions stored and episodes that ended.
+            Transitions made (stored now or held for their n-step return) and episodes that ended.
         """
         actions = epsilon_greedy(self.learning.q_network, self.obs, epsilon, rng)
-        next_obs, rewards, terminated, truncated, success = step(actions)
+        next_obs, rewards, terminated, truncated, success, positions = step(actions)
         valid = ~self.prev_done
-        self.learning.buffer.add(self.obs[valid], next_obs[valid], actions[valid],
-                                 rewards[valid] * self.reward_scale, terminated[valid])
+        self.starts[~valid] = positions[~valid]
         done = (terminated | truncated) & valid
+        self.learning.buffer.add(*self.returns.add(self.obs, actions, rewards * self.reward_scale, next_obs,
+                                                   terminated, done, valid))
         self.ep_return += np.where(valid, rewards, 0.0)
         if done.any():
             self.recent_returns.extend(self.ep_return[done].tolist())
             self.recent_success.extend(np.asarray(success, bool)[done].tolist())
+            self.ended.append((self.starts[done].copy(), np.asarray(success, bool)[done]))
             self.ep_return[done] = 0.0
         self.prev_done = terminated | truncated
         self.obs = next_obs
         return int(valid.sum()), int(done.sum())
+
+    def end(self) -> None:
+        """The environments close: store the transitions still waiting for their n-step return."""
+        self.learning.buffer.add(*self.returns.flush())
+
+    def take_ended(self) -> tuple[np.ndarray, np.ndarray]:
+        """Starts and success of the searches that ended since the last call."""
+        ended, self.ended = self.ended, []
+        if not ended:
+            return np.zeros((0, 2)), np.zeros(0, bool)
+        return np.concatenate([s for s, _ in ended]), np.concatenate([k for _, k in ended])
 
     def means(self) -> tuple[str | float, str | float]:
         """Mean return and success rate of the recent episodes, rounded for ``train.csv`` (``""``: none yet)."""
         if not self.recent_returns:
             return "", ""
         return round(float(np.mean(self.recent_returns)), 4), round(float(np.mean(self.recent_success)), 4)
+
+
+class FailureStarts:
+    """Training starts drawn where the policy fails: a share of them weighted by the recent failures near each.
+
+    The map is divided into cells of one unit (one step); each cell keeps counts of the recent
+    training searches that started in it and of those that failed, multiplied by
+    :data:`FAILURE_MEMORY` at every draw (recent searches count most). A draw of
+    :data:`DRAWN_STARTS` starts takes a ``share`` of them from the pool with weights
+    ``(failures + 0.05) / (searches + 1)`` of their cells, and the rest uniformly from the pool,
+    so every start stays possible.
+
+    Args:
+        pool: (S, 2) the training starts drawn from (in steps).
+        world: Their world (its size and the frame of its file's units).
+        share: The share drawn by failure.
+    """
+
+    def __init__(self, pool: np.ndarray, world: World, share: float):
+        self.pool, self.share, self.frame = np.asarray(pool, float), float(share), world.frame
+        self.width, self.height = (max(1, int(np.ceil(v))) for v in world.size)
+        self.cells = self._cells(self.pool)
+        self.searches = np.zeros(self.width * self.height)
+        self.failures = np.zeros(self.width * self.height)
+
+    def _cells(self, points: np.ndarray) -> np.ndarray:
+        ix = np.clip(np.floor(points[:, 0]), 0, self.width - 1).astype(np.intp)
+        iy = np.clip(np.floor(points[:, 1]), 0, self.height - 1).astype(np.intp)
+        return ix * self.height + iy
+
+    def record(self, starts: np.ndarray, success: np.ndarray) -> None:
+        """Count searches that ended: their starts (in the world file's units) and whether they succeeded."""
+        if len(starts):
+            cells = self._cells((np.asarray(starts, float) - np.asarray(self.frame.offset, float)) / self.frame.unit)
+            np.add.at(self.searches, cells, 1.0)
+            np.add.at(self.failures, cells, (~np.asarray(success, bool)).astype(float))
+
+    def draw(self, rng: np.random.Generator) -> np.ndarray:
+        """(:data:`DRAWN_STARTS`, 2) starts for the next environments; the counts then fade."""
+        weights = ((self.failures + 0.05) / (self.searches + 1.0))[self.cells]
+        by_failure = int(round(self.share * DRAWN_STARTS))
+        rows = np.concatenate([rng.choice(len(self.pool), by_failure, p=weights / weights.sum()),
+                               rng.integers(0, len(self.pool), DRAWN_STARTS - by_failure)])
+        self.searches *= FAILURE_MEMORY
+        self.failures *= FAILURE_MEMORY
+        return self.pool[rows]
+
+    def state(self) -> dict[str, list[float]]:
+        return {"searches": self.searches.tolist(), "failures": self.failures.tolist()}
+
+    def load(self, state: dict[str, list[float]]) -> None:
+        self.searches[:], self.failures[:] = state["searches"], state["failures"]
+
+
+FAILURE_MEMORY = 0.5
+"""What the counts of :class:`FailureStarts` keep at each draw: the last two or three draws' searches count,
+as the policy changes between draws (0.8 was measured too: on fixed20 it reached the target later)."""
+def start_pool(starts: Any, world: World, seed: int, count: int = 50_000) -> np.ndarray:
+    """The starts :class:`FailureStarts` draws from, for a phase's ``starts``: its array; the world's own
+    starts for ``"world"``; for ``"random"`` (or a world without starts) ``count`` random free positions
+    away from the targets (generator seeded ``[seed, 7]``, as ``"reachable"`` starts are drawn)."""
+    if not isinstance(starts, str):
+        return np.asarray(starts, float)
+    if starts == "world" and len(world.starts):
+        return np.asarray(world.starts, float)
+    return world.random_free_positions(np.random.default_rng([seed, 7]), count, away_from_targets=True)
+
+
+DRAWN_STARTS = 4096
+"""Starts of the environments between two draws of :class:`FailureStarts` (each copy draws among them)."""
+REDRAW_STARTS_EVERY = 100
+"""Vector steps between draws of :class:`FailureStarts` (new environments, seeded from the steps so far)."""
+STARTS_STREAM = 0x57A7
+"""Tag mixed into the seed of each draw of :class:`FailureStarts`."""
 
 
 class TrainingEnvs:
@@ -175,19 +270,21 @@ class TrainingEnvs:
                      for s, n in parts if n > 0]
         self.seeds = [int(s) for s in np.random.SeedSequence(list(seed)).generate_state(env.num_envs)]
 
-    def reset(self) -> np.ndarray:
-        obs, offset = [], 0
+    def reset(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(obs, positions)`` of all envs (positions in the world file's units, as ``info`` gives them)."""
+        out, offset = [], 0
         for env in self.envs:
-            obs.append(env.reset(seed=self.seeds[offset:offset + env.num_envs])[0])
+            obs, info = env.reset(seed=self.seeds[offset:offset + env.num_envs])
+            out.append((obs, info["position"]))
             offset += env.num_envs
-        return obs[0] if len(obs) == 1 else np.concatenate(obs)
+        return out[0] if len(out) == 1 else tuple(np.concatenate(parts) for parts in zip(*out))
 
     def step(self, actions: np.ndarray) -> tuple:
-        """``(obs, rewards, terminated, truncated, success)`` of all envs."""
+        """``(obs, rewards, terminated, truncated, success, positions)`` of all envs."""
         out, offset = [], 0
         for env in self.envs:
             obs, reward, terminated, truncated, info = env.step(actions[offset:offset + env.num_envs])
-            out.append((obs, reward, terminated, truncated, info["success"]))
+            out.append((obs, reward, terminated, truncated, info["success"], info["position"]))
             offset += env.num_envs
         return out[0] if len(out) == 1 else tuple(np.concatenate(parts) for parts in zip(*out))
 
@@ -202,19 +299,41 @@ class DQNLearner(Learner):
     def __init__(self, config: TrainConfig):
         self.config = config
         self.learning = QLearning(config)
-        self.network = self.learning.q_network
+        # what is evaluated and kept as best.pt
+        self.network = (self.learning.target_network if config.dqn.eval_network == "target"
+                        else self.learning.q_network)
         self.observer = config.observer
-        self.collector = Collector(self.learning, config.dqn.reward_scale)
+        self.collector = Collector(self.learning, config.dqn.reward_scale, config.dqn.n_step, config.dqn.gamma)
         self.envs: Optional[TrainingEnvs] = None
         self.epsilon = config.dqn.epsilon_initial
+        self.failure_starts: Optional[FailureStarts] = None
+        self._failure_state: Optional[dict] = None
 
     def begin(self, worlds: Sequence[World], phase: Phase, seed: tuple[int, int]) -> None:
-        self.envs = TrainingEnvs(worlds, phase.starts, self.config, seed=seed)
-        self.collector.begin(self.envs.reset())
+        self.worlds, self.phase = list(worlds), phase
+        if self.config.env.failure_starts and self.failure_starts is None:
+            pool = start_pool(phase.starts, worlds[0], self.config.run.seed)
+            self.failure_starts = FailureStarts(pool, worlds[0], self.config.env.failure_starts)
+            if self._failure_state is not None:
+                self.failure_starts.load(self._failure_state)
+        self._open(seed)
+
+    def _open(self, seed: tuple[int, int]) -> None:
+        """New environments seeded from ``seed``; their starts drawn by failure if the configuration says so."""
+        starts = self.phase.starts
+        if self.failure_starts is not None:
+            starts = self.failure_starts.draw(np.random.default_rng([STARTS_STREAM, *seed]))
+        self.envs = TrainingEnvs(self.worlds, starts, self.config, seed=seed)
+        self.collector.begin(*self.envs.reset())
 
     def collect(self, c: Counters, rng: np.random.Generator) -> tuple[int, int]:
         dqn = self.config.dqn
         self.epsilon = epsilon_schedule(dqn, c.phase_episodes if dqn.restart_exploration else c.episodes)
+        if self.failure_starts is not None:
+            self.failure_starts.record(*self.collector.take_ended())
+            if c.vector_steps and c.vector_steps % REDRAW_STARTS_EVERY == 0:   # the searches in flight end here
+                self.end()
+                self._open((self.config.run.seed, c.global_step))
         return self.collector.step(self.envs.step, self.epsilon, rng)
 
     def update(self, c: Counters, rng: np.random.Generator) -> None:
@@ -223,6 +342,7 @@ class DQNLearner(Learner):
                 self.learning.update(rng)
 
     def end(self) -> None:
+        self.collector.end()
         self.envs.close()
         self.envs = None
 
@@ -230,17 +350,19 @@ class DQNLearner(Learner):
         return DQNPlanner(policy=DQNPolicy(self.network, self.observer), shield=shield)
 
     def log_values(self, c: Counters) -> dict[str, Any]:
-        mean_return, success_rate = self.collector.means()
-        return {"epsilon": round(self.epsilon, 5), "mean_return": mean_return, "success_rate": success_rate,
+        mean_return, training_success = self.collector.means()
+        return {"epsilon": round(self.epsilon, 5), "mean_return": mean_return, "training_success": training_success,
                 "loss": self.learning.mean_loss()}
 
     def state(self, with_buffer: bool) -> tuple[dict[str, Any], dict[str, Any]]:
         learning, collector = self.learning, self.collector
         state = {"updates": learning.updates, "loss_count": learning._loss_count,
                  "collector": {"returns": list(collector.recent_returns), "success": list(collector.recent_success)}}
-        tensors = {"q_network": self.network.state_dict(), "optimizer": learning.optimizer.state_dict(),
+        if self.failure_starts is not None:
+            state["failure_starts"] = self.failure_starts.state()
+        tensors = {"q_network": learning.q_network.state_dict(), "optimizer": learning.optimizer.state_dict(),
                    "loss_sum": learning._loss_sum.clone()}
-        if learning.target_network is not self.network:
+        if learning.target_network is not learning.q_network:
             tensors["target_network"] = learning.target_network.state_dict()
         if with_buffer:
             tensors["buffer"] = learning.buffer.state_dict()
@@ -248,8 +370,8 @@ class DQNLearner(Learner):
 
     def load(self, state: dict[str, Any], tensors: dict[str, Any]) -> None:
         learning = self.learning
-        self.network.load_state_dict(tensors["q_network"])
-        if learning.target_network is not self.network:
+        learning.q_network.load_state_dict(tensors["q_network"])
+        if learning.target_network is not learning.q_network:
             learning.target_network.load_state_dict(tensors["target_network"])
         learning.optimizer.load_state_dict(tensors["optimizer"])
         if "buffer" in tensors:
@@ -258,6 +380,7 @@ class DQNLearner(Learner):
         learning._loss_sum, learning._loss_count = tensors["loss_sum"].clone(), int(state["loss_count"])
         self.collector.recent_returns.extend(state["collector"]["returns"])
         self.collector.recent_success.extend(state["collector"]["success"])
+        self._failure_state = state.get("failure_starts")
 
     @property
     def updates(self) -> int:

@@ -27,15 +27,17 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from apf_physics.sim.nodegraph import NEIGHBOURS, NodeGraph, node_moves, resolution_for
 from apf_physics.control.shield import MOVE_SAMPLES, MOVE_SETS, SAFETY
 from apf_physics.models.mapnet import MapNetwork, sample_values
-from apf_physics.models.policy import MapPolicy, map_scores, move_inputs
+from apf_physics.models.policy import MapPolicy, map_scores, move_inputs, node_scores, robot_move_inputs
 from apf_physics.sensing.mapview import MapView
 from apf_physics.planners.dqn import DQNPlanner
 from apf_physics.learning.config import ImitationConfig, TrainConfig
 from apf_physics.learning.learner import Counters, Learner
 from apf_physics.learning.phases import Phase
-from apf_physics.world.search import SearchGrid
+from apf_physics.world.kinematics import NODE_MOVES
+from apf_physics.world.search import SearchGrid, shortest_paths
 from apf_physics.world.core import World
 
 DEFAULT_GRAD_NORM = 10.0
@@ -46,7 +48,8 @@ def map_network(config: TrainConfig) -> MapNetwork:
     """A freshly initialised map network for this configuration."""
     return MapNetwork(resolution=config.imitation.map_resolution, channels=config.imitation.map_channels,
                       hidden=config.network.hidden, negative_slope=config.network.negative_slope,
-                      moves=config.imitation.map_moves)
+                      moves=config.imitation.map_moves, dv_clip=config.imitation.map_dv_clip,
+                      least_resolution=config.imitation.map_least_resolution)
 
 
 @dataclasses.dataclass
@@ -91,20 +94,79 @@ class Teacher:
         return p / p.sum(axis=1, keepdims=True), ok
 
 
+PROGRESS = 1.5
+"""A node teacher weighs the length to go after a move this many times its length: of the moves
+along a shortest path (which tie on length plus length to go), the longest is preferred, by
+``(PROGRESS − 1) × length``; a move off it loses its extra length."""
+
+
+@dataclasses.dataclass
+class NodeTeacher:
+    """A world's demonstrations for a network that moves onto nodes: its map view and node graph
+    (at the resolution the network plans at there, :func:`~apf_physics.nodegraph.resolution_for`),
+    and the shortest length to go from every node over the graph's links (one search per world)."""
+
+    world: World
+    view: MapView
+    graph: NodeGraph
+    cost: np.ndarray       # (rows * cols,) length to go over the links, inf where no target is reached
+
+    @classmethod
+    def of(cls, world: World, base: int, least: int | None = None) -> "NodeTeacher":
+        resolution = resolution_for(world, base, least)
+        view = MapView.of(world, resolution)
+        graph = NodeGraph.of(world, resolution, SAFETY)
+        steps = [(dr, dc, np.where(graph.links[k], np.hypot(dr, dc) / resolution, np.inf))
+                 for k, (dr, dc) in enumerate(NEIGHBOURS)]
+        cost, _ = shortest_paths(graph.free, np.flatnonzero(view.goal.ravel()), steps)
+        return cls(world, view, graph, cost)
+
+    def labels(self, positions: np.ndarray, moves: np.ndarray, usable: np.ndarray, ends: np.ndarray,
+               room: np.ndarray, temperature: float) -> tuple[np.ndarray, np.ndarray]:
+        """(N, M) the teacher's move probabilities, and (N,) which positions have any safe move toward a target.
+
+        A move is worth minus its length and :data:`PROGRESS` times the length to go from its end
+        node: the shortest way, and on it the longest move (every move along a shortest path
+        costs its length in length to go, and gains ``PROGRESS − 1`` times its length over the
+        others). One that ends within the goal tolerance beats every other; staying is worth
+        what a move of length 0 would be, less 0.25 (never a way to the target)."""
+        lengths = np.hypot(moves[..., 0], moves[..., 1])
+        to_go = np.where(ends >= 0, self.cost[np.maximum(ends, 0)], np.inf)
+        value = -(lengths + PROGRESS * to_go)
+        ends_xy = positions[:, None, :] + moves
+        near = np.min(np.hypot(ends_xy[..., None, 0] - self.world.targets[:, 0],
+                               ends_xy[..., None, 1] - self.world.targets[:, 1]), axis=-1)
+        value = np.where((ends >= 0) & (near <= self.world.goal_tolerance), 1.0, value)
+        moving = ends >= 0
+        # staying: the length to go from here (the best move's length and length to go)
+        here = np.where(moving, lengths + to_go, np.inf).min(axis=1)
+        value[:, -1] = -PROGRESS * here - 0.25          # staying (the last move)
+        usable = usable & np.isfinite(value) & (room >= 0)
+        logits = np.where(usable, value / temperature, -np.inf)
+        ok = (usable & moving).any(axis=1)
+        logits[~ok] = 0.0
+        logits -= logits.max(axis=1, keepdims=True)
+        p = np.exp(logits)
+        return p / p.sum(axis=1, keepdims=True), ok
+
+
 class Demonstrations:
     """Teachers for the worlds of a phase (built on first use, kept while the worlds are)."""
 
-    def __init__(self, resolution: int):
+    def __init__(self, resolution: int, on_nodes: bool = False, least: int | None = None):
         self.resolution = resolution
-        self._teachers: dict[int, Teacher] = {}
+        self.on_nodes = on_nodes
+        self.least = least
+        self._teachers: dict[int, Teacher | NodeTeacher] = {}
 
     def use(self, worlds: Sequence[World]) -> None:
         keep = {id(w) for w in worlds}
         self._teachers = {k: v for k, v in self._teachers.items() if k in keep}
 
-    def of(self, world: World) -> Teacher:
+    def of(self, world: World) -> Teacher | NodeTeacher:
         if id(world) not in self._teachers:
-            self._teachers[id(world)] = Teacher.of(world, self.resolution)
+            self._teachers[id(world)] = (NodeTeacher.of(world, self.resolution, self.least) if self.on_nodes
+                                         else Teacher.of(world, self.resolution))
         return self._teachers[id(world)]
 
 
@@ -126,17 +188,47 @@ def teacher_room(world: World, positions: np.ndarray, moves: np.ndarray) -> np.n
     72 validation starts) and do worse on large maps (BENCHMARKS.md). This is the teacher's rule,
     not an input: the network reads ``move_inputs`` when it trains as when it acts.
     """
-    raster = world.clearance_raster(TEACHER_RESOLUTION, TEACHER_CAP)
+    raster = world.clearance_raster(TEACHER_RESOLUTION, max(TEACHER_CAP, world.robot_radius + 1.5))
     steps = np.linspace(0.0, 1.0, MOVE_SAMPLES + 1)
-    points = positions[:, None, None, :] + steps[None, None, :, None] * moves[None, :, None, :]
-    clearance = raster.sample(points.reshape(-1, 2)).reshape(len(positions), len(moves), -1).min(axis=2)
-    bound = clearance - 0.5 * np.hypot(*moves.T)[None] / MOVE_SAMPLES - 0.71 / TEACHER_RESOLUTION
+    each = moves if moves.ndim == 3 else np.broadcast_to(moves, (len(positions), *moves.shape))   # (N, M, 2)
+    points = positions[:, None, None, :] + steps[None, None, :, None] * each[:, :, None, :]
+    clearance = raster.sample(points.reshape(-1, 2)).reshape(*each.shape[:2], -1).min(axis=2)
+    length = np.hypot(each[..., 0], each[..., 1])
+    bound = clearance - 0.5 * length / MOVE_SAMPLES - 0.71 / TEACHER_RESOLUTION
     return bound - (world.robot_radius + SAFETY)
 
 
-def batch(teacher: Teacher, config: ImitationConfig, rng: np.random.Generator) -> Optional[tuple]:
+NODE_SHARE = 0.75
+"""Of the positions a node teacher labels, the share on free nodes (where the robot stands after its
+first move); the others anywhere free (where it starts)."""
+
+
+def node_batch(teacher: NodeTeacher, config: ImitationConfig, rng: np.random.Generator) -> Optional[tuple]:
+    """:func:`batch` for a network that moves onto nodes: positions, their moves, per-move inputs and labels."""
+    world, graph = teacher.world, teacher.graph
+    nodes = np.flatnonzero(graph.free.ravel() & np.isfinite(teacher.cost))
+    if not len(nodes):
+        return None
+    count = config.demo_positions
+    on = graph.grid.to_world(np.column_stack(np.divmod(rng.choice(nodes, int(count * NODE_SHARE)), graph.grid.shape[1])[::-1]))
+    candidates = rng.uniform((0.0, 0.0), world.size, size=(4 * count, 2))
+    fits = teacher_room(world, candidates, np.zeros((1, 2)))[:, 0] >= 0
+    positions = np.vstack([on, candidates[fits][:count - len(on)]])
+    moves, usable, ends = node_moves(graph, positions)
+    room, du = robot_move_inputs(world, positions, moves)
+    # the moves demonstrated are those the shield admits (the room the network reads, at least 0):
+    # the graph's links are exactly such moves, and its narrowest passages need every one of them
+    target, ok = teacher.labels(positions, moves, usable, ends, room, config.label_temperature)
+    if not ok.any():
+        return None
+    return positions[ok], moves[ok], usable[ok], ends[ok], room[ok], du[ok], target[ok]
+
+
+def batch(teacher: Teacher | NodeTeacher, config: ImitationConfig, rng: np.random.Generator) -> Optional[tuple]:
     """Positions, per-move inputs (:func:`~apf_physics.models.policy.move_inputs`) and teacher labels for
     one update in ``teacher``'s world; None when it has none."""
+    if isinstance(teacher, NodeTeacher):
+        return node_batch(teacher, config, rng)
     world = teacher.world
     moves = MOVE_SETS[config.map_moves]
     candidates = rng.uniform((0.0, 0.0), world.size, size=(4 * config.demo_positions, 2))
@@ -154,11 +246,20 @@ def batch(teacher: Teacher, config: ImitationConfig, rng: np.random.Generator) -
 def update(network: MapNetwork, optimizer: torch.optim.Optimizer, teacher: Teacher, data: tuple,
            config: TrainConfig) -> float:
     """One gradient step on one world's demonstrations (:func:`batch`); the loss."""
-    positions, room, du, target = data
     view = teacher.view
-    v = network.values(torch.from_numpy(view.features), torch.from_numpy(view.free), torch.from_numpy(view.goal),
-                       grad_iterations=config.imitation.grad_iterations)
-    scores = map_scores(network, view, v, positions, MOVE_SETS[config.imitation.map_moves], room, du)
+    if isinstance(teacher, NodeTeacher):
+        positions, moves, usable, ends, room, du, target = data
+        v, kappa = network.values(torch.from_numpy(view.features), torch.from_numpy(view.free),
+                                  torch.from_numpy(view.goal), grad_iterations=config.imitation.grad_iterations,
+                                  links=torch.from_numpy(teacher.graph.links),
+                                  resolution=teacher.graph.grid.resolution, with_cost=True)
+        scores = node_scores(network, view, v, kappa, positions, moves, ends, room, du)
+        scores = torch.where(torch.from_numpy(usable), scores, torch.full_like(scores, -1e9))   # not moves at all
+    else:
+        positions, room, du, target = data
+        v = network.values(torch.from_numpy(view.features), torch.from_numpy(view.free), torch.from_numpy(view.goal),
+                           grad_iterations=config.imitation.grad_iterations)
+        scores = map_scores(network, view, v, positions, MOVE_SETS[config.imitation.map_moves], room, du)
     loss = -(torch.from_numpy(target).float() * F.log_softmax(scores, dim=1)).sum(dim=1).mean()
     optimizer.zero_grad(set_to_none=True)
     loss.backward()
@@ -175,7 +276,8 @@ class ImitationLearner(Learner):
         self.network = map_network(config)
         self.observer = None
         self.optimizer = torch.optim.Adam(self.network.parameters(), lr=config.network.learning_rate)
-        self.teachers = Demonstrations(config.imitation.map_resolution)
+        self.teachers = Demonstrations(config.imitation.map_resolution, config.imitation.map_moves == NODE_MOVES,
+                                       config.imitation.map_least_resolution)
         self.worlds: list[World] = []
         self.losses: list[float] = []
         self._batch: Optional[tuple] = None
@@ -204,7 +306,7 @@ class ImitationLearner(Learner):
     def log_values(self, c: Counters) -> dict[str, Any]:
         loss = float(np.mean(self.losses)) if self.losses else None
         self.losses = []
-        return {"epsilon": "", "mean_return": "", "success_rate": "", "loss": loss}
+        return {"epsilon": "", "mean_return": "", "training_success": "", "loss": loss}
 
     def state(self, with_buffer: bool) -> tuple[dict[str, Any], dict[str, Any]]:
         return {"losses": self.losses, "updates": self.updates}, {"q_network": self.network.state_dict(),

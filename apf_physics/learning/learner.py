@@ -43,8 +43,7 @@ class Counters:
     best_step: Optional[int] = None
     """Steps at the best evaluation."""
     top_success: Optional[float] = None
-    """Highest success of any evaluation on the held-out starts (``random_success``) when the run has them,
-    else on the validation starts (what ``target_success`` is compared with)."""
+    """Highest success of any evaluation on the validation starts (what ``target_success`` is compared with)."""
     time_to_target: Optional[float] = None
     """Wall time at which an evaluation first reached ``target_success``."""
     last_eval_step: Optional[int] = None
@@ -101,8 +100,9 @@ class Learner(abc.ABC):
 
     @abc.abstractmethod
     def log_values(self, c: Counters) -> dict[str, Any]:
-        """``epsilon``, ``mean_return``, ``success_rate`` and ``loss`` (mean since the last call; None:
-        no updates) for a row of ``train.csv``; ``""`` where the method has no such figure."""
+        """``epsilon``, ``mean_return`` and ``training_success`` (of the recent training episodes) and
+        ``loss`` (mean since the last call; None: no updates) for a row of ``train.csv``; ``""`` where the
+        method has no such figure."""
 
     @abc.abstractmethod
     def state(self, with_buffer: bool) -> tuple[dict[str, Any], dict[str, Any]]:

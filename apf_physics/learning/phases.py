@@ -2,14 +2,18 @@
 
 A :class:`Phase` is a set of worlds, where its searches start, a budget (searches or
 transitions; none: until the run stops), optionally a pool of generated worlds redrawn as it
-goes, and the validation set its networks are evaluated on. The trainer runs the phases in
-turn with one loop (:func:`apf_physics.learning.trainer.train`):
+goes, and its **validation starts**: the starts its networks are evaluated from, which choose
+``best.pt`` and measure ``target_success``. The trainer runs the phases in turn with one loop
+(:func:`apf_physics.learning.trainer.train`):
 
-- one world (:func:`phases_for_world`) is one phase, validated on the world's own starts;
+- one world (:func:`phases_for_world`) is one phase. Its validation starts are random free
+  starts that no training search starts from (``eval_random_starts`` of them), and the
+  world's own starts (the **world starts**) are evaluated and reported beside them; without
+  ``eval_random_starts`` the world starts are the validation starts;
 - a curriculum (:func:`phases_for_curriculum`) is one phase per stage, stage ``i`` training its
   worlds with every earlier stage's (rehearsal, Model §2), then, with
   :attr:`~apf_physics.learning.config.TrainConfig.families`, a phase of generated worlds plus all the
-  curriculum's; all validated on one set of generated worlds.
+  curriculum's; all validated on the starts of one set of generated worlds.
 
 Every action moves the robot by an integer vector (Model Table 1), so from a start ``p`` it
 only ever stands at ``p + (i, j)`` until a collision ends the search: with a goal tolerance
@@ -51,11 +55,13 @@ class Phase:
         episodes: Searches in this phase (None: no limit of that kind).
         steps: Transitions in this phase (None: no limit of that kind). With neither, the
             phase runs until the run stops.
+        validation: The validation starts: what its networks are evaluated on, which chooses
+            ``best.pt`` (``target_success`` refers to it).
         pool: Whether generated worlds (:func:`draw_pool`) join ``worlds``, redrawn every
             :attr:`~apf_physics.learning.config.TrainConfig.refresh_every` transitions.
-        validation: What its networks are evaluated on (``target_success`` refers to it).
-        random_validation: Random starts in the same world(s), evaluated beside it (figure
-            ``random_success``; None: none).
+        world_starts: The world's own starts, evaluated and reported beside the validation starts
+            (figures ``world_starts_success``, ``world_starts_collisions``; None: a curriculum). The
+            validation set itself when the world's starts are the validation starts.
     """
 
     name: str
@@ -65,7 +71,7 @@ class Phase:
     steps: Optional[int]
     validation: EvalSet
     pool: bool = False
-    random_validation: Optional[EvalSet] = None
+    world_starts: Optional[EvalSet] = None
 
     @property
     def open_ended(self) -> bool:
@@ -73,7 +79,8 @@ class Phase:
 
 
 def phases_for_world(world: World, config: TrainConfig) -> list[Phase]:
-    """One phase: ``world`` until the run stops, validated on its own starts (and random ones).
+    """One phase: ``world`` until the run stops, validated on ``eval_random_starts`` random free starts
+    (:func:`validation_starts`; without them, on the world's own starts), the world starts beside them.
 
     Raises:
         UserError: The world has no starts, or the configuration trains on generated worlds.
@@ -84,13 +91,15 @@ def phases_for_world(world: World, config: TrainConfig) -> list[Phase]:
                         "give it a curriculum file, or choose a preset for one world")
     if not len(world.starts):
         raise UserError(f"{world.label}: the world has no starts to evaluate from")
-    extra = None
+    world_starts = EvalSet.of([world])
+    validation = world_starts
     if config.evaluation.eval_random_starts:
         points = validation_starts(world, config.evaluation.eval_random_starts, config.run.seed)
-        extra = EvalSet.of([world_from_dict({**world_to_file(world), "name": f"{world.name}-random",
-                                             "starts": points.tolist()}, source=world.label, confine=False)])
+        validation = EvalSet.unlabelled([world_from_dict({**world_to_file(world), "name": f"{world.name}-validation",
+                                                          "starts": points.tolist()}, source=world.label,
+                                                         confine=False)])
     return [Phase(world.name, (world,), training_starts(world, config.env.train_starts, config.run.seed), None, None,
-                  EvalSet.of([world]), random_validation=extra)]
+                  validation, world_starts=world_starts)]
 
 
 def phases_for_curriculum(stages: Sequence[Stage], config: TrainConfig) -> list[Phase]:
@@ -111,6 +120,8 @@ def phases_for_curriculum(stages: Sequence[Stage], config: TrainConfig) -> list[
     if not (staged and stages) and not config.schedule.families:
         raise UserError(f"preset {config.preset!r} trains one world: give it --world, or set stage_episodes, "
                         "stage_steps or families for a curriculum")
+    if config.env.failure_starts:
+        raise UserError("failure_starts draws the starts of one world; a curriculum trains with failure_starts=0")
     validation = validation_set(config)
     phases = []
     if staged:

@@ -13,6 +13,7 @@ from apf_physics.errors import UserError
 from apf_physics.common.safefile import write_bytes
 
 _BLUE, _RED, _GREEN, _GREY, _BLACK = (200, 110, 30), (40, 40, 220), (60, 160, 60), (200, 200, 200), (0, 0, 0)
+_ORANGE = (0, 140, 255)
 
 
 def _read_columns(csv_path: str | os.PathLike) -> dict[str, np.ndarray]:
@@ -30,7 +31,8 @@ def _read_columns(csv_path: str | os.PathLike) -> dict[str, np.ndarray]:
 
 def _panel(image: np.ndarray, top: int, height: int, x: np.ndarray, series: Sequence, title: str,
            y_range: tuple[float, float] | None = None) -> None:
-    """Draw one panel: axes box, title, y range labels and each (values, colour, label, markers) series."""
+    """Draw one panel: axes box, title, y range labels and each (values, colour, label, markers) series
+    (markers: False a line, True dots, ``"rings"`` circles)."""
     left, right = 70, image.shape[1] - 20
     cv2.rectangle(image, (left, top), (right, top + height), _GREY, 1)
     ys = np.concatenate([s[0][np.isfinite(s[0])] for s in series] + [np.zeros(0)])
@@ -47,9 +49,10 @@ def _panel(image: np.ndarray, top: int, height: int, x: np.ndarray, series: Sequ
         px = left + x[keep] / x_hi * (right - left)
         py = top + height - (values[keep] - lo) / (hi - lo) * height
         points = np.round(np.stack([px, py], axis=1)).astype(np.int32)
-        if markers:
+        if markers:  # True: dots; "rings": circles, visible over dots at the same steps
             for p in points:
-                cv2.circle(image, tuple(int(v) for v in p), 3, colour, -1, cv2.LINE_AA)
+                cv2.circle(image, tuple(int(v) for v in p), 4 if markers == "rings" else 3, colour,
+                           2 if markers == "rings" else -1, cv2.LINE_AA)
         elif len(points) > 1:
             cv2.polylines(image, [points], False, colour, 2, cv2.LINE_AA)
 
@@ -64,15 +67,33 @@ def _legend(image: np.ndarray, series: Sequence, right: int, baseline: int) -> N
     for colour, label, markers, width in entries:
         y = baseline - 4
         if markers:
-            cv2.circle(image, (x + 9, y), 3, colour, -1, cv2.LINE_AA)
+            cv2.circle(image, (x + 9, y), 4 if markers == "rings" else 3, colour, 2 if markers == "rings" else -1,
+                       cv2.LINE_AA)
         else:
             cv2.line(image, (x, y), (x + 18, y), colour, 2, cv2.LINE_AA)
         cv2.putText(image, label, (x + 22, baseline), cv2.FONT_HERSHEY_SIMPLEX, 0.45, colour, 1, cv2.LINE_AA)
         x += 22 + width + 14
 
 
+def success_columns(columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The success rates of a training log by what they measure: ``training`` (the recent ε-greedy
+    episodes), ``validation`` (the greedy evaluations on the validation starts, which choose
+    ``best.pt``) and ``world starts`` (on a world's own starts); also read from the column names of
+    logs written before they had these names."""
+    empty = np.zeros(0)
+    if "validation_success" in columns:
+        return {"training": columns.get("training_success", empty), "validation": columns["validation_success"],
+                "world starts": columns.get("world_starts_success", empty)}
+    held_out = columns.get("eval_random_success", empty)
+    evaluated = columns.get("eval_success", columns.get("val_success", empty))
+    separate = bool(np.isfinite(held_out).any())   # a world's run: random starts chose best.pt, its own beside
+    return {"training": columns.get("success_rate", empty), "validation": held_out if separate else evaluated,
+            "world starts": evaluated if separate else empty}
+
+
 def plot_training_curve(csv_path: str | os.PathLike, png_path: str | os.PathLike | None = None) -> np.ndarray:
-    """Draw the training log: success rates above, mean episode return below.
+    """Draw the training log: success rates above (training episodes, validation starts, world starts),
+    mean episode return below.
 
     Args:
         csv_path: Training log written by :func:`apf_physics.learning.train`.
@@ -85,12 +106,12 @@ def plot_training_curve(csv_path: str | os.PathLike, png_path: str | os.PathLike
     empty = np.zeros(0)
     x = columns.get("global_step", empty)
     image = np.full((480, 720, 3), 255, np.uint8)
-    _panel(
-        image, 30, 190, x,
-        [(columns.get("success_rate", empty), _BLUE, "training success", False),
-         (columns.get("eval_success", columns.get("val_success", empty)), _RED, "greedy eval success", True)],
-        "success rate", y_range=(0.0, 1.0),
-    )
+    success = success_columns(columns)
+    series = [(success["training"], _BLUE, "training episodes", False),
+              (success["validation"], _RED, "validation starts", True)]
+    if np.isfinite(success["world starts"]).any():
+        series.append((success["world starts"], _ORANGE, "world starts", "rings"))
+    _panel(image, 30, 190, x, series, "success rate", y_range=(0.0, 1.0))
     _panel(image, 260, 190, x, [(columns.get("mean_return", empty), _GREEN, "mean return", False)], "mean episode return")
     x_hi = int(x.max()) if x.size else 0
     cv2.putText(image, f"env steps (0 .. {x_hi})", (300, 472), cv2.FONT_HERSHEY_SIMPLEX, 0.45, _BLACK, 1, cv2.LINE_AA)

@@ -1,11 +1,12 @@
 """What a training run shows while it runs: a bar on a terminal, plain lines anywhere else.
 
-On a terminal, a tqdm bar on stderr measures the stop rule that applies (steps, searches,
-the stages' searches or seconds) with ε, the recent training success and the latest
-evaluation in its postfix. When stderr is not a terminal (``nohup``, CI, a notebook cell, a
-pipe) there is no bar and no carriage return: one plain line per row of ``train.csv``,
-as Stable-Baselines3's logger prints, with the step, the latest evaluation, the loss and the
-elapsed time.
+On a terminal, a tqdm bar on stderr measures the budget that stops the run (steps, searches,
+the stages' searches, or seconds when a time limit is the only one), says the target if there
+is one, and shows ε and the latest evaluation (on the validation starts, and on the world
+starts) in its postfix. When stderr is not a terminal (``nohup``, CI, a notebook cell, a pipe)
+there is no bar and no carriage return: one plain line per row of ``train.csv``, as
+Stable-Baselines3's logger prints, with the step, the latest evaluation, the loss and the
+elapsed time. Both name the figures as ``train.csv`` does.
 """
 
 from __future__ import annotations
@@ -40,6 +41,9 @@ class Progress:
         self.total, self.unit = total, unit
         self.multi = len(phases) > 1
         self._desc = "" if s.target_success is None else f"until {s.target_success:.0%} of the validation starts"
+        # the world starts are shown beside the validation starts when they are not the same starts
+        self.world_starts = [None if p.world_starts is None or p.world_starts is p.validation else p.world_starts.starts
+                             for p in phases]
         self.bar = None
         if self.stream.isatty():
             self.bar = tqdm(total=total, initial=self._value(c), unit=unit, desc=self._desc or None,
@@ -63,23 +67,31 @@ class Progress:
             if desc != self.bar.desc:
                 self.bar.set_description_str(desc, refresh=False)
         eps = f"ε {epsilon:.2f}, " if isinstance(epsilon, float) else ""
-        self.bar.set_postfix_str(f"{eps}eval {'-' if latest is None else format(latest['success'], '.0%')}",
-                                 refresh=False)
+        self.bar.set_postfix_str(eps + self.figures(latest, c.phase), refresh=False)
         value = self._value(c) if self.bar.total is None else min(self._value(c), self.bar.total)
         self.bar.update(value - self.bar.n)
 
-    def line(self, row: dict[str, Any], latest: Optional[dict]) -> None:
+    def figures(self, summary: Optional[dict], phase: int) -> str:
+        """``validation starts 97.3%, world starts 40/40`` (``validation starts -`` before any evaluation)."""
+        if summary is None:
+            return "validation starts -"
+        text = f"validation starts {summary['success']:.1%}"
+        world = summary.get("world_starts_success")
+        n = self.world_starts[min(phase, len(self.world_starts) - 1)]
+        if world is not None and n:
+            text += f", world starts {round(world * n)}/{n}"
+        return text
+
+    def line(self, row: dict[str, Any], latest: Optional[dict], phase: int = 0) -> None:
         """After every row of ``train.csv``: one plain line, when there is no bar."""
         if self.bar is not None:
             return
         of = "" if self.total is None or self.measure != "steps" else f"/{self.total:,}"
         parts = [f"step {row['global_step']:,}{of}", f"phase {row['phase']}", f"episodes {row['episodes']:,}"]
-        if row["eval_success"] != "":
-            parts.append(f"eval success {row['eval_success']:.1%}")
-            if row["eval_random_success"] != "":
-                parts.append(f"held-out starts {row['eval_random_success']:.1%}")
+        if row["validation_success"] != "":
+            parts.append(self.figures(latest, phase))
         elif latest is not None:
-            parts.append(f"last eval success {latest['success']:.1%}")
+            parts.append("last evaluation: " + self.figures(latest, phase))
         if row["epsilon"] != "":
             parts.append(f"ε {row['epsilon']:.3f}")
         if row["loss"] != "":

@@ -38,8 +38,8 @@ from apf_physics.common.safefile import atomic_path, write_text
 
 __all__ = ["BUDGETS", "METRICS", "Sweep", "SweepResult", "TrialRow", "format_results", "load_sweep", "run_sweep"]
 
-FIGURES = ("success", "spl", "trap_success", "collisions", "length_ratio", "random_success")
-"""Figures of an evaluation reported per leg (those present)."""
+FIGURES = ("success", "spl", "trap_success", "collisions", "length_ratio", "world_starts_success")
+"""Figures of an evaluation reported per leg (those present): on the validation starts, and a world's own."""
 ENDED = "ended.json"
 """In the output folder: the trials Tune saw end (finished, stopped by ASHA, failed), over every session.
 An interrupted trial never ends; Tune marks it terminated all the same, so this is how it is told apart."""

@@ -45,10 +45,15 @@ from apf_physics.learning.plot import plot_training_curve
 from apf_physics.learning.progress import Progress
 from apf_physics.learning.rundir import RunDir
 
-CSV_COLUMNS = ("global_step", "episodes", "phase", "epsilon", "mean_return", "success_rate", "loss",
-               "eval_success", "eval_trap_success", "eval_collisions", "eval_length_ratio", "eval_spl",
-               "eval_random_success", "pool_draws", "wall_time")
-"""Columns of ``train.csv`` (``eval_*``: the evaluation made at that step, if any)."""
+VALIDATION_FIGURES = ("success", "trap_success", "collisions", "length_ratio", "spl")
+"""Figures of an evaluation on the validation starts (``validation_*`` in ``train.csv``)."""
+WORLD_STARTS_FIGURES = ("world_starts_success", "world_starts_collisions")
+"""Figures of an evaluation on a world's own starts (a run on one world)."""
+CSV_COLUMNS = ("global_step", "episodes", "phase", "epsilon", "mean_return", "training_success", "loss",
+               *(f"validation_{name}" for name in VALIDATION_FIGURES), *WORLD_STARTS_FIGURES, "pool_draws",
+               "wall_time")
+"""Columns of ``train.csv``: ``training_success`` and ``mean_return`` of the recent training episodes
+(ε-greedy); ``validation_*`` and ``world_starts_*``: the greedy evaluation made at that step, if any."""
 
 LEARNERS: dict[str, type[Learner]] = {"dqn": DQNLearner, "imitation": ImitationLearner}
 """The learner of each ``method``."""
@@ -66,10 +71,9 @@ class Evaluations:
         """Note an evaluation made at ``c.global_step``; returns whether it is the best so far."""
         self.latest = summary
         c.last_eval_step = c.global_step
-        held_out = summary.get("random_success", summary["success"])  # the starts never trained on, if any
-        c.top_success = max(c.top_success or 0.0, held_out)
+        c.top_success = max(c.top_success or 0.0, summary["success"])
         target, select = config.schedule.target_success, config.evaluation.select
-        if target is not None and c.time_to_target is None and held_out >= target:
+        if target is not None and c.time_to_target is None and summary["success"] >= target:
             c.time_to_target = c.wall_time
         if self.best is not None and validation.score(summary, select) <= validation.score(self.best, select):
             return False
@@ -183,11 +187,7 @@ def train(config: TrainConfig, phases: Sequence[Phase], out_dir: str | Path | Ru
         UserError: Nothing to train, worlds of different fields, a folder locked by another run
             or holding a run already (without ``resume``), or ``resume`` without a usable checkpoint.
     """
-    if not phases:
-        raise UserError("nothing to train: no phases")
-    fields = {tuple(w.field.as_dict().items()) for p in phases for w in (*p.worlds, *p.validation.worlds)}
-    if len(fields) != 1:
-        raise UserError("a model is trained for one field, but these worlds have different field parameters")
+    check_phases(phases)
     if resume and out_dir is None:
         raise UserError("resuming needs the output folder of the run to continue")
     given = isinstance(out_dir, RunDir)
@@ -202,6 +202,19 @@ def train(config: TrainConfig, phases: Sequence[Phase], out_dir: str | Path | Ru
         torch.set_num_threads(previous_threads)
         if run is not None and not given:
             run.close()
+
+
+def check_phases(phases: Sequence[Phase]) -> None:
+    """Refuse phases that cannot be trained: none, or worlds of different fields (one model serves one field).
+
+    Raises:
+        UserError: Saying which.
+    """
+    if not phases:
+        raise UserError("nothing to train: no phases")
+    fields = {tuple(w.field.as_dict().items()) for p in phases for w in (*p.worlds, *p.validation.worlds)}
+    if len(fields) != 1:
+        raise UserError("a model is trained for one field, but these worlds have different field parameters")
 
 
 def _train(config: TrainConfig, phases: list[Phase], run: Optional[RunDir], resume: bool,
@@ -284,17 +297,18 @@ def _train(config: TrainConfig, phases: list[Phase], run: Optional[RunDir], resu
                        learner.network, evals.best_state, history)
 
 
-def evaluate(learner: Learner, config: TrainConfig, phase: Phase) -> dict[str, float]:
-    """The figures of the learner's network on the phase's validation set (and ``random_success`` on its
-    random starts), run as ``apf-physics eval --planner dqn`` runs it."""
+def evaluate(learner: Learner, config: TrainConfig, phase: Phase) -> dict[str, Optional[float]]:
+    """The figures of the learner's network on the phase's validation starts (and its world starts),
+    run as ``apf-physics eval --planner dqn`` runs it."""
     shield, network = config.evaluation.eval_shield, learner.network
     was_training = network.training
     try:
         summary = validation.summarise(run_planner(learner.planner(shield), phase.validation.worlds).episodes,
                                        phase.validation)
-        if phase.random_validation is not None:
-            episodes = run_planner(learner.planner(shield), phase.random_validation.worlds).episodes
-            summary["random_success"] = validation.summarise(episodes, phase.random_validation)["success"]
+        if phase.world_starts is not None:
+            world = summary if phase.world_starts is phase.validation else validation.summarise(
+                run_planner(learner.planner(shield), phase.world_starts.worlds).episodes, phase.world_starts)
+            summary["world_starts_success"], summary["world_starts_collisions"] = world["success"], world["collisions"]
     finally:
         network.train(was_training)
     return summary
@@ -312,17 +326,16 @@ def log_row(run: Optional[RunDir], config: TrainConfig, c: Counters, phase: Phas
     s = {k: "" if v is None else round(v, 4) for k, v in (summary or {}).items()}
     row = {
         "global_step": c.global_step, "episodes": c.episodes, "phase": phase.name, "epsilon": values["epsilon"],
-        "mean_return": values["mean_return"], "success_rate": values["success_rate"],
+        "mean_return": values["mean_return"], "training_success": values["training_success"],
         "loss": "" if loss is None else round(loss, 6),
-        "eval_success": s.get("success", ""), "eval_trap_success": s.get("trap_success", ""),
-        "eval_collisions": s.get("collisions", ""), "eval_length_ratio": s.get("length_ratio", ""),
-        "eval_spl": s.get("spl", ""), "eval_random_success": s.get("random_success", ""),
+        **{f"validation_{name}": s.get(name, "") for name in VALIDATION_FIGURES},
+        **{name: s.get(name, "") for name in WORLD_STARTS_FIGURES},
         "pool_draws": c.pool_draws, "wall_time": round(c.wall_time, 3),
     }
     if run is not None:
         run.log(row)
     if shown is not None:
-        shown.line(row, latest)
+        shown.line(row, latest, c.phase)
     return row
 
 

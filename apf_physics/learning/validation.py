@@ -27,17 +27,19 @@ from apf_physics.experiments.worldsets import label_starts
 
 @dataclass(frozen=True)
 class EvalSet:
-    """Worlds a network is evaluated on, from each world's own starts, with a label per start.
+    """Worlds a network is evaluated on, from each world's own starts, with a label per start (or none).
 
     Attributes:
         worlds: The worlds (names unique).
-        trapped: (N,) bool over all starts in order: gradient descent does not reach the target.
-        astar: (N,) float: the A* path length from the start (nan: none).
+        trapped: (N,) bool over all starts in order: gradient descent does not reach the target
+            (None: not labelled; no ``trap_success``).
+        astar: (N,) float: the A* path length from the start (nan: none; None: not labelled, no
+            ``length_ratio`` or ``spl``).
     """
 
     worlds: tuple[World, ...]
-    trapped: np.ndarray
-    astar: np.ndarray
+    trapped: Optional[np.ndarray]
+    astar: Optional[np.ndarray]
 
     @classmethod
     def of(cls, worlds: Sequence[World]) -> "EvalSet":
@@ -46,9 +48,15 @@ class EvalSet:
         return cls(tuple(worlds), np.array([s["gradient_trapped"] for s in labels], bool),
                    np.array([np.nan if s["astar_length"] is None else s["astar_length"] for s in labels], float))
 
+    @classmethod
+    def unlabelled(cls, worlds: Sequence[World]) -> "EvalSet":
+        """The starts of ``worlds`` without labels: only ``success`` and ``collisions`` are figured
+        (labelling a thousand starts costs seconds of A* and gradient rollouts)."""
+        return cls(tuple(worlds), None, None)
+
     @property
     def starts(self) -> int:
-        return len(self.trapped)
+        return len(self.trapped) if self.trapped is not None else sum(len(w.starts) for w in self.worlds)
 
 
 def run(network: QNetwork, observer: ObserverConfig, evalset: EvalSet, shield: bool) -> list[Episode]:
@@ -70,7 +78,8 @@ def summarise(episodes: Sequence[Episode], evalset: EvalSet) -> dict[str, Option
         ending in one), ``length_ratio`` (summed path length over summed A* length, both over
         the successes; None without any) and ``spl``, success weighted by path length (Anderson
         et al. 2018: the mean over all starts of ``A* / max(path, A*)`` for a success, else 0):
-        :func:`apf_physics.experiments.evaluate.figures` with the A* lengths and trap labels.
+        :func:`apf_physics.experiments.evaluate.figures` with the A* lengths and trap labels
+        (an unlabelled set: ``trap_success``, ``length_ratio`` and ``spl`` are None).
     """
     scored = figures(episodes, optimal=evalset.astar, trapped=evalset.trapped)
     return {

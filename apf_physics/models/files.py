@@ -33,7 +33,8 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import torch
 
-from apf_physics.control.shield import ACTIONS, MOVE_SETS
+from apf_physics.control.shield import ACTIONS
+from apf_physics.world.kinematics import MOVE_KINDS
 from apf_physics.errors import ModelError
 from apf_physics.models.mapnet import MapNetwork
 from apf_physics.models.network import OBS_TRANSFORMS, QNetwork
@@ -319,15 +320,24 @@ class _Schema:
 
     def map_arch(self, arch: Mapping[str, Any]) -> dict[str, Any]:
         """A map network's architecture (``arch.type`` ``"map"``), checked."""
-        known = ("type", "resolution", "channels", "hidden", "negative_slope", "moves")
+        known = ("type", "resolution", "channels", "hidden", "negative_slope", "moves", "dv_clip", "least_resolution")
         unknown = sorted(set(map(str, arch)) - set(known))
         if unknown:
             raise self.fail(f"arch.{unknown[0][:40]}", "unknown key")
-        return {"resolution": self.whole(self.get(arch, "resolution", "arch."), "arch.resolution", 1, MAX_OBS_RESOLUTION),
-                "channels": self.whole(self.get(arch, "channels", "arch."), "arch.channels", 1, MAX_FILTERS),
-                "hidden": self.wholes(self.get(arch, "hidden", "arch."), "arch.hidden", (0, MAX_LAYERS), 1, MAX_HIDDEN),
-                "negative_slope": self.number(self.get(arch, "negative_slope", "arch."), "arch.negative_slope"),
-                "moves": self.choice(self.get(arch, "moves", "arch."), "arch.moves", tuple(MOVE_SETS))}
+        checked = {"resolution": self.whole(self.get(arch, "resolution", "arch."), "arch.resolution", 1, MAX_OBS_RESOLUTION),
+                   "channels": self.whole(self.get(arch, "channels", "arch."), "arch.channels", 1, MAX_FILTERS),
+                   "hidden": self.wholes(self.get(arch, "hidden", "arch."), "arch.hidden", (0, MAX_LAYERS), 1, MAX_HIDDEN),
+                   "negative_slope": self.number(self.get(arch, "negative_slope", "arch."), "arch.negative_slope"),
+                   "moves": self.choice(self.get(arch, "moves", "arch."), "arch.moves", MOVE_KINDS)}
+        if "dv_clip" in arch:
+            clip = self.number(arch["dv_clip"], "arch.dv_clip")
+            if not 0 < clip <= 1e3:
+                raise self.fail("arch.dv_clip", f"expected a number from 0 to 1,000, got {self._show(clip)}")
+            checked["dv_clip"] = clip
+        if "least_resolution" in arch:
+            checked["least_resolution"] = self.whole(arch["least_resolution"], "arch.least_resolution", 1,
+                                                     MAX_OBS_RESOLUTION)
+        return checked
 
     def arch(self, meta: Mapping[str, Any]) -> dict[str, Any]:
         """The network's architecture, checked, with its size bounded before it is built."""

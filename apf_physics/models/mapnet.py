@@ -37,7 +37,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from apf_physics.common.compiled import kernel
-from apf_physics.world.search import shortest_paths
+from apf_physics.world.search import shortest_costs
 
 MAP_FEATURES = 2
 """Node features of a :class:`~apf_physics.sensing.mapview.MapView`: clearance margin, target."""
@@ -57,20 +57,32 @@ class MapNetwork(nn.Module):
     """Learned cost map + value iteration + per-move head (see the module's docstring).
 
     Args:
-        resolution: Grid nodes per world unit of the map view.
+        resolution: Grid nodes per world unit of the map view (of its training; its cost map's scale).
         channels: Hidden channels of the cost map's first convolution.
         hidden: Widths of the head's hidden layers.
         negative_slope: Leaky ReLU slope.
-        moves: Name of the move set (:data:`~apf_physics.control.shield.MOVE_SETS`).
+        moves: Name of the move set (:data:`~apf_physics.world.kinematics.MOVE_KINDS`).
+        dv_clip: |ΔV| the head reads is clipped to this.
+        least_resolution: Moves onto nodes: the graph it plans on has at least this many nodes per
+            step (default ``resolution``).
     """
 
     def __init__(self, resolution: int = 2, channels: int = 8, hidden: Sequence[int] = (32, 32),
-                 negative_slope: float = 0.01, moves: str = "fine"):
+                 negative_slope: float = 0.01, moves: str = "fine", dv_clip: float = DV_CLIP,
+                 least_resolution: int | None = None):
         super().__init__()
         self.arch = {"type": "map", "resolution": int(resolution), "channels": int(channels),
                      "hidden": [int(h) for h in hidden], "negative_slope": float(negative_slope), "moves": str(moves)}
         """Everything needed to build this network again (saved with its weights)."""
+        if dv_clip != DV_CLIP:    # (files of networks that clip at DV_CLIP do not name it)
+            self.arch["dv_clip"] = float(dv_clip)
+        if least_resolution is not None:
+            self.arch["least_resolution"] = int(least_resolution)
+        self.dv_clip = float(dv_clip)
         self.resolution = int(resolution)
+        self.least_resolution = int(least_resolution or resolution)
+        """Nodes per step of the grid it plans on, at least (moves onto nodes:
+        :func:`~apf_physics.sim.nodegraph.resolution_for`)."""
         self.negative_slope = float(negative_slope)
         self.cost_in = nn.Conv2d(MAP_FEATURES, channels, kernel_size=3, padding=1)
         self.cost_out = nn.Conv2d(channels, 1, kernel_size=1)
@@ -92,7 +104,9 @@ class MapNetwork(nn.Module):
         return F.softplus(self.cost_out(x))[0, 0] + 0.1
 
     def values(self, features: torch.Tensor, free: torch.Tensor, goal: torch.Tensor,
-               grad_iterations: int = 0, max_iterations: int | None = None) -> torch.Tensor:
+               grad_iterations: int = 0, max_iterations: int | None = None,
+               links: torch.Tensor | None = None, resolution: int | None = None,
+               with_cost: bool = False) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
         """(R, C) V over the grid: minus the learned cost to go to the nearest target node.
 
         Args:
@@ -100,12 +114,19 @@ class MapNetwork(nn.Module):
             free: (R, C) bool, nodes where the robot fits.
             goal: (R, C) bool, free nodes within reach of a target.
             grad_iterations: Iterations run with gradients after the fixed point is reached.
-            max_iterations: SweptDistances without gradients, at most (default: none; the fixed point is
+            max_iterations: Bellman updates without gradients, at most (default: none; the fixed point is
                 found by :func:`fixed_point`, however long the paths).
+            links: (8, R, C) bool, which edges (in :func:`_neighbours`' order) may be followed
+                (:class:`~apf_physics.sim.nodegraph.NodeGraph`); None: every edge between free nodes.
+            resolution: Nodes per unit of this grid (default: :attr:`resolution`, the network's own).
+            with_cost: Also return the cost map ``κ`` (R, C).
         """
         kappa = self.cost(features)
         edges = [(dr, dc, w * 0.5 * (kappa + _shift(kappa, dr, dc, float("inf"))))
-                 for dr, dc, w in _neighbours(self.resolution)]
+                 for dr, dc, w in _neighbours(resolution or self.resolution)]
+        if links is not None:   # an edge the robot cannot follow costs without end
+            edges = [(dr, dc, torch.where(links[k], cost, torch.full_like(cost, float("inf"))))
+                     for k, (dr, dc, cost) in enumerate(edges)]
         with torch.no_grad():
             plain = [(dr, dc, e.detach()) for dr, dc, e in edges]
             if max_iterations is None:
@@ -119,7 +140,7 @@ class MapNetwork(nn.Module):
                     v = new
         for _ in range(grad_iterations):
             v = _bellman_update(v, edges, free, goal)
-        return v
+        return (v, kappa) if with_cost else v
 
     # -- the head -------------------------------------------------------------------------------
     def scores(self, move_features: torch.Tensor) -> torch.Tensor:
@@ -133,7 +154,8 @@ class MapNetwork(nn.Module):
 
 
 def replan(network: MapNetwork, features: torch.Tensor, free: torch.Tensor, held: torch.Tensor,
-           values: torch.Tensor, extra_cost: torch.Tensor | float = 0.0) -> torch.Tensor:
+           values: torch.Tensor, extra_cost: torch.Tensor | float = 0.0, resolution: int | None = None,
+           links: torch.Tensor | None = None) -> torch.Tensor:
     """V over a patch of the grid in which something changed (other robots stand in it), the
     patch's edge held at the values of the whole map.
 
@@ -151,14 +173,18 @@ def replan(network: MapNetwork, features: torch.Tensor, free: torch.Tensor, held
         held: (R, C) bool: nodes whose value is kept.
         values: (R, C) the map's V over the patch (read at ``held``).
         extra_cost: Added to the learned cost per unit length, per node ((R, C) or a number).
+        resolution: Nodes per unit of the patch's grid (default: the network's own).
+        links: (8, R, C) bool, which edges may be followed (as :meth:`MapNetwork.values` takes them).
 
     Returns:
         (R, C) float32 V over the patch (:data:`UNREACHED` where no way leads).
     """
     with torch.no_grad():
         kappa = network.cost(features) + extra_cost
-        neighbours = _neighbours(network.resolution)
+        neighbours = _neighbours(resolution or network.resolution)
         costs = torch.stack([w * 0.5 * (kappa + _shift(kappa, dr, dc, float("inf"))) for dr, dc, w in neighbours])
+        if links is not None:   # an edge the robot cannot follow costs without end
+            costs = torch.where(links, costs, torch.full_like(costs, float("inf")))
         held = (held & free).numpy()
         v = np.where(held, values.numpy(), np.float32(UNREACHED)).astype(np.float32)
         _settle(v, held, free.numpy(), costs.numpy().astype(np.float32),
@@ -204,9 +230,8 @@ def fixed_point(edges: list, free: torch.Tensor, goal: torch.Tensor) -> torch.Te
     """The fixed point of :func:`_bellman_update`, without updating the whole grid again and again.
 
     ``−V`` is a shortest-path cost to the goal nodes with positive edge costs, so it is found
-    by :func:`~apf_physics.world.search.shortest_paths` (relaxing outward from the nodes whose value
-    just fell): each round costs what the wavefront holds, not the whole grid, and long paths
-    (a maze's) are followed to their end. The values are the updates' own, to the bit: each is
+    by :func:`~apf_physics.world.search.shortest_costs` (a compiled Dijkstra search: every node settled
+    once), and long paths (a maze's) are followed to their end. The values are the updates' own, to the bit: each is
     ``V(x + n) − cost``, in float32.
 
     Args:
@@ -218,7 +243,7 @@ def fixed_point(edges: list, free: torch.Tensor, goal: torch.Tensor) -> torch.Te
         (R, C) float32 V: 0 at the goal nodes, ``UNREACHED`` where no path leads (or blocked).
     """
     steps = [(dr, dc, cost.numpy()) for dr, dc, cost in edges]
-    cost_to_go, _ = shortest_paths(free.numpy(), np.flatnonzero(goal.numpy().ravel()), steps, np.float32)
+    cost_to_go = shortest_costs(free.numpy(), np.flatnonzero(goal.numpy().ravel()), steps, np.float32)
     reached = free.numpy().ravel() & (cost_to_go <= -UNREACHED)
     v = np.where(reached, -cost_to_go, np.float32(UNREACHED)).astype(np.float32)
     v[goal.numpy().ravel()] = 0.0
@@ -267,21 +292,49 @@ def sample_values(v: torch.Tensor, free: torch.Tensor, origin: Sequence[float], 
     return best, found
 
 
+def values_between(v: torch.Tensor, kappa: torch.Tensor, free: torch.Tensor, origin: Sequence[float], resolution: int,
+                   points: torch.Tensor) -> torch.Tensor:
+    """V at ``points`` (K, 2) between nodes, as the values themselves continue: from the best of the
+    four nodes around each point, less the learned cost of the straight way there,
+    ``max_n V(n) − κ(n)·|q − n|`` (:data:`UNREACHED` where none is usable).
+
+    The map network that moves onto nodes reads V at its moves' ends on nodes; this is V where the
+    robot stands when it is not on one (at its start), in the same units, so that no move looks
+    like a loss against a value read at another rate (:func:`sample_values` charges 1 per unit)."""
+    rows, cols = v.shape
+    ij = (points - torch.as_tensor(origin, dtype=points.dtype)) * resolution
+    c0, r0 = torch.floor(ij[:, 0]), torch.floor(ij[:, 1])
+    fx, fy = ij[:, 0] - c0, ij[:, 1] - r0
+    c0, r0 = c0.long(), r0.long()
+    best = torch.full((len(points),), UNREACHED, dtype=v.dtype)
+    usable = free & (v > UNREACHED / 2)
+    for dr, dc in ((0, 0), (0, 1), (1, 0), (1, 1)):
+        r, c = r0 + dr, c0 + dc
+        inside = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
+        rc, cc = r.clamp(0, rows - 1), c.clamp(0, cols - 1)
+        ok = inside & usable[rc, cc]
+        distance = torch.hypot(fx - dc, fy - dr).to(v.dtype) / resolution
+        best = torch.maximum(best, torch.where(ok, v[rc, cc] - kappa[rc, cc] * distance, torch.full_like(best, UNREACHED)))
+    return best
+
+
 def move_features(v_here: torch.Tensor, v_there: torch.Tensor, found: torch.Tensor, lengths: torch.Tensor,
-                  room: torch.Tensor, du: torch.Tensor) -> torch.Tensor:
+                  room: torch.Tensor, du: torch.Tensor, dv_clip: float = DV_CLIP) -> torch.Tensor:
     """(N, M, MOVE_FEATURES) head inputs.
 
     Args:
         v_here: (N,) V at the robots.
         v_there: (N, M) V at the end of each move.
         found: (N, M) whether ``v_there`` could be sampled.
-        lengths: (M,) move lengths.
+        lengths: (M,) move lengths, or (N, M) when each robot has moves of its own.
         room: (N, M) clearance left along each move beyond the robot's radius and the safety margin.
         du: (N, M) change of the potential over each move, signed-log scaled.
+        dv_clip: |ΔV| is clipped to this (the network's :attr:`MapNetwork.dv_clip`).
     """
     here_ok = v_here > UNREACHED / 2
-    dv = torch.where(found & here_ok[:, None], v_there - v_here[:, None], torch.full_like(v_there, -DV_CLIP))
-    dv = dv.clamp(-DV_CLIP, DV_CLIP)
+    dv = torch.where(found & here_ok[:, None], v_there - v_here[:, None], torch.full_like(v_there, -dv_clip))
+    dv = dv.clamp(-dv_clip, dv_clip)
     n, m = v_there.shape
+    lengths = lengths.expand(n, m)
     stay = (lengths == 0).to(v_there.dtype)
-    return torch.stack([dv, lengths[None].expand(n, m), room.clamp(-1.0, 1.0), du, stay[None].expand(n, m)], dim=-1)
+    return torch.stack([dv, lengths, room.clamp(-1.0, 1.0), du, stay], dim=-1)

@@ -10,15 +10,17 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import torch
 
-from apf_physics.control.shield import MOVE_SETS, SAFETY, move_clearance
+from apf_physics.common.transforms import signed_log
+from apf_physics.sim.nodegraph import NodeGraph, node_moves, resolution_for
+from apf_physics.control.shield import MOVE_SAMPLES, MOVE_SETS, SAFETY, move_clearance
 from apf_physics.models.files import SavedModel, load_model, observer_of
-from apf_physics.models.mapnet import MapNetwork, move_features, replan, sample_values
+from apf_physics.models.mapnet import UNREACHED, MapNetwork, move_features, replan, sample_values, values_between
 from apf_physics.models.network import QNetwork
 from apf_physics.sensing.mapview import MapView
 from apf_physics.sensing.observation import ObserverConfig
-from apf_physics.common.transforms import signed_log
-from apf_physics.world.field import Grid
 from apf_physics.world.core import Moment, World
+from apf_physics.world.field import Grid
+from apf_physics.world.kinematics import NODE_MOVES
 
 
 SMALL_BATCH = 256
@@ -183,9 +185,32 @@ class MapPolicy:
     def __init__(self, network: MapNetwork, model: SavedModel | None = None):
         self.network = network.eval()
         self.model = model
-        self.moves = MOVE_SETS[network.arch["moves"]]
-        """(M, 2) the moves the action values are for."""
-        self.lengths = np.hypot(*self.moves.T)
+        self.on_nodes = network.arch["moves"] == NODE_MOVES
+        """Whether the moves are each robot's own (:meth:`candidates`: to the nodes of its
+        :class:`~apf_physics.nodegraph.NodeGraph` within one step), not one fixed set."""
+        self.moves = None if self.on_nodes else MOVE_SETS[network.arch["moves"]]
+        """(M, 2) the moves the action values are for (None: each robot's own, :meth:`candidates`)."""
+        self.lengths = None if self.moves is None else np.hypot(*self.moves.T)
+
+    def resolution(self, world: World) -> int:
+        """Nodes per step of the grid the network plans on in ``world``: its own, or for moves onto
+        nodes finer where the robot is small (:func:`~apf_physics.nodegraph.resolution_for`)."""
+        if not self.on_nodes:
+            return self.network.resolution
+        return resolution_for(world, self.network.resolution, self.network.least_resolution)
+
+    def graph(self, world: World) -> NodeGraph | None:
+        """The node graph the network plans on (None for a network with a fixed set of moves)."""
+        return NodeGraph.of(world, self.resolution(world), SAFETY) if self.on_nodes else None
+
+    def candidates(self, world: World, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each robot's moves: ``moves`` (N, M, 2), ``usable`` (N, M) and ``ends`` (N, M) node indices
+        (:func:`~apf_physics.nodegraph.node_moves`); a fixed set: the same moves for every robot."""
+        positions = np.asarray(positions, float).reshape(-1, 2)
+        if self.on_nodes:
+            return node_moves(self.graph(world), positions)
+        n, m = len(positions), len(self.moves)
+        return (np.broadcast_to(self.moves, (n, m, 2)), np.ones((n, m), bool), np.full((n, m), -1, np.intp))
 
     @property
     def field(self) -> dict[str, float] | None:
@@ -194,45 +219,109 @@ class MapPolicy:
 
     def values(self, world: World) -> tuple[MapView, torch.Tensor]:
         """The world's map view and the network's V over it (kept with the world: :class:`MapValues`)."""
+        view, v, _ = self._planned(world)
+        return view, v
+
+    def _planned(self, world: World) -> tuple[MapView, torch.Tensor, torch.Tensor]:
+        """The world's map view, V and the cost map κ (kept with the world: :class:`MapValues`)."""
         def build():
-            view = MapView.of(world, self.network.resolution, MAP_MARGIN)
+            resolution = self.resolution(world)
+            view = MapView.of(world, resolution, MAP_MARGIN)
+            graph = self.graph(world)
             with _threads_for(1), torch.inference_mode():
-                v = self.network.values(torch.from_numpy(view.features), torch.from_numpy(view.free),
-                                        torch.from_numpy(view.goal))
-            return view, v
+                v, kappa = self.network.values(torch.from_numpy(view.features), torch.from_numpy(view.free),
+                                               torch.from_numpy(view.goal),
+                                               links=None if graph is None else torch.from_numpy(graph.links),
+                                               resolution=resolution, with_cost=True)
+            return view, v, kappa
         return world.cached("map_values", MapValues).get(self, build)
 
-    def q_values(self, world: World, positions: np.ndarray, room: np.ndarray, du: np.ndarray) -> np.ndarray:
-        """(N, M) action values of robots at ``positions`` for :attr:`moves`.
+    def q_values(self, world: World, positions: np.ndarray, room: np.ndarray, du: np.ndarray,
+                 candidates: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+        """(N, M) action values of robots at ``positions`` for their moves.
 
         Args:
             world: The world (with other robots in it: each robot's values planned again among them).
             positions: (N, 2) robot centres.
             room: (N, M) clearance along each move beyond the robot's radius and the safety margin.
             du: (N, M) signed-log change of U over each move (:func:`potential_change`).
+            candidates: The robots' moves (:meth:`candidates`); None: :attr:`moves`. Moves that
+                are not usable get ``−inf``.
         """
-        view, v = self.values(world)
+        view, v, kappa = self._planned(world)
         positions = np.asarray(positions, float).reshape(-1, 2)
         with _threads_for(1), torch.inference_mode():
+            if candidates is not None:
+                return self._node_values(world, view, v, kappa, positions, candidates, room, du)
             if not len(world.others):
                 return map_scores(self.network, view, v, positions, self.moves, room, du).numpy()
             out = np.empty((len(positions), len(self.moves)))
             for i, position in enumerate(positions):
-                patch, patch_v = self.among_others(world, view, v, position)
+                patch, patch_v, _ = self.among_others(world, view, v, position)
                 out[i] = map_scores(self.network, patch, patch_v, position[None], self.moves, room[i:i + 1],
                                     du[i:i + 1]).numpy()[0]
             return out
 
+    def _node_values(self, world: World, view: MapView, v: torch.Tensor, kappa: torch.Tensor, positions: np.ndarray,
+                     candidates: tuple[np.ndarray, np.ndarray, np.ndarray], room: np.ndarray,
+                     du: np.ndarray) -> np.ndarray:
+        """:meth:`q_values` for moves onto nodes: V read at each move's end node; a robot with
+        others near reads the values planned again among them (:meth:`among_others`) there."""
+        moves, usable, ends = candidates
+        q = node_scores(self.network, view, v, kappa, positions, moves, ends, room, du).numpy()
+        for i, position in enumerate(positions if len(world.others) else ()):
+            patch, patch_v, (rs, cs) = self.among_others(world, view, v, position)
+            if patch is view:
+                continue
+            near_v = v.clone()
+            near_v[rs, cs] = patch_v
+            q[i] = node_scores(self.network, view, near_v, kappa, position[None], moves[i:i + 1], ends[i:i + 1],
+                               room[i:i + 1], du[i:i + 1]).numpy()[0]
+        return np.where(usable, q, -np.inf)
+
+    def node_values(self, world: World, goal: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """(K,) float32 V at ``points`` of the map's values toward a target at ``goal`` (:data:`UNREACHED`
+        where no way leads): a fleet robot's table (:mod:`apf_physics.control.fleet`). The values are
+        planned in a view of ``world`` with that target alone, dropped afterwards (what the map alone
+        determines stays shared)."""
+        view, v = self.values(world.with_task(np.asarray(goal, float).reshape(1, 2), np.zeros((0, 2))))
+        points = np.asarray(points, float).reshape(-1, 2)
+        with _threads_for(1), torch.inference_mode():
+            sampled, found = sample_values(v, torch.from_numpy(view.free), view.grid.origin, view.grid.resolution,
+                                           torch.from_numpy(points).to(v.dtype))
+        out = np.where(found.numpy(), sampled.numpy(), UNREACHED).astype(np.float32)
+        if self.on_nodes:   # V read on the nodes themselves, as its moves read it (node_scores)
+            rows, cols = view.grid.shape
+            index = view.grid.to_index(points)
+            near = np.rint(index)
+            on = (np.all(np.abs(index - near) <= 1e-6, axis=1) & (near[:, 0] >= 0) & (near[:, 0] < cols)
+                  & (near[:, 1] >= 0) & (near[:, 1] < rows))
+            out[on] = v.numpy()[near[on, 1].astype(np.intp), near[on, 0].astype(np.intp)]
+        return out
+
+    def move_scores(self, here: np.ndarray, there: np.ndarray, moves: np.ndarray, room: np.ndarray,
+                    du: np.ndarray) -> np.ndarray:
+        """(N, M) action values from V sampled at the robots (``here``, (N,)) and at the ends of their
+        ``moves`` (``there``, (N, M); :data:`UNREACHED` where none was found): what :meth:`q_values`
+        computes from the map, for callers that read V from tables of their own (a fleet's)."""
+        with _threads_for(1), torch.inference_mode():
+            there_t = torch.from_numpy(np.asarray(there, np.float32))
+            features = move_features(torch.from_numpy(np.asarray(here, np.float32)), there_t, there_t > UNREACHED / 2,
+                                     torch.from_numpy(np.hypot(*np.asarray(moves, float).T)).float(),
+                                     torch.from_numpy(np.asarray(room, np.float32)),
+                                     torch.from_numpy(np.asarray(du, np.float32)), self.network.dv_clip)
+            return self.network.scores(features).numpy()
+
     def among_others(self, world: World, view: MapView, v: torch.Tensor,
-                    position: np.ndarray) -> tuple[MapView, torch.Tensor]:
+                    position: np.ndarray) -> tuple[MapView, torch.Tensor, tuple[slice, slice]]:
         """The map view and values over the square of :data:`OTHERS_PATCH` around ``position``,
-        planned again among the world's other robots (see the class); the whole map's when none is
-        near."""
+        planned again among the world's other robots (see the class), and the square's rows and
+        columns in ``view``; the whole map's when none is near."""
         r = world.robot_radius
         others = world.others
         others = others[np.max(np.abs(others - position), axis=1) < OTHERS_PATCH + 2 * r + OTHERS_ROOM]
         if not len(others):
-            return view, v
+            return view, v, (slice(None), slice(None))
         grid = view.grid
         rows, cols = grid.shape
         c0, r0 = np.floor(grid.to_index(position)).astype(int)
@@ -255,9 +344,31 @@ class MapPolicy:
         held = np.zeros(patch_grid.shape, bool)
         held[[0, -1], :] = held[:, [0, -1]] = True
         extra = torch.from_numpy(np.where(gap < r + OTHERS_ROOM, OTHERS_COST, 0.0).astype(np.float32))
+        graph = self.graph(world)
         patch_v = replan(self.network, torch.from_numpy(patch.features), torch.from_numpy(free),
-                         torch.from_numpy(held | goal), v[rs, cs], extra)
-        return patch, patch_v
+                         torch.from_numpy(held | goal), v[rs, cs], extra, grid.resolution,
+                         None if graph is None else torch.from_numpy(graph.links[:, rs, cs]))
+        return patch, patch_v, (rs, cs)
+
+def robot_move_inputs(where: Moment | World, positions: np.ndarray,
+                      moves: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`move_inputs` for moves of each robot's own: ``moves`` (N, M, 2).
+
+    ``room`` is the bound :func:`~apf_physics.control.shield.move_clearance` computes for a move (the
+    clearance sampled at :data:`~apf_physics.control.shield.MOVE_SAMPLES` points, less half their
+    spacing), beyond the robot's radius and the safety margin.
+    """
+    world = where.world if isinstance(where, Moment) else where
+    positions = np.asarray(positions, float).reshape(-1, 2)
+    moves = np.asarray(moves, float)
+    n, m = moves.shape[:2]
+    spacing = np.hypot(moves[..., 0], moves[..., 1]).ravel() / MOVE_SAMPLES
+    start = np.repeat(positions, m, axis=0)
+    end = start + moves.reshape(-1, 2)
+    clear = where.path_clearance(start, end, np.where(spacing > 0, spacing, 1.0)) - 0.5 * spacing
+    room = clear.reshape(n, m) - (world.robot_radius + SAFETY)
+    d = where.potential(end).reshape(n, m) - where.potential(positions)[:, None]
+    return room, signed_log(d) / 4.0
 
 
 def move_inputs(where: Moment | World, positions: np.ndarray, moves: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -298,7 +409,36 @@ def map_scores(network: MapNetwork, view: MapView, v: torch.Tensor, positions: n
     here, there, ok = sampled[:n], sampled[n:].reshape(n, m), found[n:].reshape(n, m)
     lengths = torch.from_numpy(np.hypot(*moves.T)).to(v.dtype)
     features = move_features(here, there, ok, lengths, torch.from_numpy(np.asarray(room)).to(v.dtype),
-                             torch.from_numpy(np.asarray(du)).to(v.dtype))
+                             torch.from_numpy(np.asarray(du)).to(v.dtype), network.dv_clip)
+    return network.scores(features)
+
+
+def node_scores(network: MapNetwork, view: MapView, v: torch.Tensor, kappa: torch.Tensor, positions: np.ndarray,
+                moves: np.ndarray, ends: np.ndarray, room: np.ndarray, du: np.ndarray) -> torch.Tensor:
+    """(N, M) the network's action values for moves of each robot's own that end on nodes
+    (differentiable in ``v``, ``kappa`` and the head's weights).
+
+    V is read at each move's end node exactly (``ends``; −1: staying, or not a move), and where
+    the robot is: at its node when it stands on one, else from the nodes around it less the
+    learned cost of the way there (:func:`~apf_physics.models.mapnet.values_between`).
+    """
+    positions = np.asarray(positions, float).reshape(-1, 2)
+    flat = v.reshape(-1)
+    rows, cols = v.shape
+    index = view.grid.to_index(positions)
+    near = np.rint(index)
+    on = np.all(np.abs(index - near) / view.grid.resolution <= 1e-6, axis=1)
+    node = (np.clip(near[:, 1], 0, rows - 1) * cols + np.clip(near[:, 0], 0, cols - 1)).astype(np.intp)
+    between = values_between(v, kappa, torch.from_numpy(view.free), view.grid.origin, view.grid.resolution,
+                             torch.from_numpy(positions).to(v.dtype))
+    here = torch.where(torch.from_numpy(on), flat[torch.from_numpy(node)], between)
+    ends_t = torch.from_numpy(np.asarray(ends, np.intp))
+    there = torch.where(ends_t >= 0, flat[ends_t.clamp_min(0)], here[:, None].expand(-1, ends_t.shape[1]))
+    found = there > UNREACHED / 2
+    moves_t = torch.from_numpy(np.array(moves, float)).to(v.dtype)
+    lengths = torch.hypot(moves_t[..., 0], moves_t[..., 1])
+    features = move_features(here, there, found, lengths, torch.from_numpy(np.asarray(room)).to(v.dtype),
+                             torch.from_numpy(np.asarray(du)).to(v.dtype), network.dv_clip)
     return network.scores(features)
 
 

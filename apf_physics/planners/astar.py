@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from apf_physics.control.fleet import Lattice, goal_columns
 from apf_physics.planners.base import Planner
 from apf_physics.world.search import LOS_MARGIN, LOS_SPACING, SearchGrid, timed_path
 from apf_physics.world.core import Moment, World
@@ -44,6 +45,12 @@ class AStarPlanner(Planner):
     def stuck(self) -> np.ndarray:
         """Robots from whose start no target can be reached."""
         return self._no_path
+
+    def fleet_values(self, lattice: Lattice, nodes: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        """A* on a fleet's lattice, from every node at once: each robot's moves ranked by the shortest
+        way from where they end to its goal node (a Dijkstra search per goal, kept within the budget of
+        :meth:`goal_tables`). With the fleet's rule this is PIBT as its authors run it."""
+        return -goal_columns(self.goal_tables(lattice), nodes, goals, lattice.distances)
 
     def act(self, positions: np.ndarray, active: np.ndarray, moment: Moment | None = None) -> np.ndarray:
         positions = np.asarray(positions, float).reshape(-1, 2)

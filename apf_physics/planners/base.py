@@ -13,6 +13,8 @@ from typing import ClassVar
 
 import numpy as np
 
+from apf_physics.control.fleet import GOAL_TABLE_BUDGET, GoalTables, Lattice
+from apf_physics.errors import UserError
 from apf_physics.sim.engine import TrapRule
 from apf_physics.world.core import Moment, World
 
@@ -61,6 +63,25 @@ class Planner:
             in [-1, 1] (a unit move along an axis or a diagonal).
         """
         raise NotImplementedError
+
+    def fleet_values(self, lattice: Lattice, nodes: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        """(N, 9) the value of each unit move (:data:`~apf_physics.world.kinematics.ACTIONS`) of
+        robots on ``lattice``'s ``nodes`` (N,), each toward its own goal node ``goals[i]`` (higher is
+        better): what a fleet's rule (:func:`~apf_physics.control.fleet.fleet_moves`) ranks each
+        robot's moves by. Planners that can drive a fleet override it.
+
+        Raises:
+            UserError: This planner cannot drive a fleet.
+        """
+        raise UserError(f"--planner {self.name}: cannot drive a fleet (fleets: dqn, mapnet, astar, gradient)")
+
+    def goal_tables(self, lattice: Lattice) -> GoalTables:
+        """This planner's per-goal tables for a fleet on ``lattice``, within
+        :data:`~apf_physics.control.fleet.GOAL_TABLE_BUDGET` (new ones for another lattice)."""
+        tables = self.__dict__.get("_goal_tables")
+        if tables is None or tables.lattice is not lattice:
+            tables = self._goal_tables = GoalTables(lattice, GOAL_TABLE_BUDGET)
+        return tables
 
     def _moment(self, moment: Moment | None) -> Moment:
         """``moment``, or the world at step 0 when None."""

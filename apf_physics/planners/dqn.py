@@ -17,8 +17,10 @@ from apf_physics.control.shield import (ACTIONS, HORIZON, PREDICTIONS, SAFETY, m
                                  shielded_argmax)
 from apf_physics.errors import ModelError
 from apf_physics.models import NETWORKS, DQNPolicy, MapPolicy, load_policy, resolve_model, shipped_model_for
-from apf_physics.models.policy import move_inputs
+from apf_physics.models.policy import move_inputs, robot_move_inputs
 from apf_physics.sensing.observation import Observer
+from apf_physics.common.transforms import signed_log
+from apf_physics.control.fleet import STAY, Lattice, goal_columns
 from apf_physics.planners.base import Planner
 from apf_physics.world.core import Moment, World
 
@@ -112,6 +114,11 @@ class DQNPlanner(Planner):
         return f"{self.name}: {NETWORKS[self.network_kind]} ({source})"
 
     @property
+    def policy(self) -> DQNPolicy | MapPolicy | None:
+        """The greedy policy of the network loaded (None before :meth:`reset`)."""
+        return self._policy
+
+    @property
     def network_kind(self) -> str | None:
         """``"map"`` or ``"window"``: the kind of network loaded (None before :meth:`reset`)."""
         if self._policy is None:
@@ -135,9 +142,35 @@ class DQNPlanner(Planner):
         return ACTIONS[shield_over_time(moment, positions, ACTIONS, q, self.prediction, self.horizon)] * active[:, None]
 
 
+    def fleet_values(self, lattice: Lattice, nodes: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        """The map network's action values of the nine unit moves of each robot of a fleet, toward its
+        own goal: its values for that goal (planned once per goal, read at the lattice's nodes and kept
+        within the budget of :meth:`goal_tables`), the room of each move on the lattice and the change of
+        the robot's own U, scored by the network's head. No robot consults a search while it acts.
+
+        Raises:
+            ModelError: The model is a window network (it sees one robot's field in a window; a fleet's
+                values are the map network's).
+        """
+        if not isinstance(self._policy, MapPolicy):
+            raise ModelError(f"{self.describe()}: a fleet is driven by the map network (--model map, the "
+                             "default on Table 4's field), not a window network")
+        policy = self._policy
+        everywhere = lattice.points(np.arange(lattice.count))
+        tables = self.goal_tables(lattice)
+        build = lambda goal: policy.node_values(lattice.world, lattice.points([goal])[0], everywhere)  # noqa: E731
+        there = goal_columns(tables, nodes, goals, build)
+        here = there[:, STAY]
+        ends = lattice.ends(nodes)
+        u = lattice.potential(ends, goals)
+        du = signed_log(u - u[:, STAY:STAY + 1]) / 4.0
+        return policy.move_scores(here, there, ACTIONS, lattice.room[nodes], du)
+
     def _act_on_map(self, positions: np.ndarray, active: np.ndarray, moment: Moment) -> np.ndarray:
         """A map network's move: its best-valued one (with the shield: among the safe ones)."""
         policy = self._policy
+        if policy.on_nodes:
+            return self._act_on_nodes(positions, active, moment)
         moves = policy.moves
         room, du = move_inputs(moment, positions, moves)
         q = policy.q_values(self.world, positions, room, du)
@@ -146,6 +179,30 @@ class DQNPlanner(Planner):
         if not self.world.moving or self.horizon == 0:   # its room input is the one-step shield's
             return moves[shielded_argmax(q, room)] * active[:, None]
         return moves[shield_over_time(moment, positions, moves, q, self.prediction, self.horizon)] * active[:, None]
+
+    def _act_on_nodes(self, positions: np.ndarray, active: np.ndarray, moment: Moment) -> np.ndarray:
+        """A node-graph network's move: each robot's own moves (to the nodes within one step of it)
+        scored, the best taken (with the shield: among the safe ones)."""
+        policy = self._policy
+        positions = np.asarray(positions, float).reshape(-1, 2)
+        candidates = moves, usable, _ = policy.candidates(self.world, positions)
+        room, du = robot_move_inputs(moment, positions, moves)
+        room = np.where(usable, room, -np.inf)
+        q = policy.q_values(self.world, positions, room, du, candidates)
+        rows = np.arange(len(positions))
+        if not self.shield:
+            choice = q.argmax(axis=1)
+        elif not self.world.moving or self.horizon == 0:
+            choice = shielded_argmax(q, room)
+        else:   # the shield over time takes one set of moves: robots with the same ones together
+            choice = np.zeros(len(positions), np.intp)
+            key = np.round(moves.reshape(len(positions), -1), 6)
+            _, group = np.unique(key, axis=0, return_inverse=True)
+            for g in np.unique(group):
+                members = np.flatnonzero(group.ravel() == g)
+                choice[members] = shield_over_time(moment, positions[members], moves[members[0]], q[members],
+                                                   self.prediction, self.horizon)
+        return moves[rows, choice] * active[:, None]
 
 
 __all__ = ["DQNPlanner", "shielded_argmax"]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from apf_physics.control.fleet import Lattice
 from apf_physics.planners.base import Planner
 from apf_physics.world.core import Moment
 
@@ -11,9 +12,11 @@ from apf_physics.world.core import Moment
 class GradientPlanner(Planner):
     """Each control step, a unit step along the force ``−∇U/‖∇U‖``.
 
-    When the unit step would not lower U, half and quarter steps are tried; when none does,
-    the robot is at a local minimum of U (at this resolution) and the planner reports it
-    trapped through :meth:`stuck`.
+    A step is taken when U is lower all along it (at :data:`SAMPLES` points, its end included)
+    than where it starts; when the unit step is not, half and quarter steps are tried; when none
+    is, the robot is at a local minimum of U (at this resolution) and the planner reports it
+    trapped through :meth:`stuck`. The field reads its cap wherever the robot would touch an
+    obstacle (Model §1): a step that would graze a corner on its way is not a descent.
 
     It gets trapped wherever the field has a minimum that is not a target (thesis Fig. 1,
     Fig. 22); the rollout detects that with the ``"descent"`` trap rule.
@@ -22,6 +25,8 @@ class GradientPlanner(Planner):
     name = "gradient"
     trap_rule = "descent"
     backtracking = (1.0, 0.5, 0.25)  # step lengths tried, longest first
+    SAMPLES = 4
+    """Points along a step (evenly spaced, its end the last) where U must be below its start's."""
 
     def reset(self, world, positions):
         super().reset(world, positions)
@@ -30,6 +35,11 @@ class GradientPlanner(Planner):
     def stuck(self) -> np.ndarray:
         """Robots whose next unit step would not lower the potential: a local minimum at this step size."""
         return self._stuck
+
+    def fleet_values(self, lattice: Lattice, nodes: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        """Gradient descent on a fleet's lattice: the moves that lower each robot's own U the most
+        (its target's attraction and well, the static obstacles' repulsion) rank first."""
+        return -lattice.potential(lattice.ends(nodes), goals)
 
     def act(self, positions: np.ndarray, active: np.ndarray, moment: Moment | None = None) -> np.ndarray:
         moment = self._moment(moment)
@@ -45,13 +55,15 @@ class GradientPlanner(Planner):
         here = moment.potential(positions)
         scale = np.ones(len(positions))
         pending = moving.copy()
+        along = np.arange(1, self.SAMPLES + 1) / self.SAMPLES
         for factor in self.backtracking:
             if not pending.any():
                 break
             scale[pending] = factor
-            there = moment.potential(positions[pending] + factor * step[pending])
             idx = np.flatnonzero(pending)
-            pending[idx[there < here[idx]]] = False
+            points = positions[idx, None, :] + factor * along[None, :, None] * step[idx, None, :]
+            there = moment.potential(points.reshape(-1, 2)).reshape(len(idx), -1)
+            pending[idx[np.all(there < here[idx, None], axis=1)]] = False
         self._stuck = active & (pending | ~moving)
         step *= scale[:, None]
         step[self._stuck] = 0.0

@@ -79,6 +79,7 @@ CAPTIONS = ("below", "over", "off")
 """Where a frame's text goes (:attr:`FieldImage.caption`): in a band below the map (the default: it
 never hides the map), over the map's top-left corner, or nowhere."""
 CAPTION_BAND: RGB = (32, 32, 32)
+FLOOR: RGB = (40, 44, 52)              # a map drawn without its field (a fleet's): dark floor, white obstacles
 
 _SHIFT = 4                 # fractional bits for cv2 drawing: sub-pixel positions, smooth motion
 _ONE = 1 << _SHIFT
@@ -252,6 +253,7 @@ class FieldImage:
         min_radius: float = 3.0,
         t: float | None = None,
         caption: str = "below",
+        field: bool = True,
     ) -> FieldImage:
         """Render the world's static picture.
 
@@ -275,6 +277,8 @@ class FieldImage:
                 every obstacle as they are at that step.
             caption: Where frames' text goes: ``"below"`` (default), ``"over"`` or ``"off"``
                 (:data:`CAPTIONS`).
+            field: False: the map alone, obstacles on a plain floor, no field and no targets (a
+                fleet's video: each robot's goal is drawn in its own colour).
         """
         if long_side < 16:
             raise ValueError(f"long_side must be at least 16 pixels, got {long_side}")
@@ -289,12 +293,14 @@ class FieldImage:
         min_px = max(min_radius, 3.0 * unit)
         if raster_resolution is None:
             raster_resolution = int(np.clip(np.ceil(scale / 2), 4, 16))
-        raster = world.raster(raster_resolution)
         shown = world.obstacles_at(t) if t is not None else world.static_obstacles
+        if not field:
+            return cls._plain(world, scale, rows, cols, unit, line_width, halo_width, min_px, shown, caption)
+        raster = world.raster(raster_resolution)
         if world.moving:   # the field as the frames show it: at step t, or of the static obstacles
             grid = raster.grid
             nodes = grid.node_points()
-            values = apf.potential(nodes, world.targets, shown, world.field)
+            values = apf.potential(nodes, world.targets, shown, world.field, world.robot_radius)
             raster = apf.Raster(grid, values.reshape(grid.shape))
 
         shade, shade_potential = _shade(raster, world, scale, rows, cols, scaling, shown)
@@ -315,6 +321,21 @@ class FieldImage:
         mapping._draw_tolerance(image_cv, world.goal_tolerance)
         mapping.draw_targets(image_cv)
         image_cv.setflags(write=False)
+        return mapping
+
+    @classmethod
+    def _plain(cls, world: World, scale: float, rows: int, cols: int, unit: float, line_width: int, halo_width: int,
+               min_px: float, shown: Sequence, caption: str) -> FieldImage:
+        """The map alone: obstacles on a plain floor (see :meth:`from_world`'s ``field``)."""
+        image = np.empty((rows, cols, 3), np.uint8)
+        image[...] = FLOOR
+        robot_px = max(world.robot_radius * scale, min(min_px, 0.4 * scale))
+        targets = np.zeros((0, 2))
+        targets.setflags(write=False)
+        mapping = cls(image, scale, (float(world.size[0]), float(world.size[1])), robot_px, line_width, halo_width,
+                      0.45 * unit, targets, robot_px, "log", np.zeros(SHADE_SAMPLES), 0, (), min_px, caption)
+        mapping._draw_obstacles(image, shown, min_px)
+        image.setflags(write=False)
         return mapping
 
     # -- world ↔ pixels ----------------------------------------------------------------

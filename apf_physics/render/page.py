@@ -56,6 +56,8 @@ class Video:
     caption: str
     duration: float
     poster: Path | None = None
+    wide: bool = False
+    """Shown as wide as the page (a fleet's: hundreds of robots need the pixels)."""
 
 
 @dataclass(frozen=True)
@@ -140,9 +142,9 @@ def write_results(folder: str | Path, evaluations: Sequence, worlds: Sequence, *
 
 
 def write_page(folder: str | Path, title: str, evaluations: Sequence, sections: Sequence[Section], *,
-               notes: Sequence[str] = (), files: Sequence[str] = ()) -> Path:
+               notes: Sequence[str] = (), files: Sequence[str] = (), tables: Sequence[str] = ()) -> Path:
     """Write ``folder/index.html`` (``folder`` is created if missing): title, notes, the results
-    table, the sections, links to ``files``.
+    table (and ``tables``, HTML such as :func:`fleet_table`'s), the sections, links to ``files``.
 
     Every figure, video and file must lie inside ``folder``; links are relative to it.
 
@@ -153,8 +155,8 @@ def write_page(folder: str | Path, title: str, evaluations: Sequence, sections: 
     check_writable(folder / PAGE, create_parent=True)
     parts = [_HEAD.format(title=html.escape(title)), f"<h1>{html.escape(title)}</h1>"]
     parts += [f"<p>{html.escape(line)}</p>" for line in notes]
-    if evaluations:
-        parts += ["<h2>Results</h2>", results_table(evaluations)]
+    if evaluations or tables:
+        parts += ["<h2>Results</h2>"] + ([results_table(evaluations)] if evaluations else []) + list(tables)
     for section in sections:
         parts.append(f'<section><h2>{html.escape(section.title)}</h2><div class="row">')
         for figure in section.figures:
@@ -162,7 +164,8 @@ def write_page(folder: str | Path, title: str, evaluations: Sequence, sections: 
                          f"<figcaption>{html.escape(figure.caption)}</figcaption></figure>")
         for video in section.videos:
             poster = f' poster="{_link(folder, video.poster)}"' if video.poster is not None else ""
-            parts.append(f'<figure><video controls muted playsinline preload="auto"{poster} '
+            wide = ' class="wide"' if video.wide else ""
+            parts.append(f'<figure{wide}><video controls muted playsinline preload="auto"{poster} '
                          f'data-duration="{video.duration:.3f}" src="{_link(folder, video.path)}"></video>'
                          f"<figcaption>{html.escape(video.caption)} ({video.duration:.1f} s)</figcaption></figure>")
         parts.append("</div></section>")
@@ -205,6 +208,23 @@ def results_table(evaluations: Sequence) -> str:
     return table + "".join(f"<p>{html.escape(note)}</p>" for note in notes)
 
 
+FLEET_COLUMNS = (("planner", "planner"), ("world", "world"), ("robots", "robots"), ("arrived", "arrived"),
+                 ("makespan", "makespan"), ("sum of costs", "sum_of_costs"), ("over the optima", "soc_over_optimal"),
+                 ("goals reached", "goals_reached"), ("throughput", "throughput"),
+                 ("robot–robot", "robot_robot_collisions"), ("robot–obstacle", "robot_obstacle_collisions"),
+                 ("ms per robot-step", "ms_per_robot_step"))
+
+
+def fleet_table(rows: Sequence[dict]) -> str:
+    """Fleets' runs as an HTML table: a row per run (its summary, with ``planner`` and ``world``); a
+    column only where some run has a value."""
+    columns = [(name, key) for name, key in FLEET_COLUMNS if any(row.get(key) is not None for row in rows)]
+    head = "".join(f"<th>{html.escape(name)}</th>" for name, _ in columns)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape('-' if row.get(key) is None else str(row[key]))}</td>"
+                                    for _, key in columns) + "</tr>" for row in rows)
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
 def _link(folder: Path, path: Path) -> str:
     """``path`` relative to ``folder``, URL-quoted; it must exist inside the folder."""
     try:
@@ -230,6 +250,7 @@ th:nth-child(-n+2), td:nth-child(-n+2) {{ text-align: left; }}
 tr.total td {{ font-weight: 600; border-bottom: 2px solid #bbb; }}
 .row {{ display: flex; flex-wrap: wrap; gap: 1em; align-items: flex-start; }}
 figure {{ margin: 0; max-width: 640px; }}
+figure.wide {{ max-width: 100%; }}
 img, video {{ max-width: 100%; height: auto; display: block; background: #eee; }}
 figcaption {{ font-size: 0.9em; color: #555; margin-top: 0.3em; }}
 footer {{ margin-top: 2em; font-size: 0.85em; color: #777; }}

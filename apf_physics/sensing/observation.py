@@ -123,7 +123,7 @@ def observation_raster(world: World, margin: int, resolution: int) -> Raster:
         grid = Grid.covering((-margin, -margin), (world.size[0] + margin, world.size[1] + margin), resolution)
 
         def values_at(nodes: np.ndarray) -> np.ndarray:
-            values = apf.potential(nodes, world.targets, world.shapes, world.field)
+            values = apf.potential(nodes, world.targets, world.shapes, world.field, world.robot_radius)
             blocked = (world.edge_distance(nodes) < 0) | (world.obstacle_distance(nodes, static=True) <= 0)
             values[blocked] = world.u_wall
             return values
@@ -326,13 +326,14 @@ class Observer:
         half = self.config.size // 2 if lattice else 0   # one point (potential_at): a 1×1 window
         polygon_d = _NO_POINTS
         if near.polygons:
-            shape, px, py = _polygon_points(where, table, steps, near.lo, near.hi, field.p0, half, near.polygon)
+            shape, px, py = _polygon_points(where, table, steps, near.lo, near.hi, max(field.p0, world.robot_radius),
+                                            half, near.polygon)
             polygon_d = np.empty(len(shape))
             for index in np.unique(shape).tolist():
                 chosen = shape == index
                 polygon_d[chosen], _ = near.shapes[index].signed_distance(np.stack([px[chosen], py[chosen]], -1))
         _add_terms(values, mine, where, table, steps, near.lo, near.hi, near.centre, near.radius, polygon_d,
-                   field.krep, field.p0, field.u_max, world.u_wall, half)
+                   field.krep, field.p0, field.u_max, world.u_wall, half, world.robot_radius)
 
     def observe(self, positions: np.ndarray, robots: np.ndarray | None = None,
                 t: np.ndarray | float = 0.0, discs: np.ndarray | None = None) -> np.ndarray:
@@ -406,21 +407,24 @@ def _polygon_points(where, table, steps, lo, hi, p0, half, polygon):
 
 
 @kernel
-def _add_terms(values, rows, where, table, steps, lo, hi, centre, radius, polygon_d, krep, p0, u_max, u_wall, half):
+def _add_terms(values, rows, where, table, steps, lo, hi, centre, radius, polygon_d, krep, p0, u_max, u_wall, half,
+               surface):
     """Add to each robot's window the repulsive terms of the shapes near it.
 
     Robot ``r``'s window is ``values[rows[r]]`` (``k²`` points, ``k = 2·half + 1``); it is at
     ``(x, y) = where[r] − table[steps[r], s]`` in shape ``s``'s frame (the shape moved by that
     offset), so its window point ``[half − dy, half + dx]`` is at ``(x + dx, y + dy)``. The
-    points within ``p0`` of the shape's box ``[lo[s], hi[s]]`` are measured: their signed
+    points within ``max(p0, surface)`` of the shape's box ``[lo[s], hi[s]]`` are measured: their signed
     distance ``d`` to the disc ``centre[s]``, ``radius[s]``, or, for a polygon (NaN radius), the
     next of ``polygon_d`` (its points in the order met here: robots, shapes, ``dx``, ``dy``, as
-    :func:`_polygon_points` lists them). A window point's terms (:func:`~apf_physics.world.field.repulsive_term_at`) are
+    :func:`_polygon_points` lists them). A window point's terms (:func:`~apf_physics.world.field.repulsive_term_at`;
+    the cap where a robot of radius ``surface`` there touches the shape) are
     summed in shape order, from 0, then added to its value, which stays at most ``u_wall``; a
     point inside a shape reads ``u_wall``. A disc's ``d`` is not measured where the squared
     distance from its centre settles the term (surely beyond ``p0``: 0; surely inside: ``u_max``).
     """
     k = 2 * half + 1
+    reach = max(p0, surface)            # terms reach p0, and the cap where the robot touches
     added = np.empty(k * k)             # one robot's sums, by window point (where marked)
     mark = np.zeros(k * k, np.int8)     # 0: no shape near, 1: near, 2: inside one
     touched = np.empty(k * k, np.intp)  # the points near, in the order first met
@@ -430,16 +434,16 @@ def _add_terms(values, rows, where, table, steps, lo, hi, centre, radius, polygo
         step = steps[r]
         for s in range(table.shape[1]):
             x = where[r, 0] - table[step, s, 0]
-            x0, x1 = _window_span(x, lo[s, 0], hi[s, 0], p0, half)
+            x0, x1 = _window_span(x, lo[s, 0], hi[s, 0], reach, half)
             if x0 > x1:                 # no column of the window near it (most shapes)
                 continue
             y = where[r, 1] - table[step, s, 1]
-            y0, y1 = _window_span(y, lo[s, 1], hi[s, 1], p0, half)
+            y0, y1 = _window_span(y, lo[s, 1], hi[s, 1], reach, half)
             polygon = np.isnan(radius[s])
             # squared distances from the disc's centre beyond which a point is surely more than
             # p0 from its rim, and within which surely inside it (margins of 1e-9, a million
             # times the rounding of either side): there the term is 0, or u_max, whatever d is
-            beyond = (radius[s] + p0) ** 2 * (1.0 + 1e-9)
+            beyond = (radius[s] + reach) ** 2 * (1.0 + 1e-9)
             within = radius[s] ** 2 * (1.0 - 1e-9)
             for dx in range(x0, x1 + 1):
                 for dy in range(y0, y1 + 1):
@@ -450,11 +454,11 @@ def _add_terms(values, rows, where, table, steps, lo, hi, centre, radius, polygo
                         ex, ey = x + dx - centre[s, 0], y + dy - centre[s, 1]
                         q = ex * ex + ey * ey
                         if (q > beyond) | (q < within):   # no hypot (half the loop's time): d only picks the term
-                            d = -1.0 if q < within else p0 + 1.0
+                            d = -1.0 if q < within else reach + 1.0
                         else:
                             d = np.hypot(ex, ey) - radius[s]
                     c = (half - dy) * k + (half + dx)
-                    term = repulsive_term_at(d, krep, p0, u_max)
+                    term = repulsive_term_at(0.0 if d <= surface else d, krep, p0, u_max)
                     if mark[c] == 0:    # the first term here: 0 + term is term
                         added[c] = term
                         mark[c] = 1

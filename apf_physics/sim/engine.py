@@ -167,11 +167,20 @@ class Stepper:
             crowd's slots together.
         unicycle: The robots are unicycles with these limits (None: holonomic); see the module
             docstring.
+        arrival: ``"end"``: a leader that reaches a target ends its episode (the rules above);
+            ``"continue"``: it does not (a fleet's robot stays in play on its goal, and may be given
+            another one with :meth:`set_targets`): :attr:`StepReport.reached` says who stands within
+            the goal tolerance of a target after the step, and episodes end only by a collision,
+            the trap rule, the step limit or :meth:`finish`.
     """
 
     def __init__(self, worlds: Sequence[World], num_slots: int, robots_per_slot: int = 1,
                  max_steps: int | None = None, trap: TrapDetector | None = None,
-                 crowds: Sequence[int] | None = None, unicycle: UnicycleLimits | None = None):
+                 crowds: Sequence[int] | None = None, unicycle: UnicycleLimits | None = None,
+                 arrival: Literal["end", "continue"] = "end"):
+        if arrival not in ("end", "continue"):
+            raise ValueError(f"arrival must be 'end' or 'continue', got {arrival!r}")
+        self.ends_at_target = arrival == "end"
         self.worlds = list(worlds)
         self.num_slots = int(num_slots)
         self.robots_per_slot = int(robots_per_slot)
@@ -211,6 +220,14 @@ class Stepper:
 
     def world(self, slot: int) -> World:
         return self.worlds[self.world_of[slot]]
+
+    def set_targets(self, slots: np.ndarray, targets: np.ndarray) -> None:
+        """Give the slots of ``slots`` targets of their own, ``targets`` (k, 2), instead of their world's
+        (a fleet: one map, a goal per robot). A slot put in another world by :meth:`start` takes that
+        world's targets again."""
+        slots = np.asarray(slots, np.intp).reshape(-1)
+        self._slot_targets[slots] = np.inf
+        self._slot_targets[slots, 0] = np.asarray(targets, float).reshape(-1, 2)
 
     def moment(self, slot: int) -> Moment:
         """The world of ``slot`` at its episode's step (where its moving obstacles are): what a
@@ -280,7 +297,7 @@ class Stepper:
         self.last_distance[slots] = distance = _nearest(np.ascontiguousarray(positions[:, 0]), self._slot_targets[slots])
         if self._watch is not None:
             self._watch.reset(slots, positions[:, 0], self._leader_potential(slots))
-        arrived = distance <= self._slot_tolerance[slots]
+        arrived = (distance <= self._slot_tolerance[slots]) & self.ends_at_target
         self.outcome[slots[arrived]] = REACHED
         self._unreported[slots] = arrived
         self._any_unreported = bool(self._unreported.any())
@@ -348,7 +365,7 @@ class Stepper:
         outcome = self.outcome.copy()
         distance, collided, reached, ended = _episode_rules(
             np.ascontiguousarray(self.positions[:, 0]), self._slot_targets, self._slot_tolerance, moved, touched,
-            self.steps, -1 if self.max_steps is None or watch else int(self.max_steps), outcome)
+            self.steps, -1 if self.max_steps is None or watch else int(self.max_steps), outcome, self.ends_at_target)
         if watch:   # the trap rule judges the slots still running, before the step limit does
             judge = np.flatnonzero(moved & (outcome == RUNNING))
             trapped = self._watch.record(judge, self.positions[judge, 0], self._leader_potential(judge))
@@ -382,11 +399,11 @@ def _nearest(leaders, targets):
 
 
 @kernel
-def _episode_rules(leaders, targets, tolerance, moved, touched, steps, max_steps, outcome):
+def _episode_rules(leaders, targets, tolerance, moved, touched, steps, max_steps, outcome, ends_at_target):
     """The episode rules of one step, for every slot (see the module docstring): each leader's
     distance to its nearest target, and for the slots that moved, whether a robot collided, whether
-    the leader reached a target (and nothing collided), and the outcome (collision, reached, or the
-    step limit when ``max_steps`` ≥ 0), written into ``outcome``.
+    the leader reached a target (and nothing collided), and the outcome (collision, reached when
+    ``ends_at_target``, or the step limit when ``max_steps`` ≥ 0), written into ``outcome``.
 
     Returns:
         ``(distance, collided, reached, ended)``, each (S,).
@@ -403,7 +420,7 @@ def _episode_rules(leaders, targets, tolerance, moved, touched, steps, max_steps
         reached[s] = distance[s] <= tolerance[s] and not touched[s]
         if collided[s]:
             outcome[s] = COLLISION
-        elif reached[s]:
+        elif reached[s] and ends_at_target:
             outcome[s] = REACHED
         elif 0 <= max_steps <= steps[s]:
             outcome[s] = TIMEOUT

@@ -110,11 +110,8 @@ class FreeMoveTest:
             needs = close_under_touch(needs.reshape(-1, m), both_free, near_held).ravel()
         for group in slots.crowd_robots:   # robots of several slots that meet: the same over the crowd
             group = group[slots.present[group]]
-            radius = slots.radius[group // m][None, :, None]
-            both_free, near_held = may_touch(positions[group][None], moves[group][None], radius,
-                                             np.ones((1, len(group)), bool), self.reach,
-                                             None if bend is None else bend[group][None])
-            needs[group] = close_under_touch(needs[group][None], both_free, near_held)[0]
+            needs[group] = crowd_needs(positions[group], moves[group], slots.radius[group // m], needs[group],
+                                       self.reach, None if bend is None else bend[group])
         if not any_moving:
             return needs
         self.movers_needed = []
@@ -256,6 +253,105 @@ def may_touch(p: np.ndarray, dp: np.ndarray, radius: np.ndarray, present: np.nda
     near_held = _segment_point_distance(p, dp) < touch + reach
     others = present[:, None, :] & present[:, :, None] & ~np.eye(p.shape[1], dtype=bool)[None]
     return both_free & others, near_held & others
+
+
+def crowd_needs(p: np.ndarray, dp: np.ndarray, radius: np.ndarray, needs: np.ndarray, reach: float,
+                bend: np.ndarray | None = None) -> np.ndarray:
+    """(G,) the robots of a crowd (every robot meets every other) that go to pymunk: what
+    :func:`may_touch` and :func:`close_under_touch` decide over the crowd, with the same arithmetic,
+    but only between robots near enough to matter (a grid of cells wider than any pair that may touch
+    or come within ``reach``), so that a crowd of hundreds costs in proportion to its robots.
+
+    Args:
+        p: (G, 2) the robots' positions; dp: (G, 2) their moves; radius: (G,) their radii;
+        needs: (G,) bool, the moves that need physics already; reach: as :func:`may_touch`'s;
+        bend: (G,) how far each path strays from its straight move (None: not at all).
+    """
+    p, dp = np.ascontiguousarray(p, float), np.ascontiguousarray(dp, float)
+    bend = np.zeros(len(p)) if bend is None else np.ascontiguousarray(bend, float)
+    out = np.ascontiguousarray(needs, np.bool_).copy()
+    if len(p) > 1:
+        _crowd_needs(p, dp, np.ascontiguousarray(radius, float), float(reach), bend, out)
+    return out
+
+
+@kernel
+def _pair_both_free(p, dp, i, j, touch):
+    """``may_touch``'s ``both_free[i, j]``: the two straight, uniform moves come within ``touch``."""
+    r0x, r0y = p[i, 0] - p[j, 0], p[i, 1] - p[j, 1]
+    drx, dry = dp[i, 0] - dp[j, 0], dp[i, 1] - dp[j, 1]
+    a = drx * drx + dry * dry
+    t = 0.0
+    if a > 0:
+        t = -(r0x * drx + r0y * dry) / a
+    t = min(max(t, 0.0), 1.0)
+    cx, cy = r0x + t * drx, r0y + t * dry
+    return np.sqrt(cx * cx + cy * cy) < touch
+
+
+@kernel
+def _pair_near_held(p, dp, i, j, within):
+    """``may_touch``'s ``near_held[i, j]``: robot i's straight move comes within ``within`` of j's start."""
+    r0x, r0y = p[j, 0] - p[i, 0], p[j, 1] - p[i, 1]
+    a = dp[i, 0] * dp[i, 0] + dp[i, 1] * dp[i, 1]
+    t = (r0x * dp[i, 0] + r0y * dp[i, 1]) / (a if a > 0 else 1.0)
+    t = min(max(t, 0.0), 1.0)
+    cx, cy = r0x - t * dp[i, 0], r0y - t * dp[i, 1]
+    return np.sqrt(cx * cx + cy * cy) < within
+
+
+@kernel
+def _crowd_needs(p, dp, radius, reach, bend, needs):
+    """:func:`crowd_needs`' loops, in place in ``needs``: robots binned in cells wider than any pair that
+    may matter; first the robots that may touch another moving as commanded, then every robot whose
+    move comes near where a robot that goes to pymunk may be, until none is added."""
+    n = p.shape[0]
+    longest, widest, strayed = 0.0, 0.0, 0.0
+    for i in range(n):
+        longest = max(longest, np.hypot(dp[i, 0], dp[i, 1]))
+        widest = max(widest, radius[i])
+        strayed = max(strayed, bend[i])
+    size = 2 * widest + CONTACT_MARGIN + 2 * strayed + reach + 2 * longest + 1e-9
+    x0, y0 = p[:, 0].min(), p[:, 1].min()
+    cols = int((p[:, 0].max() - x0) / size) + 1
+    rows = int((p[:, 1].max() - y0) / size) + 1
+    cell = np.empty(n, np.int64)
+    for i in range(n):
+        cell[i] = int((p[i, 1] - y0) / size) * cols + int((p[i, 0] - x0) / size)
+    order = np.argsort(cell, kind="mergesort")
+    first = np.full(rows * cols + 1, n, np.int64)
+    for k in range(n - 1, -1, -1):
+        first[cell[order[k]]] = k
+    for c in range(rows * cols - 1, -1, -1):
+        first[c] = min(first[c], first[c + 1])
+    queue = np.empty(n, np.int64)
+    top = 0
+    for i in range(n):
+        touch_i = 2 * radius[i] + CONTACT_MARGIN
+        if not needs[i]:
+            r, c = cell[i] // cols, cell[i] % cols
+            for rr in range(max(r - 1, 0), min(r + 2, rows)):
+                for cc in range(max(c - 1, 0), min(c + 2, cols)):
+                    for k in range(first[rr * cols + cc], first[rr * cols + cc + 1]):
+                        j = order[k]
+                        if j != i and _pair_both_free(p, dp, i, j, touch_i + bend[i] + bend[j]):
+                            needs[i] = True
+        if needs[i]:
+            queue[top] = i
+            top += 1
+    while top > 0:   # every robot whose move comes near a robot that goes to pymunk goes too
+        top -= 1
+        j = queue[top]
+        r, c = cell[j] // cols, cell[j] % cols
+        for rr in range(max(r - 1, 0), min(r + 2, rows)):
+            for cc in range(max(c - 1, 0), min(c + 2, cols)):
+                for k in range(first[rr * cols + cc], first[rr * cols + cc + 1]):
+                    i = order[k]
+                    if not needs[i] and i != j and _pair_near_held(
+                            p, dp, i, j, 2 * radius[i] + CONTACT_MARGIN + bend[i] + bend[j] + reach):
+                        needs[i] = True
+                        queue[top] = i
+                        top += 1
 
 
 def close_under_touch(needs: np.ndarray, both_free: np.ndarray, near_held: np.ndarray) -> np.ndarray:

@@ -150,6 +150,10 @@ class Physics:
 
         self._arbiters = pymunk.batch.Buffer()
         self._touching = Touching(self.space, self._arbiters)
+        self.count_at_most = _COUNT_AT_MOST
+        """With at most this many robots in pymunk a step counts the contacts that begin and end (and
+        reads the arbiters only after substeps in which shapes touch); with more it reads them after
+        every substep (:class:`~apf_physics.sim.contacts.Touching`). Either way, the same contacts."""
         self._touch_free = ContactLog.nothing(self.num_robots)   # the log of a step without contacts
         self._depths = None   # the last substep's touching pairs, normals and distances (touching_depths)
 
@@ -342,7 +346,7 @@ class Physics:
         self.bodies.write(proxies, (v[robots, 0] if per_substep else v[robots]) / self.control_dt)
         touched = []
         touching = self._touching
-        touching.count(len(robots) <= _COUNT_AT_MOST)   # robots in pymunk mostly touch something
+        touching.count(len(robots) <= self.count_at_most)   # robots in pymunk mostly touch something
         self._depths = None
         for k in range(self.substeps):
             if per_substep and k:   # steer: the command's change, on top of what contacts did to the velocity

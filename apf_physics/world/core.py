@@ -133,6 +133,41 @@ class FormationTask:
 
 
 @dataclass(frozen=True, eq=False)
+class Fleet:
+    """Robots that share one map, each with its own start and target (a world file's ``robots:``, or
+    the first lines of a MovingAI scenario file).
+
+    Attributes:
+        starts: (N, 2) each robot's start.
+        targets: (N, 2) each robot's target.
+        labels: How messages name each robot (``robots[3]``, ``FILE.scen: line 7``).
+        optimal: (N,) each robot's shortest path length alone on the map, when known (a scenario's
+            octile optimum), else None.
+    """
+
+    starts: np.ndarray
+    targets: np.ndarray
+    labels: tuple[str, ...] = ()
+    optimal: np.ndarray | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "starts", np.asarray(self.starts, float).reshape(-1, 2))
+        object.__setattr__(self, "targets", np.asarray(self.targets, float).reshape(-1, 2))
+        if len(self.starts) != len(self.targets):
+            raise ValueError(f"{len(self.starts)} starts for {len(self.targets)} targets")
+        if not self.labels:
+            object.__setattr__(self, "labels", tuple(f"robots[{i}]" for i in range(len(self.starts))))
+
+    def __len__(self) -> int:
+        return len(self.starts)
+
+    def first(self, count: int) -> Fleet:
+        """The first ``count`` robots."""
+        optimal = None if self.optimal is None else self.optimal[:count]
+        return Fleet(self.starts[:count], self.targets[:count], self.labels[:count], optimal)
+
+
+@dataclass(frozen=True, eq=False)
 class World(FreeSpace):
     """A validated world.
 
@@ -154,6 +189,8 @@ class World(FreeSpace):
             (:meth:`among`). Empty for a world as read from its file.
         unicycle: The robots are unicycles with these limits (``robot: {kinematics: unicycle,
             ...}``), in steps; None: holonomic, the thesis's robot.
+        robots: A fleet: robots each with its own start and target, run all at once (the world
+            file's ``robots:``); None for a world without one.
     """
 
     name: str
@@ -170,6 +207,7 @@ class World(FreeSpace):
     others: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
     frame: Frame = Frame()
     unicycle: UnicycleLimits | None = None
+    robots: Fleet | None = None
     # Caches of what is built from the world (rasters, indexes). Not constructor arguments: a
     # world made by dataclasses.replace (other obstacles, targets, radius, ...) starts with its
     # own; only the views below share them, on purpose.
@@ -523,7 +561,7 @@ class Moment:
     def _field_set(self) -> ShapeSet | None:
         """:attr:`movers` indexed for the field (reach ``p0``); None when there are none."""
         if self._field_shapes is None and self.movers:
-            self._field_shapes = ShapeSet(self.movers, self.world.field.p0)
+            self._field_shapes = ShapeSet(self.movers, max(self.world.field.p0, self.world.robot_radius))
         return self._field_shapes
 
     # -- the field ---------------------------------------------------------------------
@@ -531,17 +569,19 @@ class Moment:
         """Total potential U at ``(N, 2)`` points (Model §1)."""
         points = np.asarray(points, float).reshape(-1, 2)
         world = self.world
-        u = apf.potential(points, world.targets, world.shapes, world.field)
+        r = world.robot_radius     # the cap where the robot touches (Model §1 as the README states it)
+        u = apf.potential(points, world.targets, world.shapes, world.field, r)
         movers = self._field_set()
-        return u + apf.repulsive(points, movers, world.field) if movers is not None else u
+        return u + apf.repulsive(points, movers, world.field, r) if movers is not None else u
 
     def gradient(self, points: np.ndarray) -> np.ndarray:
         """``∇U`` at ``(N, 2)`` points."""
         points = np.asarray(points, float).reshape(-1, 2)
         world = self.world
-        g = apf.gradient(points, world.targets, world.shapes, world.field)
+        r = world.robot_radius
+        g = apf.gradient(points, world.targets, world.shapes, world.field, r)
         movers = self._field_set()
-        return g + apf.repulsive_gradient(points, movers, world.field) if movers is not None else g
+        return g + apf.repulsive_gradient(points, movers, world.field, r) if movers is not None else g
 
     # -- geometry ----------------------------------------------------------------------
     def obstacle_distance(self, points: np.ndarray, static: bool = False, near: bool = False) -> np.ndarray:

@@ -6,9 +6,12 @@ One small function per term, each over ``(N, 2)`` arrays of points:
 - :func:`repulsive` ``U_rep = krep/2 · (1/d_O − 1/p0)²`` for ``d_O ≤ p0``, one capped term per obstacle,
 - :func:`black_hole` ``U_bh = −kstr/2 · (ps − d_T)²`` for ``d_T ≤ ps``, one per target,
 
-and their gradients. ``d_O`` is the distance from the point to the obstacle's boundary (a
-circle: to its rim; radius 0: to its centre). Inside an obstacle, or on its boundary, the
-repulsive term equals the cap ``u_max`` and contributes no gradient.
+and their gradients. ``d_O`` is the distance from the point (the robot's centre) to the
+obstacle's boundary (a circle: to its rim; radius 0: to its centre). The robot has a size:
+where a robot of radius ``surface`` (which the world passes; 0: the thesis's point robot)
+centred at the point would touch or overlap the obstacle (``d_O ≤ surface``), the repulsive
+term equals the cap ``u_max`` and contributes no gradient, as inside the obstacle
+(:func:`contact_distance`).
 
 The map's edge is not part of U: it is a hard limit that only the physics (walls) and the
 observation (points outside read as impassable) see. ``potential()`` outside the map is the
@@ -135,31 +138,44 @@ def repulsive_term_slope(d: np.ndarray, krep: float, p0: float, u_max: float) ->
     return np.where(live, -krep * (1.0 / safe - 1.0 / p0) / (safe * safe), 0.0)
 
 
-def _shape_set(obstacles: Sequence[Obstacle] | ShapeSet, params: FieldParams) -> ShapeSet:
-    """``obstacles`` ready for queries out to ``p0`` (a world passes its own, built once)."""
+def contact_distance(d: np.ndarray, surface: float) -> np.ndarray:
+    """``d`` where the robot (a disc of radius ``surface`` centred at the point) is clear of the
+    obstacle, 0 where it touches or overlaps it: there the repulsive term is the cap."""
+    return np.where(d <= surface, 0.0, d)
+
+
+def _shape_set(obstacles: Sequence[Obstacle] | ShapeSet, params: FieldParams, surface: float = 0.0) -> ShapeSet:
+    """``obstacles`` ready for queries out to ``max(p0, surface)`` (a world passes its own, built once)."""
+    reach = max(params.p0, surface)
     if isinstance(obstacles, ShapeSet):
-        if obstacles.reach < params.p0:
-            raise ValueError(f"a shape set of reach {obstacles.reach:g} cannot give a field of range p0 = {params.p0:g}")
+        if obstacles.reach < reach:
+            raise ValueError(f"a shape set of reach {obstacles.reach:g} cannot give a field of range p0 = {params.p0:g} "
+                             f"for a robot of radius {surface:g}")
         return obstacles
-    return ShapeSet(obstacles, params.p0)
+    return ShapeSet(obstacles, reach)
 
 
-def repulsive(points: np.ndarray, obstacles: Sequence[Obstacle] | ShapeSet, params: FieldParams) -> np.ndarray:
-    """``Σ_O U_rep,O`` (Model eq. 4–7), each term capped at ``u_max``.
+def repulsive(points: np.ndarray, obstacles: Sequence[Obstacle] | ShapeSet, params: FieldParams,
+              surface: float = 0.0) -> np.ndarray:
+    """``Σ_O U_rep,O`` (Model eq. 4–7), each term capped at ``u_max``, and at the cap where a robot
+    of radius ``surface`` at the point touches the obstacle.
 
-    Only the (point, obstacle) pairs within ``p0`` are measured (:class:`~apf_physics.world.spatial.ShapeSet`):
+    Only the (point, obstacle) pairs within ``max(p0, surface)`` are measured (:class:`~apf_physics.world.spatial.ShapeSet`):
     beyond, the term is 0, so the cost does not grow with the number of obstacles.
     """
     points = np.asarray(points, dtype=float).reshape(-1, 2)
-    who, _, d, _ = _shape_set(obstacles, params).pairs(points, with_nearest=False)
-    return np.bincount(who, weights=repulsive_term(d, params.krep, params.p0, params.u_max), minlength=len(points))
+    who, _, d, _ = _shape_set(obstacles, params, surface).pairs(points, with_nearest=False)
+    return np.bincount(who, weights=repulsive_term(contact_distance(d, surface), params.krep, params.p0, params.u_max),
+                       minlength=len(points))
 
 
-def repulsive_gradient(points: np.ndarray, obstacles: Sequence[Obstacle] | ShapeSet, params: FieldParams) -> np.ndarray:
-    """``Σ_O dU_rep/dd · ∇d``, with ``∇d = (P − Q)/d`` for the nearest boundary point Q."""
+def repulsive_gradient(points: np.ndarray, obstacles: Sequence[Obstacle] | ShapeSet, params: FieldParams,
+                       surface: float = 0.0) -> np.ndarray:
+    """``Σ_O dU_rep/dd · ∇d``, with ``∇d = (P − Q)/d`` for the nearest boundary point Q (0 where a
+    robot of radius ``surface`` touches the obstacle: the term is at its cap)."""
     points = np.asarray(points, dtype=float).reshape(-1, 2)
-    who, _, d, nearest = _shape_set(obstacles, params).pairs(points)
-    slope = repulsive_term_slope(d, params.krep, params.p0, params.u_max)
+    who, _, d, nearest = _shape_set(obstacles, params, surface).pairs(points)
+    slope = repulsive_term_slope(contact_distance(d, surface), params.krep, params.p0, params.u_max)
     safe = np.where(d > 0, d, 1.0)
     pull = (slope / safe)[:, None] * (points[who] - nearest)
     return np.column_stack([np.bincount(who, weights=pull[:, 0], minlength=len(points)),
@@ -181,22 +197,22 @@ def discs_repulsive_gradient(points: np.ndarray, centres: np.ndarray, radius: fl
 
 
 def potential(points: np.ndarray, targets: np.ndarray, obstacles: Sequence[Obstacle] | ShapeSet,
-              params: FieldParams) -> np.ndarray:
-    """Total ``U = U_att + U_rep + U_bh`` (Model eq. 11) at each point."""
+              params: FieldParams, surface: float = 0.0) -> np.ndarray:
+    """Total ``U = U_att + U_rep + U_bh`` (Model eq. 11) at each point, for a robot of radius ``surface``."""
     points = np.asarray(points, dtype=float).reshape(-1, 2)
     d = _target_distances(points, targets)
     well = np.clip(params.ps - d, 0.0, None)
     # U_att + U_bh from the same distances (see attractive() and black_hole())
     u = 0.5 * params.katt * np.sum(d * d, axis=1) - 0.5 * params.kstr * np.sum(well * well, axis=1)
-    return u + repulsive(points, obstacles, params)
+    return u + repulsive(points, obstacles, params, surface)
 
 
 def gradient(points: np.ndarray, targets: np.ndarray, obstacles: Sequence[Obstacle] | ShapeSet,
-             params: FieldParams) -> np.ndarray:
-    """``∇U`` at each point; the force is ``F = −∇U`` (Model eq. 12)."""
+             params: FieldParams, surface: float = 0.0) -> np.ndarray:
+    """``∇U`` at each point; the force is ``F = −∇U`` (Model eq. 12), for a robot of radius ``surface``."""
     points = np.asarray(points, dtype=float).reshape(-1, 2)
     return (attractive_gradient(points, targets, params.katt)
-            + repulsive_gradient(points, obstacles, params)
+            + repulsive_gradient(points, obstacles, params, surface)
             + black_hole_gradient(points, targets, params.kstr, params.ps))
 
 

@@ -48,6 +48,11 @@ FINE_ACTIONS = np.vstack([ACTIONS[:8], 0.5 * ACTIONS[:8], ACTIONS[8:]])
 narrower than a unit lattice allows."""
 MOVE_SETS = {"unit": ACTIONS, "fine": FINE_ACTIONS}
 """Move sets of planners, by name."""
+NODE_MOVES = "nodes"
+"""The moves of a map network that plans on a node graph: to every free node within one step
+(:func:`~apf_physics.sim.nodegraph.node_moves`), different for each robot's position."""
+MOVE_KINDS = (*MOVE_SETS, NODE_MOVES)
+"""Every name a map network's moves may have."""
 
 
 # -- unicycles ---------------------------------------------------------------------------------

@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 
 from apf_physics.common import geometry
+from apf_physics.common.compiled import kernel
 from apf_physics.world.field import Grid
 from apf_physics.world.core import World
 from apf_physics.world.kinematics import ACTIONS
@@ -97,6 +98,145 @@ def shortest_paths(free: np.ndarray, sources: np.ndarray, steps, dtype=np.float6
         nxt[nodes[lower | tie]] = via[lower | tie]
         frontier = nodes[lower]
     return cost, nxt
+
+
+@kernel
+def node_distances(ok, offsets, lengths, source):
+    """Dijkstra over a graph of nodes with up to M moves each: every node's cost to reach ``source``.
+
+    Args:
+        ok: (n, M) bool: move ``m`` from node ``u`` to ``u + offsets[m]`` is allowed; moves are taken
+            to be allowed both ways (a fleet's lattice: :class:`~apf_physics.control.fleet.Lattice`).
+        offsets: (M,) each move's change of node index.
+        lengths: (M,) each move's cost.
+        source: The node of cost 0.
+
+    Returns:
+        (n,) float64 costs (inf where ``source`` cannot be reached).
+    """
+    n = ok.shape[0]
+    cost = np.full(n, np.inf)
+    done = np.zeros(n, np.bool_)
+    heap_cost = np.empty(8 * n + 1)
+    heap_node = np.empty(8 * n + 1, np.int64)
+    size = 0
+    cost[source] = 0.0
+    heap_cost[0], heap_node[0] = 0.0, source
+    size = 1
+    while size > 0:
+        c, u = heap_cost[0], heap_node[0]
+        size -= 1
+        # sift the last entry down from the root
+        last_c, last_u = heap_cost[size], heap_node[size]
+        i = 0
+        while True:
+            child = 2 * i + 1
+            if child >= size:
+                break
+            if child + 1 < size and heap_cost[child + 1] < heap_cost[child]:
+                child += 1
+            if heap_cost[child] >= last_c:
+                break
+            heap_cost[i], heap_node[i] = heap_cost[child], heap_node[child]
+            i = child
+        heap_cost[i], heap_node[i] = last_c, last_u
+        if done[u]:
+            continue
+        done[u] = True
+        for m in range(ok.shape[1]):
+            if not ok[u, m] or lengths[m] <= 0:
+                continue
+            v = u + offsets[m]
+            value = c + lengths[m]
+            if value < cost[v]:
+                cost[v] = value
+                # sift up
+                i = size
+                size += 1
+                while i > 0:
+                    parent = (i - 1) // 2
+                    if heap_cost[parent] <= value:
+                        break
+                    heap_cost[i], heap_node[i] = heap_cost[parent], heap_node[parent]
+                    i = parent
+                heap_cost[i], heap_node[i] = value, v
+    return cost
+
+
+def shortest_costs(free: np.ndarray, sources: np.ndarray, steps, dtype=np.float32) -> np.ndarray:
+    """The costs of :func:`shortest_paths` (without the next nodes), by a compiled Dijkstra search.
+
+    The same numbers to the bit: both are the least fixed point of ``cost[x] = min over edges of
+    cost[x + (dr, dc)] + edge[x]``, summed in ``dtype`` (rounding is monotonic, and edges are not
+    negative, so Dijkstra's settled costs are final). Every node is settled once: a large map's
+    long paths cost what the map holds, not one vectorised round per edge of the longest path.
+    """
+    rows, cols = free.shape
+    dr = np.array([d[0] for d in steps], np.int64)
+    dc = np.array([d[1] for d in steps], np.int64)
+    edges = np.stack([np.broadcast_to(np.asarray(d[2], dtype), (rows, cols)).ravel() for d in steps]).astype(dtype)
+    cost = np.full(rows * cols, np.inf, dtype)
+    _settle_costs(np.ascontiguousarray(free, np.bool_).ravel(), rows, cols,
+                  np.unique(np.asarray(sources, np.int64).ravel()), dr, dc, edges, cost)
+    return cost
+
+
+@kernel
+def _settle_costs(free, rows, cols, sources, dr, dc, edges, cost):
+    """Dijkstra from ``sources`` over the free nodes: ``cost[x] = cost[y] + edges[k, x]`` for ``y = x +
+    (dr[k], dc[k])``, in ``cost``'s type, written into ``cost``."""
+    n = rows * cols
+    done = np.zeros(n, np.bool_)
+    heap_cost = np.empty(dr.shape[0] * n + len(sources) + 1, cost.dtype)
+    heap_node = np.empty(dr.shape[0] * n + len(sources) + 1, np.int64)
+    size = 0
+    for s in sources:
+        cost[s] = 0
+        i = size
+        size += 1
+        while i > 0 and heap_cost[(i - 1) // 2] > 0:
+            heap_cost[i], heap_node[i] = heap_cost[(i - 1) // 2], heap_node[(i - 1) // 2]
+            i = (i - 1) // 2
+        heap_cost[i], heap_node[i] = cost[s], s
+    while size > 0:
+        c, y = heap_cost[0], heap_node[0]
+        size -= 1
+        last_c, last_u = heap_cost[size], heap_node[size]
+        i = 0
+        while True:
+            child = 2 * i + 1
+            if child >= size:
+                break
+            if child + 1 < size and heap_cost[child + 1] < heap_cost[child]:
+                child += 1
+            if heap_cost[child] >= last_c:
+                break
+            heap_cost[i], heap_node[i] = heap_cost[child], heap_node[child]
+            i = child
+        heap_cost[i], heap_node[i] = last_c, last_u
+        if done[y] or c > cost[y]:
+            continue
+        done[y] = True
+        r, col = y // cols, y % cols
+        for k in range(dr.shape[0]):
+            xr, xc = r - dr[k], col - dc[k]
+            if xr < 0 or xr >= rows or xc < 0 or xc >= cols:
+                continue
+            x = xr * cols + xc
+            if not free[x] or done[x]:
+                continue
+            value = cost[y] + edges[k, x]
+            if value < cost[x]:
+                cost[x] = value
+                i = size
+                size += 1
+                while i > 0:
+                    parent = (i - 1) // 2
+                    if heap_cost[parent] <= value:
+                        break
+                    heap_cost[i], heap_node[i] = heap_cost[parent], heap_node[parent]
+                    i = parent
+                heap_cost[i], heap_node[i] = value, x
 
 
 class SearchGrid:

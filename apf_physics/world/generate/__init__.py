@@ -11,6 +11,10 @@ local minima arise (thesis Fig. 1). :func:`generate_world` draws a world of any 
   static families plus 3–8 moving obstacles whose routes cross the axis.
 - :mod:`~apf_physics.world.generate.crossing` (:data:`FORMATION_FAMILIES`): ``crossing``, 2–4
   formations whose routes cross near the middle of the map (the world file's ``formations:``).
+- :mod:`~apf_physics.world.generate.scaled` (:data:`SCALED_FAMILIES`): ``pillars``, ``doors``,
+  ``rescaled``: a robot of 0.1 to 3 steps in radius, worlds in units of their own (``robot:
+  {radius, step}``); pillars on a lattice (BARN-like), doors barely wider than the robot, and
+  the static and structure families at another scale.
 - :mod:`~apf_physics.world.generate.structures` (:data:`STRUCTURE_FAMILIES`): ``rooms``,
   ``maze``, ``nested_cups``, ``narrow_gap``, ``dense_clutter``, ``mixed``: larger structures
   with every start out of the target's sight, built from the blocks of
@@ -40,6 +44,7 @@ from apf_physics.world.generate.blocks import CUP_SPACING, DOOR_WIDTH, TARGET_CL
 from apf_physics.world.generate.common import GOAL_TOLERANCE, MAX_ATTEMPTS, ROBOT_RADIUS, START_CLEARANCE
 from apf_physics.world.generate.crossing import FORMATION_FAMILIES, crossing_world
 from apf_physics.world.generate.moving import MOVING_FAMILIES, moving_world
+from apf_physics.world.generate.scaled import SCALED_FAMILIES, scaled_world
 from apf_physics.world.generate.static import FAMILIES, STATIC_FAMILIES, static_world
 from apf_physics.world.generate.structures import (GAP_WIDTH, PATH_SHARE, START_SPACING, STRUCTURE_ATTEMPTS,
                                              STRUCTURE_FAMILIES, STRUCTURE_ROBOT_RADIUS, Drawn, step_limit,
@@ -48,12 +53,12 @@ from apf_physics.world.core import World
 
 __all__ = [
     "ALL_FAMILIES", "CUP_SPACING", "DOOR_WIDTH", "Drawn", "FAMILIES", "FORMATION_FAMILIES", "GAP_WIDTH",
-    "GOAL_TOLERANCE", "MAX_ATTEMPTS", "MOVING_FAMILIES", "PATH_SHARE", "ROBOT_RADIUS", "START_CLEARANCE",
+    "GOAL_TOLERANCE", "MAX_ATTEMPTS", "MOVING_FAMILIES", "PATH_SHARE", "ROBOT_RADIUS", "SCALED_FAMILIES", "START_CLEARANCE",
     "START_SPACING", "STATIC_FAMILIES", "STRUCTURE_ATTEMPTS", "STRUCTURE_FAMILIES", "STRUCTURE_ROBOT_RADIUS",
     "TARGET_CLEARANCE", "generate_world", "step_limit",
 ]
 
-ALL_FAMILIES = FAMILIES + MOVING_FAMILIES + FORMATION_FAMILIES + STRUCTURE_FAMILIES
+ALL_FAMILIES = FAMILIES + MOVING_FAMILIES + FORMATION_FAMILIES + STRUCTURE_FAMILIES + SCALED_FAMILIES
 """Every family :func:`generate_world` draws."""
 
 
@@ -86,4 +91,6 @@ def generate_world(family: str, rng: np.random.Generator, size: float = 50, fiel
         return structure_world(family, rng, float(size), field, n_starts, name)
     if family in MOVING_FAMILIES:
         return moving_world(rng, float(size), field, n_starts, name)
+    if family in SCALED_FAMILIES:
+        return scaled_world(family, rng, float(size), field, n_starts, name)
     return static_world(family, rng, float(size), field, n_starts, name)

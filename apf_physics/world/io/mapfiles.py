@@ -29,7 +29,7 @@ import struct
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -411,6 +411,40 @@ def _type_name(value: Any) -> str:
     return f"{'an' if name[0] in 'aeiou' else 'a'} {name}"
 
 
+def _unknown_ros_keys(spec: dict, quote: bool, bad: Callable[[str, str], None]) -> None:
+    """A ROS map's unknown keys: each named with a "did you mean" (``quote``: a world file's own), or,
+    for a map YAML a world names, counted, with the known keys they are close to."""
+    unknown = [key for key in spec if key not in ROS_KEYS]
+    if quote:
+        for key in unknown:
+            name = key if isinstance(key, str) and key.isprintable() and len(key) <= 40 else shortened(key, 40)
+            bad(name, f"unknown key{did_you_mean(key, ROS_KEYS)}; a ROS map has {', '.join(ROS_KEYS)}")
+    elif unknown:
+        close = sorted({c for c in (closest_match(k, ROS_KEYS) for k in unknown) if c is not None})
+        hint = f" (did you mean {', '.join(map(repr, close))}?)" if close else ""
+        bad("keys", f"{len(unknown)} unknown key{'s' if len(unknown) > 1 else ''}{hint}; a ROS map has "
+                    f"{', '.join(ROS_KEYS)}")
+
+
+def _ros_origin(value: Any, kind: Callable[[Any], str],
+                bad: Callable[[str, str], None]) -> tuple[float, float] | None:
+    """A ROS map's ``origin: [x, y, yaw]`` (yaw 0, or left out), or None with its problems told to ``bad``."""
+    if not isinstance(value, list) or len(value) not in (2, 3):
+        bad("origin", f"expected [x, y, yaw], got {kind(value)}")
+        return None
+    found = [_ros_number(v) for v in value]
+    for i, (raw, number) in enumerate(zip(value, found)):
+        if number is None:
+            bad(f"origin[{i}]", f"expected a finite number, got {kind(raw)}")
+    for i, number in enumerate(found[:2]):
+        if number is not None and abs(number) > MAX_ORIGIN:
+            bad(f"origin[{i}]", f"at most {MAX_ORIGIN:g} from 0 (farther, the map's cells lose their precision)")
+            found[i] = None
+    if len(value) == 3 and found[2] is not None and found[2] != 0:
+        bad("origin[2]", f"a rotated map (yaw {found[2]:g}) is not supported; rotate the image instead")
+    return (found[0], found[1]) if all(n is not None for n in found[:2]) else None
+
+
 def ros_map_from_dict(spec: dict, source: str, folder: str | Path, within: str | Path | None = None,
                       quote: bool = True) -> OccupancyMap:
     """A ROS map from the keys of its YAML (``image`` relative to ``folder``); see :func:`read_ros_map`.
@@ -428,16 +462,7 @@ def ros_map_from_dict(spec: dict, source: str, folder: str | Path, within: str |
     def bad(key: str, problem: str) -> None:
         problems.append(f"{source}: {key}: {problem}")
 
-    unknown = [key for key in spec if key not in ROS_KEYS]
-    for key in unknown if quote else unknown[:1]:
-        if quote:
-            name = key if isinstance(key, str) and key.isprintable() and len(key) <= 40 else shortened(key, 40)
-            bad(name, f"unknown key{did_you_mean(key, ROS_KEYS)}; a ROS map has {', '.join(ROS_KEYS)}")
-        else:
-            close = sorted({c for c in (closest_match(k, ROS_KEYS) for k in unknown) if c is not None})
-            hint = f" (did you mean {', '.join(map(repr, close))}?)" if close else ""
-            bad("keys", f"{len(unknown)} unknown key{'s' if len(unknown) > 1 else ''}{hint}; a ROS map has "
-                        f"{', '.join(ROS_KEYS)}")
+    _unknown_ros_keys(spec, quote, bad)
     for key in ("image", "resolution", "origin"):
         if key not in spec:
             bad(key, "missing")
@@ -460,24 +485,7 @@ def ros_map_from_dict(spec: dict, source: str, folder: str | Path, within: str |
             bad("resolution", f"expected a positive finite number [units per cell], got {kind(spec['resolution'])}")
             resolution = None
 
-    origin = None
-    if "origin" in spec:
-        value = spec["origin"]
-        if not isinstance(value, list) or len(value) not in (2, 3):
-            bad("origin", f"expected [x, y, yaw], got {kind(value)}")
-        else:
-            numbers_ = [_ros_number(v) for v in value]
-            for i, (raw, number) in enumerate(zip(value, numbers_)):
-                if number is None:
-                    bad(f"origin[{i}]", f"expected a finite number, got {kind(raw)}")
-            for i, number in enumerate(numbers_[:2]):
-                if number is not None and abs(number) > MAX_ORIGIN:
-                    bad(f"origin[{i}]", f"at most {MAX_ORIGIN:g} from 0 (farther, the map's cells lose their precision)")
-                    numbers_[i] = None
-            if len(value) == 3 and numbers_[2] is not None and numbers_[2] != 0:
-                bad("origin[2]", f"a rotated map (yaw {numbers_[2]:g}) is not supported; rotate the image instead")
-            if all(n is not None for n in numbers_[:2]):
-                origin = (numbers_[0], numbers_[1])
+    origin = _ros_origin(spec["origin"], kind, bad) if "origin" in spec else None
 
     negate = spec.get("negate", 0)
     if isinstance(negate, bool):
@@ -947,6 +955,16 @@ def _file_name(name: str) -> str:
 def read_movingai_scen(path: str | Path) -> list[Scenario]:
     """Every scenario of a MovingAI scenario file (``.scen``): :func:`read_scenarios`' scenarios."""
     return read_scenarios(path).scenarios
+
+
+def scen_text(scenarios: list[Scenario]) -> str:
+    """A MovingAI scenario file's text (``version 1``, then one tab-separated line per scenario):
+    what :func:`read_movingai_scen` reads back."""
+    lines = ["version 1"]
+    for s in scenarios:
+        lines.append("\t".join([str(s.bucket), s.map_name, str(s.width), str(s.height), str(s.start[0]),
+                                str(s.start[1]), str(s.goal[0]), str(s.goal[1]), repr(float(s.optimal))]))
+    return "\n".join(lines) + "\n"
 
 
 def scenario_points(scen: Scenario, grid: OccupancyMap) -> tuple[np.ndarray, np.ndarray]:

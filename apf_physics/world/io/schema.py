@@ -22,14 +22,14 @@ from typing import Any, Callable, Mapping, Sequence, TypeVar
 import numpy as np
 
 from apf_physics.common import geometry
-from apf_physics.world.io import mapfiles
+from apf_physics.world.io import mapfiles, sdfworld
 from apf_physics.errors import WorldError, closest_match
 from apf_physics.world.field import FIELD_PRESETS, FieldParams
 from apf_physics.world.kinematics import KINEMATICS, LIMIT_BOUNDS, LIMIT_KEYS, UnicycleLimits
 from apf_physics.world.obstacles import CircleObstacle, Motion, Obstacle, PolygonObstacle
 from apf_physics.common.safefile import NamedFileError, named_file
 from apf_physics.common.safeyaml import described, key_text, shortened
-from apf_physics.world.core import FormationSpec, FormationTask, Frame
+from apf_physics.world.core import Fleet, FormationSpec, FormationTask, Frame
 
 T = TypeVar("T")
 
@@ -66,8 +66,9 @@ MAX_COUNTED = 1000
 """Problems counted in one file before the check stops (a file of a million bad entries is
 not read to its end)."""
 
-_TOP_KEYS = {"name", "units", "size", "grid", "robot", "robot_radius", "goal_tolerance", "field", "obstacles", "targets",
-             "starts", "formation", "formations"}
+_TOP_KEYS = {"name", "units", "size", "origin", "grid", "sdf", "robot", "robot_radius", "goal_tolerance", "field",
+             "obstacles", "targets", "starts", "formation", "formations", "robots"}
+_SDF_KEYS = {"file", "skip", "heights"}
 MAX_UNIT_CHARS = 16
 """Longest name of the file's unit (``units:``) [characters]."""
 _GRID_KEYS = {"image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh", "mode", "map", "movingai", "cell"}
@@ -366,6 +367,32 @@ def _parse_obstacles(check: Checker, value: Any, box: tuple[np.ndarray, np.ndarr
 
 MAX_FORMATIONS = 64
 """Most formations in one world."""
+MAX_ROBOTS = 10_000
+"""Most robots of a world's ``robots:`` (a fleet; each is one robot of one evaluation)."""
+
+
+def _parse_robots(check: Checker, value: Any) -> Fleet:
+    """A world file's ``robots:``: a list of ``{start: [x, y], target: [x, y]}``, in the file's units."""
+    if not isinstance(value, list) or not value:
+        check.bad("robots", f"expected a non-empty list of robots ({{start: [x, y], target: [x, y]}}), got {described(value)}")
+        raise Invalid
+    if len(value) > MAX_ROBOTS:
+        check.bad("robots", f"at most {MAX_ROBOTS:,} robots, got {len(value):,}")
+        raise Invalid
+    starts, targets = [], []
+    for i, entry in enumerate(value):
+        key = f"robots[{i}]"
+        body = check.attempt(check.mapping, entry, key, {"start", "target"}, required=("start", "target"))
+        if body is None or "start" not in body or "target" not in body:
+            continue
+        start = check.attempt(check.point, body["start"], f"{key}.start")
+        target = check.attempt(check.point, body["target"], f"{key}.target")
+        if start is not None and target is not None:
+            starts.append(start)
+            targets.append(target)
+    if len(starts) < len(value):
+        raise Invalid
+    return Fleet(np.array(starts, float), np.array(targets, float))
 
 
 def _parse_formations(check: Checker, value: Any) -> tuple[FormationTask, ...]:
@@ -519,6 +546,64 @@ def _parse_grid(check: Checker, value: Any, source: str, confine: bool = False) 
         raise Invalid from None
 
 
+def _parse_sdf(check: Checker, value: Any, source: str, box: tuple[np.ndarray, np.ndarray] | None,
+               room: int, confine: bool = False) -> tuple[Obstacle, ...]:
+    """The ``sdf:`` key: the static box, cylinder and sphere collisions of a Gazebo SDF world
+    (:mod:`apf_physics.sdfworld`) as obstacles, named ``model::link::collision``. Those wholly
+    outside the map are left out (the map is a window on the Gazebo world); one that crosses the
+    map's edge is a problem. ``room``: how many obstacles the world may still take; ``confine``: the
+    file must be inside the world file's folder (:func:`~apf_physics.common.safefile.named_file`)."""
+    body = check.mapping(value, "sdf", _SDF_KEYS, required=("file",))
+    if "file" not in body:
+        raise Invalid
+    name = body["file"]
+    if not isinstance(name, str) or not name:
+        raise check.bad("sdf.file", f"expected a file name, got {described(name)}")
+    skip = body.get("skip", [])
+    if not isinstance(skip, list) or not all(isinstance(p, str) and p for p in skip):
+        raise check.bad("sdf.skip", f"expected a list of model names (glob patterns allowed), got {described(skip)}")
+    heights = body.get("heights", list(sdfworld.DEFAULT_HEIGHTS))
+    if not isinstance(heights, (list, tuple)) or len(heights) != 2:
+        raise check.bad("sdf.heights", f"expected [low, high], got {described(heights)}")
+    low = check.number(heights[0], "sdf.heights[0]")
+    high = check.number(heights[1], "sdf.heights[1]")
+    if not low < high:
+        raise check.bad("sdf.heights", f"low {low:g} must be below high {high:g}")
+    if set(body) - _SDF_KEYS:
+        raise Invalid
+    folder = Path(source).parent if source != "<dict>" else Path.cwd()
+    try:
+        path = named_file(name, folder, folder if confine else None)
+    except NamedFileError as exc:
+        raise check.bad("sdf.file", str(exc)) from None
+    try:
+        footprints = sdfworld.read_sdf_obstacles(path, skip, (low, high))
+    except WorldError as exc:   # the SDF file's own problems, each naming that file
+        for line in str(exc).splitlines():
+            check.bad("sdf", line)
+        raise Invalid from None
+    obstacles: list[Obstacle] = []
+    for shape in footprints:
+        if shape.vertices is not None:
+            obstacle: Obstacle = PolygonObstacle(shape.vertices, name=shape.name)
+            lower, upper = shape.vertices.min(axis=0), shape.vertices.max(axis=0)
+        else:
+            center = np.array(shape.center, float)
+            obstacle = CircleObstacle(center, float(shape.radius), name=shape.name)
+            lower, upper = center - shape.radius, center + shape.radius
+        if box is not None and ((upper < box[0]).any() or (lower > box[1]).any()):
+            continue                                      # wholly outside the map: not in this world
+        outside = _outside(box, lower, upper)
+        if outside:
+            check.bad("sdf", f"{shape.name!r} {outside}: enlarge the map (size, origin) or add the model to sdf.skip")
+            continue
+        obstacles.append(obstacle)
+    if len(obstacles) > room:
+        raise check.bad("sdf", f"{len(obstacles):,} obstacles from the SDF world leave the world over "
+                               f"{MAX_OBSTACLES:,} obstacles")
+    return tuple(obstacles)
+
+
 @dataclass(frozen=True)
 class FileWorld:
     """A world file's values as checked, in the file's units and coordinates; each None where it
@@ -539,6 +624,8 @@ class FileWorld:
         formation: The ``formation:`` of the world's robots, if any.
         formations: The ``formations:`` (empty when there are none).
         unicycle: The robot's limits if it is a unicycle (file units), else None.
+        sdf: The obstacles read from the ``sdf:`` world (after :attr:`obstacles` in the world).
+        robots: The ``robots:`` (file units), else None.
     """
 
     name: str | None
@@ -554,6 +641,8 @@ class FileWorld:
     formation: FormationSpec | None
     formations: tuple[FormationTask, ...] | None
     unicycle: UnicycleLimits | None = None
+    sdf: tuple[Obstacle, ...] | None = ()
+    robots: Fleet | None = None
 
 
 def parse_world(check: Checker, data: Any, source: str, confine: bool = False) -> FileWorld | None:
@@ -572,17 +661,24 @@ def parse_world(check: Checker, data: Any, source: str, confine: bool = False) -
         check.bad("", f"a world file must be a mapping of keys, got {described(data)}")
         return None
     several = data.get("formations") is not None
+    fleet = data.get("robots") is not None
     has_grid = data.get("grid") is not None
-    required = [k for k in (("field",) if several else ("field", "targets"))] + ([] if has_grid else ["size"])
+    required = [k for k in (("field",) if several or fleet else ("field", "targets"))] + ([] if has_grid else ["size"])
     check.mapping(data, "", _TOP_KEYS, required=required)
     if several and data.get("formation") is not None:
         check.bad("formation", "'formation' and 'formations' together: give one formation, or a list of them")
+    for other in ("formation", "starts"):
+        if fleet and data.get(other):
+            check.bad("robots", f"'robots' and '{other}' together: a fleet's robots start where 'robots' puts them")
     if has_grid and "size" in data:
         check.bad("size", "a world with a grid takes its size from the grid: leave size out")
+    if has_grid and "origin" in data:
+        check.bad("origin", "a world with a grid takes its origin from the grid: leave origin out")
     grid = check.attempt(_parse_grid, check, data["grid"], source, confine) if has_grid else None
     size = grid.size if grid is not None else (check.attempt(_parse_size, check, data["size"]) if "size" in data else None)
-    offset = np.asarray(grid.origin if grid is not None else (0.0, 0.0), float)
-    box = (offset, offset + np.asarray(size, float)) if size is not None else None
+    origin = check.attempt(check.point, data["origin"], "origin") if "origin" in data and not has_grid else (0.0, 0.0)
+    offset = np.asarray(grid.origin if grid is not None else (origin or (0.0, 0.0)), float)
+    box = (offset, offset + np.asarray(size, float)) if size is not None and origin is not None else None
     default_name = Path(source).stem if source != "<dict>" else "world"
     name = check.attempt(_parse_name, check, data.get("name", default_name))
     robot_radius, step, unicycle = _parse_robot(check, data)
@@ -599,16 +695,21 @@ def parse_world(check: Checker, data: Any, source: str, confine: bool = False) -
                                    positive=True)
     params = check.attempt(_parse_field, check, data["field"], frame) if "field" in data else None
     obstacles = check.attempt(_parse_obstacles, check, data.get("obstacles"), box)
+    room = MAX_OBSTACLES - (len(data["obstacles"]) if isinstance(data.get("obstacles"), list) else 0)
+    sdf = check.attempt(_parse_sdf, check, data["sdf"], source, box, room, confine) if data.get("sdf") is not None else ()
     targets = (check.attempt(check.points, data["targets"], "targets", at_least=1, at_most=MAX_TARGETS, what="targets")
                if "targets" in data else None)
     starts = check.attempt(check.points, data.get("starts") or [], "starts", at_most=MAX_STARTS, what="starts")
     formation = (check.attempt(_parse_formation, check, data["formation"])
                  if data.get("formation") is not None and not several else None)
     formations = check.attempt(_parse_formations, check, data["formations"]) if several else ()
+    robots = check.attempt(_parse_robots, check, data["robots"]) if fleet else None
+    if robots is not None and "targets" not in data:
+        targets = robots.targets   # a fleet's targets are its robots'
     if several and formations:   # the formations' own starts and targets, unless also given at the top
         if "targets" not in data:
             targets = np.array([task.target for task in formations])
         if not data.get("starts"):
             starts = np.array([task.start for task in formations])
     return FileWorld(name, size, grid, frame, robot_radius, goal_tolerance, params, obstacles, targets, starts,
-                     formation, formations, unicycle)
+                     formation, formations, unicycle, sdf, robots)

@@ -21,6 +21,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from apf_physics.world.core import FormationSpec, Frame, World
+from apf_physics.world.field import FIELD_PRESETS
 from apf_physics.world.kinematics import LIMIT_KEYS
 from apf_physics.world.obstacles import CircleObstacle, GridObstacle, Motion, Obstacle, PolygonObstacle
 
@@ -102,14 +103,24 @@ def world_to_file(world: World) -> dict[str, Any]:
         data["grid"] = dict(grids[0].spec)
     else:
         data["size"] = [world.size[0] * u, world.size[1] * u]
+        if any(frame.offset):
+            data["origin"] = list(frame.offset)
     data.update({
         "robot": _robot_to_file(world),
         "goal_tolerance": world.goal_tolerance * u,
-        "field": frame.field_to_file(world.field),
+        # a preset by its name: its values in file units would not read back to the bit
+        "field": next((name for name in FIELD_PRESETS if world.field.equals_preset(name)),
+                      frame.field_to_file(world.field)),
         "obstacles": [obstacle_to_file(frame, o) for o in world.obstacles if not isinstance(o, GridObstacle)],
         "targets": frame.to_file(world.targets).tolist(),
         "starts": frame.to_file(world.starts).tolist(),
     })
+    if world.robots is not None:
+        robots = world.robots
+        if len(world.targets) == len(robots) and np.array_equal(world.targets, robots.targets):
+            del data["targets"]   # a file of robots alone: its targets are theirs
+        data["robots"] = [{"start": frame.to_file(s).tolist(), "target": frame.to_file(t).tolist()}
+                          for s, t in zip(robots.starts, robots.targets)]
     if world.formation is not None:
         data["formation"] = _formation_to_file(world.formation.to_dict(), u)
     if world.formations:

@@ -36,7 +36,7 @@ from apf_physics.common.safefile import MAX_FILE_BYTES, open_regular_file, read_
 from apf_physics.common.safefile import paths_confined, write_text
 from apf_physics.common.safeyaml import MAX_DEPTH, MAX_NODES, MAX_SCALAR_CHARS  # noqa: F401 (public here too)
 from apf_physics.common.safeyaml import read_yaml_file, shortened
-from apf_physics.world.core import Frame, FormationTask, World
+from apf_physics.world.core import Fleet, Frame, FormationTask, World
 from apf_physics.world.io.units import (formation_to_steps, obstacle_to_steps, points_to_steps, show_length,
                                         show_point, unit_suffix, world_to_file)
 from apf_physics.world.io.schema import (MAX_FOLLOWERS, MAX_FORMATIONS, MAX_NAME_CHARS,  # noqa: F401 (public here too)
@@ -206,6 +206,8 @@ def _check_placement(check: Checker, world: World, index: Mapping[str, Sequence[
 def _place(check: Checker, world: World, index: Mapping[str, Sequence[int]]) -> None:
     size, radius, frame = world.size, world.robot_radius, world.frame
     for key, pts, margin in (("targets", world.targets, 0.0), ("starts", world.starts, radius)):
+        if not len(pts) or (key == "targets" and world.robots is not None and pts is world.robots.targets):
+            continue   # (a fleet's targets are checked as its robots': _check_robots)
         if not len(pts):
             continue
         edge = world.edge_distance(pts)
@@ -245,7 +247,10 @@ def _nearest_obstacle(world: World, point: np.ndarray, index: Sequence[int] | No
     k = int(np.argmin(distances))
     if isinstance(placed[k], GridObstacle):
         return "the grid map's occupied cells"
-    return obstacle_place(index[k] if index is not None else k, getattr(world.obstacles[k], "name", None))
+    name = getattr(world.obstacles[k], "name", None)
+    if index is not None and k >= len(index):   # not one of the file's list: the SDF world's
+        return f"the SDF world's collision {name!r}"
+    return obstacle_place(index[k] if index is not None else k, name)
 
 
 def _check_formations(check: Checker, world: World) -> None:
@@ -302,7 +307,7 @@ def _build(check: Checker, data: Any, source: str, confine: bool = False) -> Wor
     goal_tolerance = None if parts.goal_tolerance is None else parts.goal_tolerance / frame.unit
     targets = None if parts.targets is None else to_world(parts.targets)
     starts = None if parts.starts is None else to_world(parts.starts).reshape(-1, 2)
-    obstacles = parts.obstacles
+    obstacles = None if parts.obstacles is None or parts.sdf is None else parts.obstacles + parts.sdf
     if obstacles is not None:
         obstacles = tuple(obstacle_to_steps(frame, o) for o in obstacles)
         if grid is not None:
@@ -311,20 +316,26 @@ def _build(check: Checker, data: Any, source: str, confine: bool = False) -> Wor
     formation = None if parts.formation is None else formation_to_steps(frame, parts.formation)
     formations = tuple(FormationTask(to_world(t.start), to_world(t.target), formation_to_steps(frame, t.spec))
                        for t in parts.formations or ())
+    robots = None if parts.robots is None else Fleet(to_world(parts.robots.starts), to_world(parts.robots.targets))
+    if robots is not None and parts.targets is parts.robots.targets:
+        targets = robots.targets
     radius_key = "robot_radius" if isinstance(data, Mapping) and "robot_radius" in data else "robot.radius"
-    _check_together(check, size, robot_radius, goal_tolerance, parts.params, obstacles, targets, len(formations),
-                    frame, radius_key)
+    # a fleet plans each robot to its own target, from tables within a budget of their own: one target's rasters
+    _check_together(check, size, robot_radius, goal_tolerance, parts.params, obstacles,
+                    targets if robots is None or targets is None else targets[:1], len(formations), frame, radius_key)
     if check.problems:
         _check_what_parsed(check, parts, size, robot_radius, goal_tolerance, obstacles, targets, starts, to_world,
                            (data.get("grid") if isinstance(data, Mapping) else None), source)
         return None
     unicycle = None if parts.unicycle is None else parts.unicycle.scaled(frame.unit)
     world = World(parts.name, size, robot_radius, goal_tolerance, parts.params, obstacles, targets, starts, formation,
-                  source, formations, frame=frame, unicycle=unicycle)
+                  source, formations, frame=frame, unicycle=unicycle, robots=robots)
     _check_substeps(check, world)
-    _check_placement(check, world)
+    # with an SDF world, a placement problem tells the file's obstacles from the SDF world's
+    _check_placement(check, world, {"obstacles": list(range(len(parts.obstacles)))} if parts.sdf else None)
     _check_routes(check, world)
     _check_formations(check, world)
+    _check_robots(check, world)
     return world
 
 
@@ -345,21 +356,56 @@ def _check_substeps(check: Checker, world: World) -> None:
                        "a larger radius or a lower max_speed/max_reverse")
 
 
+def _check_robots(check: Checker, world: World) -> None:
+    """A fleet: every start clear of the obstacles and the map's edge by the robot radius, every
+    target inside the map and outside the obstacles, no two starts (nor two targets) on one spot."""
+    fleet = world.robots
+    if fleet is None:
+        return
+    r, frame = world.robot_radius, world.frame
+    for what, points, margin in (("start", fleet.starts, r), ("target", fleet.targets, 0.0)):
+        clear = world.clearance(points)
+        for i in np.flatnonzero((clear < margin) | (clear <= 0)).tolist():
+            check.bad(f"robots[{i}].{what}", f"{show_point(frame, points[i], 9)} is " + (
+                "not clear of the obstacles and the map's edge by the robot radius" if what == "start"
+                else "inside an obstacle or outside the map"))
+        for i, j in _close_pairs(points, 2 * r if what == "start" else 1e-9):
+            check.bad(f"robots[{j}].{what}", f"{show_point(frame, points[j], 9)} is on robots[{i}]'s {what} "
+                                             f"(two robots need {show_length(frame, 2 * r)} between their centres)"
+                      if what == "start" else f"{show_point(frame, points[j], 9)} is robots[{i}]'s target too")
+
+
+def _close_pairs(points: np.ndarray, within: float) -> list[tuple[int, int]]:
+    """Pairs ``(i, j)``, ``i < j``, of points closer than ``within`` (a grid of cells of that size)."""
+    cells: dict[tuple[int, int], list[int]] = {}
+    pairs = []
+    size = max(within, 1e-9)
+    for j, p in enumerate(points):
+        cx, cy = int(np.floor(p[0] / size)), int(np.floor(p[1] / size))
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                for i in cells.get((cx + dx, cy + dy), ()):
+                    if np.hypot(*(points[i] - p)) < within:
+                        pairs.append((i, j))
+        cells.setdefault((cx, cy), []).append(j)
+    return sorted(pairs)
+
+
 def _check_what_parsed(check: Checker, parts: Any, size, robot_radius, goal_tolerance, obstacles, targets, starts,
                        to_world: Callable[[Any], np.ndarray], grid_value: Any, source: str) -> None:
     """A file with problems: still check the placement of the starts and targets that parsed, among the
     obstacles that parsed, so one report lists every problem (each named by its index in the file)."""
     if size is None or robot_radius is None or goal_tolerance is None or parts.params is None or parts.formations:
         return
-    if check.keys & {"size", "robot", "robot_radius", "goal_tolerance", "field", "grid"}:
+    if check.keys & {"size", "origin", "robot", "robot_radius", "goal_tolerance", "field", "grid", "sdf"}:
         return                                  # the map or the robot itself is wrong: placement would mislead
-    index: dict[str, list[int]] = {}
+    index: dict[str, list[int]] = {"obstacles": list(range(len(parts.obstacles)))} if parts.sdf and parts.obstacles is not None else {}
     if obstacles is None:
         if "obstacles" not in check.partial:
             return
         kept, index["obstacles"] = check.partial["obstacles"]
         frame = parts.frame
-        obstacles = tuple(obstacle_to_steps(frame, o) for o in kept)
+        obstacles = tuple(obstacle_to_steps(frame, o) for o in tuple(kept) + tuple(parts.sdf or ()))
         if parts.grid is not None:
             obstacles += (GridObstacle(parts.grid.occupied, parts.grid.cell / frame.unit, (0.0, 0.0),
                                        spec=_grid_spec(grid_value, source)),)
