@@ -8,6 +8,7 @@ import numpy as np
 
 from apf_physics import world_from_dict
 from apf_physics.sim.engine import COLLISION, REACHED, RUNNING, TIMEOUT, TRAPPED, Stepper, TrapDetector, TrapWatch
+from apf_physics.world.kinematics import UnicycleLimits
 
 from conftest import simple_world_dict
 
@@ -219,3 +220,41 @@ def test_a_start_within_the_goal_tolerance_is_reached_at_once_and_reported_by_th
     np.testing.assert_allclose(report.positions[:2, 0], [[4.0, 5.0], [5.0, 5.5]])    # not moved
     report = stepper.step(np.array([[[1.0, 0.0]], [[1.0, 0.0]], [[0.0, 1.0]]]))
     assert report.ended.tolist() == [False, False, False] and report.reached.tolist() == [False, False, False]
+
+
+def test_a_start_reported_reached_is_not_reported_again_when_another_slot_starts():
+    world = _open(targets=[[5.0, 5.0]], goal_tolerance=1.0)
+    stepper = Stepper([world], 3, max_steps=10)
+    stepper.start(np.arange(3), np.array([[[5.0, 5.0]], [[2.0, 5.0]], [[2.0, 2.0]]]))
+    up = np.array([[[0.0, 1.0]]] * 3)
+    assert stepper.step(up).reached.tolist() == [True, False, False]
+    stepper.start(np.array([1]), np.array([[[2.0, 8.0]]]))        # a new episode in slot 1, away from the target
+    report = stepper.step(up)
+    assert report.ended.tolist() == [False, False, False] and report.reached.tolist() == [False, False, False]
+    assert stepper.outcome.tolist() == [REACHED, RUNNING, RUNNING]
+
+
+def test_a_start_without_world_ids_among_several_worlds_is_in_the_first():
+    near = _open(name="near", targets=[[5.0, 5.0]], goal_tolerance=0.5)
+    far = _open(name="far", targets=[[15.0, 5.0]], goal_tolerance=1.5)
+    stepper = Stepper([near, far], 2, max_steps=20)
+    stepper.start(np.array([0, 1]), np.array([[[2.0, 5.0]], [[4.0, 5.0]]]))
+    assert stepper.world(0) is near and stepper.world(1) is near
+    np.testing.assert_allclose(stepper.last_distance, [3.0, 1.0])
+    report = stepper.step(np.array([[[1.0, 0.0]], [[0.5, 0.0]]]))
+    assert report.reached.tolist() == [False, True]              # within near's 0.5 (far's target is 10 away)
+
+
+def test_unicycles_start_at_rest_headed_as_given_or_toward_the_target_nearest_their_leader():
+    world = _open(targets=[[15.0, 5.0], [5.0, 15.0]])
+    stepper = Stepper([world], 3, robots_per_slot=2, unicycle=UnicycleLimits())
+    start = np.array([[[5.0, 5.0], [4.0, 5.0]], [[14.0, 12.0], [13.0, 12.0]], [[5.0, 12.0], [5.0, 11.0]]])
+    stepper.start(np.arange(3), start)
+    # the nearest target of slot 0's leader is [15, 5] (east), of slot 1's [15, 5] too (7.1 away; [5, 15] is
+    # 9.5), of slot 2's [5, 15] (north); a follower faces where its leader does
+    toward = np.array([0.0, np.arctan2(-7.0, 1.0), np.pi / 2])
+    np.testing.assert_allclose(stepper.poses()[..., 2], np.repeat(toward[:, None], 2, axis=1), atol=1e-12)
+    np.testing.assert_array_equal(stepper.states()[..., 3:], 0.0)
+    stepper.start(np.array([1]), start[1:2], headings=np.array([[1.0, 7.0]]))     # given, wrapped to [-π, π)
+    np.testing.assert_allclose(stepper.poses()[1, :, 2], [1.0, 7.0 - 2 * np.pi])
+    np.testing.assert_allclose(stepper.poses()[[0, 2], :, 2], np.repeat(toward[[0, 2], None], 2, axis=1), atol=1e-12)

@@ -815,6 +815,11 @@ def test_show_config_names_the_layer_each_value_comes_from():
     assert moving["env.memory"] == "preset general-memory" and moving["env.previous"] == "preset moving"
     assert moving["dqn.loss"].startswith("fast learner") and moving["network.learning_rate"] == "--set"
     assert moving["dqn.gamma"] == "default" and "fast learner" in LAYERS
+    # an option is shown as section.option; the two outside any section by their names alone
+    names = [option for option, _, _ in explain("map")]
+    assert names[:2] == ["preset", "method"] and all(name.count(".") == 1 for name in names[2:])
+    assert {name.split(".")[0] for name in names[2:]} == {"env", "dqn", "network", "schedule", "evaluation", "run",
+                                                          "imitation"}
 
 
 def test_train_show_config_trains_nothing_and_needs_no_out(tmp_path, capsys):

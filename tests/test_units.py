@@ -17,7 +17,8 @@ from apf_physics.experiments.evaluate import evaluate, format_table
 from apf_physics.planners import make_planner
 from apf_physics.render.episodes import collision_events, episode_clips
 from apf_physics.world.io.mapfiles import write_pgm
-from apf_physics.world.io.units import length_to_file, length_to_steps, points_to_file, points_to_steps, show_length
+from apf_physics.world.io.units import (length_to_file, length_to_steps, points_to_file, points_to_steps, show_length,
+                                      show_point)
 from apf_physics.world.io.worldfile import load_world, world_from_dict
 from apf_physics.world.core import Frame
 from apf_physics.world.io.units import world_to_file
@@ -123,3 +124,93 @@ def test_the_worlds_listing_gives_sizes_in_the_files_units(capsys):
     assert main(["worlds"]) == 0
     row = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("ros_arena"))
     assert "5.4x5.4 m" in row
+
+
+def file_in_steps_of(step):
+    """A world file whose lengths are given in a unit of which the robot moves ``step`` a step: the
+    same world in steps whatever ``step`` is (everything below is that world's value times ``step``)."""
+    def s(*values):
+        return [v * step for v in values]
+    limits = {"max_speed": 1.0 * step, "max_reverse": 0.5 * step, "max_turn_rate": 0.5, "max_accel": 0.25 * step,
+              "max_turn_accel": 0.25}
+    return {"name": "scaled", "units": "m", "size": s(40, 20),
+            "robot": {"radius": 0.5 * step, "step": step, "kinematics": "unicycle", **limits},
+            "goal_tolerance": 1.0 * step, "field": "thesis-general",
+            "obstacles": [{"circle": {"center": s(12, 4), "radius": 1.0 * step}, "name": "pillar",
+                           "motion": {"path": [s(0, 8)], "speed": 0.5 * step, "phase": 2.0 * step}},
+                          {"polygon": [s(20, 12), s(24, 12), s(24, 16)], "name": "cart",
+                           "motion": {"path": [s(4, -4)], "speed": 0.25 * step, "loop": True}}],
+            "targets": [s(36, 16)], "starts": [s(4, 4)],
+            "formation": {"followers": 2, "comm_range": 4.0 * step, "spacing": 2.0 * step, "shape": "offsets",
+                          "offsets": [s(-2, 1), s(-4, -1)]}}
+
+
+@pytest.mark.parametrize("step", [0.5, 2.0])
+def test_a_world_file_in_other_units_is_read_in_steps_and_written_back_as_given(step):
+    data = file_in_steps_of(step)
+    world = world_from_dict(data)
+    # in steps: the same world whatever the file's unit
+    assert world.size == (40.0, 20.0) and world.robot_radius == 0.5 and world.goal_tolerance == 1.0
+    assert (world.unicycle.max_speed, world.unicycle.max_reverse, world.unicycle.max_accel) == (1.0, 0.5, 0.25)
+    assert (world.unicycle.max_turn_rate, world.unicycle.max_turn_accel) == (0.5, 0.25)    # rates: no length in them
+    circle, polygon = world.obstacles
+    np.testing.assert_allclose(circle.center, [12, 4])
+    assert circle.radius == 1.0 and circle.name == "pillar"
+    np.testing.assert_allclose(circle.motion.path, [[0, 8]])
+    assert (circle.motion.speed, circle.motion.phase) == (0.5, 2.0)
+    np.testing.assert_allclose(polygon.vertices, [[20, 12], [24, 12], [24, 16]])
+    assert polygon.name == "cart" and polygon.motion.loop and polygon.motion.speed == 0.25
+    np.testing.assert_allclose(polygon.motion.path, [[4, -4]])
+    np.testing.assert_allclose(world.targets, [[36, 16]])
+    np.testing.assert_allclose(world.starts, [[4, 4]])
+    assert (world.formation.comm_range, world.formation.spacing) == (4.0, 2.0)
+    assert world.formation.offsets == ((-2.0, 1.0), (-4.0, -1.0))
+    # written back: the file's own values, the field's parameters in its units too
+    written = world_to_file(world)
+    assert {k: v for k, v in written.items() if k != "field"} == {k: v for k, v in data.items() if k != "field"}
+    again = world_from_dict(written)
+    assert again.field == world.field and world_to_file(again) == written
+
+
+@pytest.mark.parametrize("step", [0.5, 2.0])
+def test_several_formations_are_read_in_steps_and_written_back_as_given(step):
+    data = {k: v for k, v in file_in_steps_of(step).items() if k not in ("formation", "starts")}
+    data["formations"] = [{"followers": 1, "comm_range": 4.0 * step, "spacing": 2.0 * step, "shape": "line",
+                           "start": [4.0 * step, 4.0 * step], "target": [36.0 * step, 16.0 * step]}]
+    world = world_from_dict(data)
+    (task,) = world.formations
+    np.testing.assert_allclose([task.start, task.target], [[4, 4], [36, 16]])
+    assert (task.spec.comm_range, task.spec.spacing) == (4.0, 2.0)
+    assert world_to_file(world)["formations"] == data["formations"]
+
+
+def test_a_grid_maps_origin_moves_the_obstacles_drawn_on_it(tmp_path):
+    """A ROS map whose corner is at [-1, -2] m: a circle and a polygon given in the map's coordinates
+    are that far from the world's corner, in steps of 0.25 m; and a map in steps of 1 m too."""
+    extra = {"obstacles": [{"circle": {"center": [1.0, -1.0], "radius": 0.25}},
+                           {"polygon": [[7.0, 1.0], [8.0, 1.0], [8.0, 1.5]]}]}
+    world = load_world(metric_world(tmp_path, **extra))
+    circle, polygon = world.obstacles[:2]
+    np.testing.assert_allclose(circle.center, [8.0, 4.0])
+    assert circle.radius == 1.0
+    np.testing.assert_allclose(polygon.vertices, [[32, 12], [36, 12], [36, 14]])
+    written = world_to_file(world)
+    assert written["grid"] == {"map": str(tmp_path / "floor.yaml")}
+    assert written["obstacles"] == [{"circle": {"center": [1.0, -1.0], "radius": 0.25}},
+                                    {"polygon": [[7.0, 1.0], [8.0, 1.0], [8.0, 1.5]]}]
+    assert "size" not in written            # the map gives the size
+    metres = load_world(metric_world(tmp_path, robot={"radius": 0.2, "step": 1.0}, goal_tolerance=1.0, **extra))
+    np.testing.assert_allclose(metres.obstacles[0].center, [2.0, 1.0])
+    np.testing.assert_allclose(metres.obstacles[1].vertices, [[8, 3], [9, 3], [9, 3.5]])
+
+
+def test_lengths_convert_one_or_many():
+    frame = Frame((-1.0, -2.0), 0.25, "m")
+    one = length_to_steps(frame, 0.2)
+    assert isinstance(one, float) and json.dumps(one) and one == pytest.approx(0.8)
+    np.testing.assert_allclose(length_to_steps(frame, [0.2, 0.5]), [0.8, 2.0])
+    np.testing.assert_allclose(length_to_file(frame, [0.8, 2.0]), [0.2, 0.5])
+    assert isinstance(length_to_file(frame, 0.8), float)
+    assert show_point(frame, [29.0, 7.0]) == "[6.25, -0.25]"
+    assert show_point(Frame(), [1 / 3, 2 / 3]) == "[0.3333, 0.6667]"       # four digits unless told
+    assert show_length(Frame(), 1 / 3) == "0.3333" and show_length(frame, 4 / 3, 2) == "0.33 m"
