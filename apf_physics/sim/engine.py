@@ -259,7 +259,8 @@ class Stepper:
 
     def start(self, slots: np.ndarray, positions: np.ndarray, world_ids: np.ndarray | None = None,
               present: np.ndarray | None = None, headings: np.ndarray | None = None) -> None:
-        """Begin episodes in ``slots``: robots at ``positions`` (k, m, 2), in ``worlds[world_ids]`` (default: each slot's world as it was, the first at the start).
+        """Begin episodes in ``slots``: robots at ``positions`` (k, m, 2), in ``worlds[world_ids]``
+        (default: each slot's world as it was; the first world before any).
 
         An episode whose leader starts within the goal tolerance of a target of its world ends
         at once, reached after 0 steps; the next :meth:`step` reports it (``ended`` and
