@@ -808,9 +808,10 @@ def test_show_config_names_the_layer_each_value_comes_from():
     for name in PRESETS:
         rows = {option.rpartition(".")[2]: (value, source) for option, value, source in explain(name)}
         assert {k: v for k, (v, _) in rows.items()} == preset(name).options()
+        assert rows["preset"] == (name, "the preset chosen")
         for option, (value, source) in rows.items():
             if source == "default":
-                assert option not in PRESETS[name] or option in ("preset",)
+                assert option not in PRESETS[name]
     moving = {option: source for option, _, source in explain("moving", {"learning_rate": 3e-4})}
     assert moving["env.memory"] == "preset general-memory" and moving["env.previous"] == "preset moving"
     assert moving["dqn.loss"].startswith("fast learner") and moving["network.learning_rate"] == "--set"

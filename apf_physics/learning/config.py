@@ -690,7 +690,8 @@ def explain(name: str, overrides: dict[str, Any] | None = None) -> list[tuple[st
     rows = []
     for option, value in config.options().items():
         section = OPTIONS[option]
-        where = "--set" if option in given else source.get(option, "default")
+        where = ("--set" if option in given else "the preset chosen" if option == "preset"
+                 else source.get(option, "default"))
         rows.append((option if section is None else f"{section}.{option}", value, where))
     return rows
 
