@@ -16,6 +16,7 @@ import numpy as np
 from apf_physics import world_from_dict
 from apf_physics.models import MapNetwork, MapPolicy
 from apf_physics.models.policy import MAP_VALUES_PER_WORLD, MapValues
+from apf_physics.planners import make_planner
 
 from conftest import simple_world_dict
 
@@ -93,3 +94,18 @@ def test_views_share_the_values_and_copies_start_without():
     assert policy.values(crowded)[1] is values and kept(world) == 1
     assert len(pickle.loads(pickle.dumps(world.peek("map_values")))) == 0
     assert isinstance(world.peek("map_values"), MapValues)
+
+
+def test_a_world_shows_what_it_keeps_and_the_map_values_their_entries():
+    """``World.kept`` lists what :meth:`World.cached` built for the world itself (not what is shared
+    with its other targets), and ``MapValues.kept`` one entry per policy: what a memory benchmark reads."""
+    world = world_from_dict(simple_world_dict(field="thesis-general"))
+    before = len(world.kept())
+    raster = world.cached("a raster of its own", lambda: np.zeros(4))
+    world.cached("shared with other targets", lambda: np.ones(3), static=True)
+    assert len(world.kept()) == before + 1 and any(value is raster for value in world.kept())
+    planner = make_planner("dqn")
+    planner.reset(world, world.starts)
+    planner.act(world.starts, np.ones(len(world.starts), bool))
+    values = world.peek("map_values")
+    assert len(values.kept()) == len(values) == 1

@@ -82,7 +82,7 @@ def run_one(world_file: str, model: str) -> dict:
     start = time.perf_counter()
     episodes = rollout_formations(world, make_planner("dqn", model=model))
     seconds = time.perf_counter() - start
-    kept = sum(_nbytes(world.formation_world(i)._cache, set()) for i in range(len(world.formations)))
+    kept = sum(_nbytes(world.formation_world(i).kept(), set()) for i in range(len(world.formations)))
     arrived = [e for e in episodes if e.success]
     return {"formations": len(episodes), "arrived": len(arrived),
             "trapped": sum(e.outcome == "trapped" for e in episodes),
@@ -108,8 +108,8 @@ def _nbytes(value, seen: set) -> int:
         return sum(_nbytes(v, seen) for v in value.values())
     if isinstance(value, (list, tuple)):
         return sum(_nbytes(v, seen) for v in value)
-    if hasattr(value, "_entries"):                       # the map policy's values (MapValues)
-        return sum(_nbytes(v, seen) for v in value._entries.values())
+    if hasattr(value, "kept"):                           # the map policy's values (MapValues)
+        return sum(_nbytes(v, seen) for v in value.kept())
     if hasattr(value, "__dataclass_fields__"):
         return sum(_nbytes(getattr(value, f), seen) for f in value.__dataclass_fields__)
     if hasattr(value, "__dict__"):

@@ -129,6 +129,10 @@ class MapValues:
     def __len__(self) -> int:
         return len(self._entries)
 
+    def kept(self) -> list:
+        """Each kept policy's ``[last use, values]``: for measuring what a world holds in memory."""
+        return list(self._entries.values())
+
     def __reduce__(self):
         return MapValues, ()
 

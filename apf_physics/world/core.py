@@ -266,6 +266,11 @@ class World(FreeSpace):
         """What :meth:`cached` keeps under ``key``, or None if nothing is built yet (nothing is built)."""
         return (self._static if static else self._cache).get(key)
 
+    def kept(self) -> list:
+        """What this world keeps of its own (:meth:`cached`'s values, not those shared by :meth:`with_task`):
+        for measuring what a world holds in memory."""
+        return list(self._cache.values())
+
     @property
     def cache_size(self) -> int:
         """How many things this world keeps of its own (not counting those shared by :meth:`with_task`)."""
