@@ -6,8 +6,10 @@ crowds of slots, and every robot of the multi-agent environment; and unicycles, 
 formations and in crowds, at the highest speed a world file accepts, among bars down to 0.001
 thick (the physics probe's worlds, ``tools/probe_contacts.py``)."""
 
+import importlib.util
 import math
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,6 +23,12 @@ from conftest import WORLDS, simple_world_dict
 from contacts_check import assert_contacts_hold, overlaps, tunnelled
 
 EXAMPLES = int(os.environ.get("APF_CONTACT_EXAMPLES", 4))
+
+_PROBE = importlib.util.spec_from_file_location(
+    "apf_probe_contacts_tool", Path(__file__).resolve().parent.parent / "tools" / "probe_contacts.py")
+probe_contacts = importlib.util.module_from_spec(_PROBE)
+_PROBE.loader.exec_module(probe_contacts)
+bars = probe_contacts.bars   # the probe's worlds: bars 0.001 to 0.1 thick, and their centre lines
 
 
 def thin_walls(rng: np.random.Generator, count: int = 6):
@@ -162,23 +170,6 @@ def test_the_check_sees_a_pass_through():
 
 # -- unicycles at the highest speed a world file accepts ------------------------------------------
 
-def thin_bars(rng: np.random.Generator, count: int = 12):
-    """A 20 × 20 world of ``count`` bars 0.001–0.1 thick at random angles, and each bar's centre line."""
-    obstacles, lines = [], []
-    for _ in range(count):
-        c = rng.uniform(3, 17, 2)
-        angle, length, width = rng.uniform(0, math.pi), rng.uniform(2, 6), rng.uniform(0.001, 0.1)
-        u = np.array([math.cos(angle), math.sin(angle)])
-        n = np.array([-u[1], u[0]])
-        a, b = np.clip(c - u * length / 2, 0.5, 19.5), np.clip(c + u * length / 2, 0.5, 19.5)
-        obstacles.append({"polygon": [(a - n * width / 2).tolist(), (b - n * width / 2).tolist(),
-                                      (b + n * width / 2).tolist(), (a + n * width / 2).tolist()]})
-        lines.append((a, b))
-    world = world_from_dict({"size": [20, 20], "field": "thesis-fixed", "targets": [[19.5, 19.5]],
-                             "obstacles": obstacles})
-    return world, lines
-
-
 def drive_unicycles(rng, physics, worlds, lines, world_of, speed, steps, robots_meet):
     """Random full-speed commands (forward or back, any turn within π per step) for ``steps`` steps,
     never reset; after each, contacts hold and no robot went through a bar."""
@@ -206,7 +197,7 @@ def drive_unicycles(rng, physics, worlds, lines, world_of, speed, steps, robots_
 @given(st.integers(0, 10_000), st.sampled_from([3.0, MAX_UNICYCLE_SPEED]))
 def test_unicycles_alone_at_full_speed_neither_sink_into_nor_pass_through_bars(seed, speed):
     rng = np.random.default_rng(seed)
-    made = [thin_bars(rng) for _ in range(2)]
+    made = [bars(rng) for _ in range(2)]
     worlds, lines = [w for w, _ in made], [b for _, b in made]
     world_of = np.arange(32) % 2
     physics = Physics([worlds[i] for i in world_of], max_speed=speed)
@@ -219,7 +210,7 @@ def test_unicycles_alone_at_full_speed_neither_sink_into_nor_pass_through_bars(s
 @given(st.integers(0, 10_000), st.booleans())
 def test_unicycles_in_formations_and_crowds_at_full_speed_hold(seed, crowd):
     rng = np.random.default_rng(seed)
-    world, lines = thin_bars(rng)
+    world, lines = bars(rng)
     slots, m = 6, 4
     physics = Physics([world] * slots, robots_per_slot=m, max_speed=MAX_UNICYCLE_SPEED,
                       crowds=[0] * slots if crowd else None)
