@@ -1,3 +1,4 @@
+import importlib.util
 import os
 
 import numpy as np
@@ -5,6 +6,12 @@ from pathlib import Path
 
 import pytest
 from hypothesis import settings
+
+# the benchmark's warehouse maps, drawn the same way at a test's size (tools/bench_warehouse.py)
+_WAREHOUSE_SPEC = importlib.util.spec_from_file_location(
+    "apf_bench_warehouse_tool", Path(__file__).resolve().parent.parent / "tools" / "bench_warehouse.py")
+_warehouse_tool = importlib.util.module_from_spec(_WAREHOUSE_SPEC)
+_WAREHOUSE_SPEC.loader.exec_module(_warehouse_tool)
 
 # Property tests draw the same examples on every run (a landing never depends on luck);
 # HYPOTHESIS_PROFILE=explore draws new ones each run, to look for failures.
@@ -48,17 +55,9 @@ def write_warehouse_map(path, blocks=(5, 4), shelf=6, aisle=2, border=3) -> np.n
         (height, width) bool, the occupied cells, row 0 the map's top line (highest y).
     """
     columns, rows = blocks
-    width = 2 * border + columns * (shelf + aisle) - aisle
-    height = 2 * border + rows * (2 + aisle) - aisle
-    occupied = np.zeros((height, width), bool)
-    for i in range(columns):
-        for j in range(rows):
-            x, y = border + i * (shelf + aisle), border + j * (2 + aisle)
-            occupied[y:y + 2, x:x + shelf] = True
-    lines = ["type octile", f"height {height}", f"width {width}", "map"]
-    lines += ["".join("@" if cell else "." for cell in row) for row in occupied]
+    lines = _warehouse_tool.warehouse_lines(columns, rows, shelf, aisle, border)
     path.write_text("\n".join(lines) + "\n")
-    return occupied
+    return np.array([[cell == "@" for cell in line] for line in lines[4:]])
 
 
 def warehouse_formations(occupied: np.ndarray, count: int, followers: int, seed: int = 0) -> list[dict]:

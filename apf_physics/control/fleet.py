@@ -272,6 +272,18 @@ def fleet_moves(lattice: Lattice, nodes: np.ndarray, prefs: np.ndarray, order: n
 
 
 @kernel
+def _closest_squared(px, py, vx, vy):
+    """The least squared distance from the origin of a point that starts at ``(px, py)`` and moves
+    by ``(vx, vy)`` over the step (two centres moving uniformly, in the frame of one of them)."""
+    a = vx * vx + vy * vy
+    t = 0.0
+    if a > 0:
+        t = min(1.0, max(0.0, -(px * vx + py * vy) / a))
+    qx, qy = px + t * vx, py + t * vy
+    return qx * qx + qy * qy
+
+
+@kernel
 def _clear(i, m, skip, nodes, chosen, occupant, cols, steps, contact, movers, mover_moves):
     """Whether robot ``i``'s move ``m`` keeps ``contact`` from every robot within two nodes, each
     along its decided move or standing (``skip``: the undecided robot it pushes out, or −1), and from
@@ -281,12 +293,7 @@ def _clear(i, m, skip, nodes, chosen, occupant, cols, steps, contact, movers, mo
     for k in range(movers.shape[0]):
         px, py = movers[k, 0] - c0, movers[k, 1] - r0
         vx, vy = mover_moves[k, 0] - float(steps[m, 0]), mover_moves[k, 1] - float(steps[m, 1])
-        a = vx * vx + vy * vy
-        t = 0.0
-        if a > 0:
-            t = min(1.0, max(0.0, -(px * vx + py * vy) / a))
-        qx, qy = px + t * vx, py + t * vy
-        if qx * qx + qy * qy < contact * contact:
+        if _closest_squared(px, py, vx, vy) < contact * contact:
             return False
     rows = occupant.shape[0] // cols
     dx, dy = float(steps[m, 0]), float(steps[m, 1])
@@ -302,14 +309,7 @@ def _clear(i, m, skip, nodes, chosen, occupant, cols, steps, contact, movers, mo
             if chosen[k] >= 0:
                 kx, ky = float(steps[chosen[k], 0]), float(steps[chosen[k], 1])
             # the least distance between the two centres over the step, both moving uniformly
-            px, py = float(-dc), float(-dr)
-            vx, vy = dx - kx, dy - ky
-            a = vx * vx + vy * vy
-            t = 0.0
-            if a > 0:
-                t = min(1.0, max(0.0, -(px * vx + py * vy) / a))
-            qx, qy = px + t * vx, py + t * vy
-            if qx * qx + qy * qy < contact * contact:
+            if _closest_squared(float(-dc), float(-dr), dx - kx, dy - ky) < contact * contact:
                 return False
     return True
 
