@@ -277,10 +277,15 @@ class MapPolicy:
             patch, patch_v, (rs, cs) = self.among_others(world, view, v, position)
             if patch is view:
                 continue
-            near_v = v.clone()
-            near_v[rs, cs] = patch_v
-            q[i] = node_scores(self.network, view, near_v, kappa, position[None], moves[i:i + 1], ends[i:i + 1],
-                               room[i:i + 1], du[i:i + 1]).numpy()[0]
+            # the patch's values in place of the map's for this robot, put back at once (the map's
+            # values are kept with the world: a copy of them per robot would cost the whole map)
+            kept = v[rs, cs].clone()
+            v[rs, cs] = patch_v
+            try:
+                q[i] = node_scores(self.network, view, v, kappa, position[None], moves[i:i + 1], ends[i:i + 1],
+                                   room[i:i + 1], du[i:i + 1]).numpy()[0]
+            finally:
+                v[rs, cs] = kept
         return np.where(usable, q, -np.inf)
 
     def node_values(self, world: World, goal: np.ndarray, points: np.ndarray) -> np.ndarray:
