@@ -374,6 +374,9 @@ def rollout_formations(world: World, planner: Planner, max_steps: int | None = N
     max_steps = default_max_steps(world) if max_steps is None else int(max_steps)
     limits = robot_limits(world, unicycle)
     initial = formations.starts()
+    # the planner given is reset first (its model loaded, as a caller's describe() reads it); each
+    # formation's leader is a copy of it, reset on its formation's world
+    planner.reset(formations.worlds[0], initial[0, :1].copy())
     planners = [copy.copy(planner) for _ in range(count)]
     for f, p in enumerate(planners):
         p.reset(formations.worlds[f], initial[f, :1].copy())
