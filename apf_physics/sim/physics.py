@@ -57,13 +57,26 @@ from apf_physics.world.core import World
 from apf_physics.world.kinematics import HOLONOMIC_SPEED, MAX_SUBSTEPS, physics_substeps, substeps_for
 
 MAX_SPEED = HOLONOMIC_SPEED  # a diagonal unit move (±1, ±1) per control step [units per control step]
-HASH_CELLS = 10_000
-"""Cells of pymunk's spatial hash (its table's size; shapes spread over them)."""
+HASH_CELLS = (256, 1 << 15)
+"""The fewest and the most cells of pymunk's spatial hash (:func:`hash_cells`)."""
 NAMED_WITHIN = 0.05
 """A touched obstacle is one within the robot's radius and this much of where the step leaves it [units]."""
 _COUNT_AT_MOST = 8  # up to this many robots in pymunk, count touching pairs by callbacks; more: read every substep
 
 __all__ = ["CONTACT_MARGIN", "MAX_SPEED", "ContactLog", "Physics", "substeps_for"]
+
+
+def hash_cells(pieces: int) -> int:
+    """Cells of pymunk's spatial hash for a space of ``pieces`` static pieces (obstacles, a grid's
+    boxes, walls): four per piece, within :data:`HASH_CELLS`.
+
+    Chipmunk clears the whole table of its moving shapes at every substep, so every cell costs
+    every substep (10,000 cells: about 10 µs, where 256 cells take 2 µs, the rest of a substep
+    of one robot against a wall); too few cells and the static pieces crowd its buckets. The count depends on the worlds
+    alone, never on the number of robots: a robot alone and the same robot among a batch meet
+    their obstacles in the same order.
+    """
+    return int(min(max(HASH_CELLS[0], 4 * pieces), HASH_CELLS[1]))
 
 
 class Physics:
@@ -121,7 +134,9 @@ class Physics:
         self.space.iterations = 10
         # A spatial hash of cells about a robot's size: among thousands of small obstacles it finds a
         # robot's candidates faster than the default bounding-box tree (tools/bench_obstacles.py)
-        self.space.use_spatial_hash(min(max(4.0 * min_radius, 0.5), 16.0), HASH_CELLS)
+        # (sized to the static pieces once the tiles are made: _fit_hash)
+        self._hash_dim = min(max(4.0 * min_radius, 0.5), 16.0)
+        self._hash_cells = 0
         # Chipmunk tolerates 0.1 of overlap by default; a robot resting against an obstacle with
         # that much overlap would sink past its boundary on the next push. Correct overlaps fully.
         self.space.collision_slop = 0.002
@@ -147,6 +162,7 @@ class Physics:
         self.bodies = SpaceBodies(self.space, self.proxies, self.movers)
         for s, world in enumerate(worlds):
             self._assign(s, world)
+        self._fit_hash()
 
         self._arbiters = pymunk.batch.Buffer()
         self._touching = Touching(self.space, self._arbiters)
@@ -171,6 +187,8 @@ class Physics:
             reach = world.robot_radius + CONTACT_MARGIN + 0.5
             self._tiles.build(key, world, 2 * reach + self.max_speed * self.control_dt)
             self.bodies.tiles_grew = True
+            if self._hash_cells:   # a tile made after the start (set_world)
+                self._fit_hash()
         slots = self.slots
         slots.worlds[slot] = world
         self._any_moving = self._any_moving or bool(world.moving)   # stays set: moving obstacles were met
@@ -179,6 +197,14 @@ class Physics:
         slots.offset[slot] = self._tiles.offset[slots.tile[slot]]
         slots.radius[slot] = world.robot_radius
         self.free.assign(slot, world)
+
+    def _fit_hash(self) -> None:
+        """Size pymunk's spatial hash to the static pieces of every tile (:func:`hash_cells`); it
+        only grows (re-hashing every shape)."""
+        cells = hash_cells(self._tiles.piece_count)
+        if cells > self._hash_cells:
+            self.space.use_spatial_hash(self._hash_dim, cells)
+            self._hash_cells = cells
 
     def _ensure_obstacles(self, robots: np.ndarray, moves: np.ndarray) -> None:
         """Build the static obstacles near the moves of ``robots`` that are not built yet

@@ -81,6 +81,11 @@ class Tiles:
         return tile
 
     @property
+    def piece_count(self) -> int:
+        """Static pieces of every tile, built or not, and their walls."""
+        return sum(len(pieces.owner) + 4 for pieces in self.pieces)
+
+    @property
     def complete(self) -> bool:
         """Every obstacle of every tile is built (small maps soon are)."""
         return all(pieces.complete for pieces in self.pieces)
