@@ -345,8 +345,7 @@ class Stepper:
         """
         if gave_up is not None and gave_up.any():
             self.finish(np.flatnonzero(gave_up), Outcome.TRAPPED)
-        moved = self.outcome == RUNNING
-        everyone = bool(moved.all())
+        moved, everyone = _running(self.outcome)
         if self.unicycle is not None:
             commands = self._drive(commands, moved)
         else:
@@ -355,18 +354,14 @@ class Stepper:
             self.physics.set_time(self.steps)
         contacts = self.physics.step(commands, None if everyone else np.repeat(moved, self.robots_per_slot))
         after = self.physics.positions.reshape(self.positions.shape)
-        if everyone:   # a new array every step: the report can hand it out
-            self.positions = after
-            self.steps += 1
-        else:
-            self.positions = np.where(moved[:, None, None], after, self.positions)
-            self.steps += moved
+        # a new array every step: the report can hand it out
+        self.positions = after if everyone else np.where(moved[:, None, None], after, self.positions)
         touched = contacts.any.reshape(self.num_slots, -1).any(axis=1) if contacts.touched else self._nobody
         watch = self._watch is not None
         outcome = self.outcome.copy()
         distance, collided, reached, ended = _episode_rules(
-            np.ascontiguousarray(self.positions[:, 0]), self._slot_targets, self._slot_tolerance, moved, touched,
-            self.steps, -1 if self.max_steps is None or watch else int(self.max_steps), outcome, self.ends_at_target)
+            self.positions, self._slot_targets, self._slot_tolerance, moved, touched, self.steps,
+            -1 if self.max_steps is None or watch else int(self.max_steps), outcome, self.ends_at_target)
         if watch:   # the trap rule judges the slots still running, before the step limit does
             judge = np.flatnonzero(moved & (outcome == RUNNING))
             trapped = self._watch.record(judge, self.positions[judge, 0], self._leader_potential(judge))
@@ -400,23 +395,36 @@ def _nearest(leaders, targets):
 
 
 @kernel
-def _episode_rules(leaders, targets, tolerance, moved, touched, steps, max_steps, outcome, ends_at_target):
-    """The episode rules of one step, for every slot (see the module docstring): each leader's
-    distance to its nearest target, and for the slots that moved, whether a robot collided, whether
-    the leader reached a target (and nothing collided), and the outcome (collision, reached when
+def _running(outcome):
+    """``(moved, everyone)``: (S,) the slots whose episode runs, and whether all do."""
+    moved = np.empty(outcome.shape[0], np.bool_)
+    everyone = True
+    for s in range(outcome.shape[0]):
+        moved[s] = outcome[s] == RUNNING
+        everyone = everyone and moved[s]
+    return moved, everyone
+
+
+@kernel
+def _episode_rules(positions, targets, tolerance, moved, touched, steps, max_steps, outcome, ends_at_target):
+    """The episode rules of one step, for every slot (see the module docstring): the step count of
+    each slot that moved advanced (in ``steps``), each leader's (``positions[:, 0]``) distance to
+    its nearest target, and for the slots that moved, whether a robot collided, whether the leader
+    reached a target (and nothing collided), and the outcome (collision, reached when
     ``ends_at_target``, or the step limit when ``max_steps`` ≥ 0), written into ``outcome``.
 
     Returns:
         ``(distance, collided, reached, ended)``, each (S,).
     """
-    n = leaders.shape[0]
-    distance = _nearest(leaders, targets)
+    n = positions.shape[0]
+    distance = _nearest(positions[:, 0], targets)
     collided = np.zeros(n, np.bool_)
     reached = np.zeros(n, np.bool_)
     ended = np.zeros(n, np.bool_)
     for s in range(n):
         if not moved[s]:
             continue
+        steps[s] += 1
         collided[s] = touched[s]
         reached[s] = distance[s] <= tolerance[s] and not touched[s]
         if collided[s]:
