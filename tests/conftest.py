@@ -22,6 +22,16 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repeatable"))
 WORLDS = Path(__file__).resolve().parent.parent / "worlds"
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _sb3_logs(tmp_path_factory):
+    """Stable-Baselines3 makes a folder for its logger at every ``learn`` (``/tmp/SB3-<time>`` unless
+    ``SB3_LOGDIR`` says where): the tests' go in pytest's temporary folder, not the machine's /tmp
+    (subprocesses, such as the README's snippets, inherit it)."""
+    if "SB3_LOGDIR" not in os.environ:
+        os.environ["SB3_LOGDIR"] = str(tmp_path_factory.mktemp("sb3-logs"))
+    yield
+
+
 @pytest.fixture
 def worlds_dir() -> Path:
     return WORLDS
