@@ -94,7 +94,7 @@ def _with_rows(observation: np.ndarray | dict, slots: np.ndarray, rows: np.ndarr
 def _ends(ended: np.ndarray, outcome: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(terminated, truncated, trapped)`` of the episodes that ``ended``, from their outcome:
     reached or collided terminate; the step limit and the trap detector truncate."""
-    if not ended.any():
+    if not np.count_nonzero(ended):   # (a quarter of ndarray.any's cost on a few flags: every step asks)
         return ended, ended, ended
     trapped = ended & (outcome == TRAPPED)
     truncated = trapped | (ended & (outcome == TIMEOUT))

@@ -301,7 +301,7 @@ class Stepper:
         arrived = (distance <= self._slot_tolerance[slots]) & self.ends_at_target
         self.outcome[slots[arrived]] = REACHED
         self._unreported[slots] = arrived
-        self._any_unreported = bool(self._unreported.any())
+        self._any_unreported = bool(np.count_nonzero(self._unreported))
 
     def _face(self, slots: np.ndarray, positions: np.ndarray, headings: np.ndarray | None) -> None:
         """Unicycles of ``slots`` at rest, headed as given or toward the target nearest each leader."""
@@ -343,7 +343,7 @@ class Stepper:
             gave_up: (S,) bool: slots whose planner knows it is trapped; they end as ``trapped``
                 before moving.
         """
-        if gave_up is not None and gave_up.any():
+        if gave_up is not None and np.count_nonzero(gave_up):
             self.finish(np.flatnonzero(gave_up), Outcome.TRAPPED)
         moved, everyone = _running(self.outcome)
         if self.unicycle is not None:

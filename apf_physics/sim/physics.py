@@ -332,7 +332,7 @@ class Physics:
             if not moved_free:
                 simulate = self.free.close(self._positions, v * self.control_dt, simulate, None, self._any_moving)
         simulate &= movable
-        if not self.proxies.held and not simulate.any():
+        if not self.proxies.held and not np.count_nonzero(simulate):
             if not moved_free:
                 self._move_free(np.flatnonzero(movable), v)
             return self._touch_free
@@ -356,7 +356,7 @@ class Physics:
         log = self._log(pairs)
         undone = np.zeros(0, np.intp)
         pushed = log.robot[robots]   # only a robot that touched a robot can have been pushed faster than told
-        if pushed.any():
+        if np.count_nonzero(pushed):
             undone = self.settler.undo_crossings(robots[pushed], before[pushed])
         self.settler.settle(self._depths, undone, robots, before)
         return log
