@@ -423,3 +423,34 @@ def test_a_crowds_free_move_test_by_cells_decides_as_the_dense_one(seed):
                            None if bend is None else bend[None])
     dense = close_under_touch(needs[None], both, near)[0]
     assert np.array_equal(crowd_needs(p, dp, radius, needs, 2.8, bend), dense)
+
+
+def test_the_spatial_hash_is_sized_by_the_worlds_not_the_robots():
+    small = world_from_dict(simple_world_dict())
+    boxes = [{"polygon": [[x + 0.2, y + 0.2], [x + 0.6, y + 0.2], [x + 0.6, y + 0.6], [x + 0.2, y + 0.6]]}
+             for x in range(1, 19, 2) for y in range(1, 19, 2)]
+    cluttered = world_from_dict(simple_world_dict(obstacles=boxes))
+    assert Physics([small]).hash_cells == Physics([small] * 64).hash_cells == 256   # the fewest
+    assert Physics([cluttered]).hash_cells == Physics([cluttered] * 64).hash_cells == 4 * (len(boxes) + 4)
+    grown = Physics([small])
+    grown.set_world(0, cluttered)   # a tile made later: the table grows with it
+    assert grown.hash_cells == 4 * (len(boxes) + 2 + 8)
+
+
+def test_a_robot_in_a_corner_moves_alone_as_in_a_batch():
+    """Pressed into the corner of two obstacles (two contacts at once, whose order the solver
+    follows), a lone robot and 64 robots alone in their slots, driven the same, end bit for bit
+    where the lone one does."""
+    world = world_from_dict(simple_world_dict(obstacles=[{"polygon": [[5, 5], [8, 5], [8, 9], [5, 9]]},
+                                                         {"circle": {"center": [4.4, 8.3], "radius": 0.5}}]))
+    lone, batch = Physics([world]), Physics([world] * 64)
+    lone.place([0], [[4.0, 6.0]])
+    batch.place(np.arange(64), np.tile([[4.0, 6.0]], (64, 1)))
+    touched = 0
+    for k in range(40):
+        v = np.array([[0.7, 0.9]]) if k % 7 else np.array([[-0.3, 0.2]])
+        log = lone.step(v)
+        batch.step(np.tile(v, (64, 1)))
+        touched += bool(log.any[0])
+        np.testing.assert_array_equal(batch.positions, np.tile(lone.positions, (64, 1)))
+    assert touched > 10

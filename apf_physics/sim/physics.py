@@ -136,7 +136,8 @@ class Physics:
         # robot's candidates faster than the default bounding-box tree (tools/bench_obstacles.py)
         # (sized to the static pieces once the tiles are made: _fit_hash)
         self._hash_dim = min(max(4.0 * min_radius, 0.5), 16.0)
-        self._hash_cells = 0
+        self.hash_cells = 0
+        """Cells of pymunk's spatial hash (:func:`hash_cells` of the tiles' static pieces)."""
         # Chipmunk tolerates 0.1 of overlap by default; a robot resting against an obstacle with
         # that much overlap would sink past its boundary on the next push. Correct overlaps fully.
         self.space.collision_slop = 0.002
@@ -187,7 +188,7 @@ class Physics:
             reach = world.robot_radius + CONTACT_MARGIN + 0.5
             self._tiles.build(key, world, 2 * reach + self.max_speed * self.control_dt)
             self.bodies.tiles_grew = True
-            if self._hash_cells:   # a tile made after the start (set_world)
+            if self.hash_cells:   # a tile made after the start (set_world)
                 self._fit_hash()
         slots = self.slots
         slots.worlds[slot] = world
@@ -202,9 +203,9 @@ class Physics:
         """Size pymunk's spatial hash to the static pieces of every tile (:func:`hash_cells`); it
         only grows (re-hashing every shape)."""
         cells = hash_cells(self._tiles.piece_count)
-        if cells > self._hash_cells:
+        if cells > self.hash_cells:
             self.space.use_spatial_hash(self._hash_dim, cells)
-            self._hash_cells = cells
+            self.hash_cells = cells
 
     def _ensure_obstacles(self, robots: np.ndarray, moves: np.ndarray) -> None:
         """Build the static obstacles near the moves of ``robots`` that are not built yet
