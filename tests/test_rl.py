@@ -49,7 +49,8 @@ from apf_physics.learning.dqn import q_network
 from apf_physics.learning.learner import Counters
 from apf_physics.learning.progress import Progress
 from apf_physics.learning.trainer import CSV_COLUMNS
-from rl_worlds import TINY_OPTIONS, tiny_world, write_tiny_world
+from rl_worlds import TINY, TINY_OPTIONS, tiny_world, write_tiny_world
+from apf_physics.world.io.worldfile import world_from_dict
 
 TINY_FIELD = tiny_world().field
 
@@ -544,6 +545,9 @@ def test_progress_bar_measures_the_stop_rule_and_shows_the_latest_evaluation(mon
     shown = Progress(config, phases_for_world(world, config), Counters(), stream=io.StringIO())
     assert shown.figures({"success": 0.95, "world_starts_success": 5 / 6}, 0) == "validation starts 95.0%, world starts 5/6"
     assert shown.figures(None, 0) == "validation starts -"
+    terminal = _Terminal()  # the bar says both targets: the fast preset's world-starts target applies here
+    Progress(config, phases_for_world(world, config), Counters(), stream=terminal).close()
+    assert "until 100% of the validation starts and 100% of the world starts" in terminal.getvalue()
 
 
 def test_tensorboard_logs_beside_train_csv(tmp_path):
@@ -788,16 +792,67 @@ def test_train_prints_progress_lines_and_a_finished_run_names_the_limit_to_lift(
 
 
 def test_the_target_is_measured_on_the_validation_starts_not_the_world_starts():
-    from apf_physics.learning.learner import Counters
     from apf_physics.learning.trainer import Evaluations, stop_reason
-    config = tiny_config(target_success=0.9, eval_random_starts=20)
+    config = tiny_config(target_success=0.9, target_world_starts=None, eval_random_starts=20)
     phases = phases_for_world(tiny_world(), config)
     c, evals = Counters(), Evaluations()
     net = torch.nn.Linear(1, 1)
     evals.record({"success": 0.5, "world_starts_success": 1.0}, c, net, config)   # every world start, few others
     assert c.top_success == 0.5 and stop_reason(config, phases, c, 0.0) is None
     evals.record({"success": 0.95, "world_starts_success": 0.8}, c, net, config)
-    assert stop_reason(config, phases, c, 0.0) == "target_success 0.9 reached"
+    assert stop_reason(config, phases, c, 0.0) == "target_success 0.9 of the validation starts reached"
+
+
+def test_with_a_world_starts_target_one_evaluation_must_meet_both_targets_and_is_preferred_as_best():
+    """``target_world_starts``: the run stops only at an evaluation that meets it and ``target_success``
+    together, and ``best.pt`` prefers such an evaluation to a better-scoring one that misses either."""
+    from apf_physics.learning.trainer import Evaluations, stop_reason
+    config = tiny_config(target_success=0.9, target_world_starts=1.0, eval_random_starts=20)
+    phases = phases_for_world(tiny_world(), config)
+    c, evals = Counters(), Evaluations()
+    net = torch.nn.Linear(1, 1)
+    assert evals.record({"success": 0.5, "world_starts_success": 1.0}, c, net, config)
+    assert evals.record({"success": 0.97, "world_starts_success": 0.8}, c, net, config)   # validation target only
+    assert stop_reason(config, phases, c, 0.0) is None and c.time_to_target is None
+    assert evals.record({"success": 0.92, "world_starts_success": 1.0}, c, net, config)   # both: best, though lower
+    assert evals.best["success"] == 0.92 and c.time_to_target is not None
+    assert stop_reason(config, phases, c, 0.0) == ("target_success 0.9 of the validation starts reached "
+                                                   "with target_world_starts 1 of the world starts")
+    assert not evals.record({"success": 0.99, "world_starts_success": 5 / 6}, c, net, config)  # misses one
+    assert evals.record({"success": 0.95, "world_starts_success": 1.0}, c, net, config)   # both, then select
+    assert evals.best["success"] == 0.95
+    # where the world starts are the validation starts, only target_success counts
+    same = tiny_config(target_success=0.9, target_world_starts=1.0, eval_random_starts=0)
+    c, evals = Counters(), Evaluations()
+    evals.record({"success": 0.95, "world_starts_success": 0.95}, c, net, same)
+    assert stop_reason(same, phases_for_world(tiny_world(), same), c, 0.0) == \
+        "target_success 0.9 of the validation starts reached"
+    with pytest.raises(UserError, match="target_world_starts must be in"):
+        tiny_config(target_world_starts=1.5)
+    assert preset("fast").schedule.target_world_starts == 1.0
+
+
+def test_a_run_that_meets_the_validation_target_but_not_the_world_starts_target_goes_on():
+    """A world start that can never be reached (walled into a corner): the run meets ``target_success`` on
+    the random validation starts early, yet with ``target_world_starts`` it trains to its step budget;
+    without it, it stops at that evaluation."""
+    world = world_from_dict({**TINY, "name": "tiny-pocket",
+                             "obstacles": TINY["obstacles"] + [{"polygon": [[0, 6.8], [1.3, 6.8], [1.3, 7.0], [0, 7.0]]},
+                                                               {"polygon": [[1.1, 7.0], [1.3, 7.0], [1.3, 8], [1.1, 8]]}],
+                             "starts": TINY["starts"] + [[0.5, 7.5]]})
+    options = dict(eval_random_starts=20, target_success=0.5, total_steps=5_000, eval_every=500)
+    held = tiny_config(**options, target_world_starts=1.0)
+    result = train(held, phases_for_world(world, held))
+    evaluations = [row for row in result.history if row["validation_success"] != ""]
+    assert any(row["validation_success"] >= 0.5 for row in evaluations)
+    assert all(row["world_starts_success"] < 1.0 for row in evaluations)
+    assert result.stop_reason == "total_steps 5000 reached" and not result.stopped_early
+    assert result.global_step >= 5_000 and result.counters.time_to_target is None
+    alone = tiny_config(**options, target_world_starts=None)
+    early = train(alone, phases_for_world(world, alone))
+    assert early.stopped_early and early.global_step < 5_000
+    first = next(row for row in early.history if row["validation_success"] != "" and row["validation_success"] >= 0.5)
+    assert early.global_step == first["global_step"]
 
 
 def test_show_config_names_the_layer_each_value_comes_from():

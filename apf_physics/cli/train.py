@@ -15,7 +15,7 @@ from apf_physics.learning.config import (CURRICULUM_DEFAULT, OPTIONS, PRESETS, W
                                          replace)
 from apf_physics.learning.phases import phases_for_curriculum, phases_for_world
 from apf_physics.learning.rundir import RunDir
-from apf_physics.learning.trainer import CSV_COLUMNS, check_phases, load_checkpoint_config, train
+from apf_physics.learning.trainer import CSV_COLUMNS, check_phases, load_checkpoint_config, train, world_starts_apart
 from apf_physics.world.io.worldfile import load_world
 
 
@@ -163,7 +163,9 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(f"best.pt (step {c.best_step:,}): {_figures(best, phases[0])}")
     if c.time_to_target is not None:
-        print(f"reached the target success rate after {c.time_to_target:.1f} s")
+        both = config.schedule.target_world_starts is not None and world_starts_apart(config, phases[0])
+        print(f"met the target of the validation starts{' and of the world starts' if both else ''} after "
+              f"{c.time_to_target:.1f} s")
     names = [Path(p).name for p in result.written]
     use = " (best.pt is the network to use)" if "best.pt" in names else ""
     print(f"wrote {', '.join(names)} in {out.path}{use}")

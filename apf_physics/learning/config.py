@@ -313,7 +313,13 @@ class ScheduleConfig:
     time_limit: Optional[float] = None
     """Seconds of training over all resumed sessions (None: no limit)."""
     target_success: Optional[float] = None
-    """Stop once a greedy evaluation succeeds from this share of the validation starts (None: never early)."""
+    """Stop once a greedy evaluation succeeds from this share of the validation starts (None: never early).
+    An evaluation that meets it (and ``target_world_starts``) is preferred as ``best.pt`` over one that does not."""
+    target_world_starts: Optional[float] = None
+    """Where the world's own starts are evaluated beside random validation starts (``eval_random_starts``
+    > 0): stop only once the same evaluation also succeeds from this share of the world starts, and prefer
+    such an evaluation as ``best.pt`` (None: the world starts only break ties; without ``target_success``
+    it has no effect)."""
     loss_limit: Optional[float] = 1e12
     """Stop, as diverged, when a logged mean loss exceeds this (a non-finite loss always stops; None:
     no limit)."""
@@ -327,6 +333,8 @@ class ScheduleConfig:
             (all(v is None or v >= 1 for v in (self.stage_episodes, self.stage_steps, self.total_episodes,
                                                self.total_steps)), "budgets must be positive or null"),
             (self.time_limit is None or self.time_limit > 0, "time_limit must be positive or null"),
+            (all(t is None or 0 < t <= 1 for t in (self.target_success, self.target_world_starts)),
+             "target_success and target_world_starts must be in (0, 1] or null"),
             (self.loss_limit is None or self.loss_limit > 0, "loss_limit must be positive or null"),
         ])
 
@@ -605,7 +613,7 @@ LAYERS: dict[str, tuple[str | None, dict[str, Any], str]] = {
         train_starts="reachable", failure_starts=0.5, batch_size=128, gradient_steps=4, n_step=5,
         learning_rate=5e-4, eval_network="target", eval_random_starts=1000, select=("success", "world_starts_success"),
         exploration_episodes=3_000, total_episodes=None, total_steps=300_000, eval_every=3_200,
-        target_success=0.99, checkpoint_every=128_000, log_every=6_400),
+        target_success=0.99, target_world_starts=1.0, checkpoint_every=128_000, log_every=6_400),
         "a world, learnt fastest; validated on random starts, stopped by steps"),
     "thesis-general-world": (None, dict(
         obs_size=9, filters=(4, 4), reward="thesis-general", exploration_episodes=150, total_episodes=150,

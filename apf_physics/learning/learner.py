@@ -43,9 +43,10 @@ class Counters:
     best_step: Optional[int] = None
     """Steps at the best evaluation."""
     top_success: Optional[float] = None
-    """Highest success of any evaluation on the validation starts (what ``target_success`` is compared with)."""
+    """Highest success on the validation starts of an evaluation that also met ``target_world_starts`` where it
+    applies (what ``target_success`` is compared with)."""
     time_to_target: Optional[float] = None
-    """Wall time at which an evaluation first reached ``target_success``."""
+    """Wall time at which an evaluation first met the targets (``target_success``, with ``target_world_starts``)."""
     last_eval_step: Optional[int] = None
     diverged: Optional[float] = None
     """The logged mean loss that stopped the run as diverged (None: it has not)."""

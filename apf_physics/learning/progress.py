@@ -1,9 +1,9 @@
 """What a training run shows while it runs: a bar on a terminal, plain lines anywhere else.
 
 On a terminal, a tqdm bar on stderr measures the budget that stops the run (steps, searches,
-the stages' searches, or seconds when a time limit is the only one), says the target if there
-is one, and shows ε and the latest evaluation (on the validation starts, and on the world
-starts) in its postfix. When stderr is not a terminal (``nohup``, CI, a notebook cell, a pipe)
+the stages' searches, or seconds when a time limit is the only one), says the targets if there
+are any (of the validation starts, and of the world starts), and shows ε and the latest
+evaluation (on the validation starts, and on the world starts) in its postfix. When stderr is not a terminal (``nohup``, CI, a notebook cell, a pipe)
 there is no bar and no carriage return: one plain line per row of ``train.csv``, as
 Stable-Baselines3's logger prints, with the step, the latest evaluation, the loss and the
 elapsed time. Both name the figures as ``train.csv`` does.
@@ -40,10 +40,13 @@ class Progress:
             self.measure, total, unit = "steps", None, "step"
         self.total, self.unit = total, unit
         self.multi = len(phases) > 1
-        self._desc = "" if s.target_success is None else f"until {s.target_success:.0%} of the validation starts"
         # the world starts are shown beside the validation starts when they are not the same starts
         self.world_starts = [None if p.world_starts is None or p.world_starts is p.validation else p.world_starts.starts
                              for p in phases]
+        self._desc = "" if s.target_success is None else f"until {s.target_success:.0%} of the validation starts"
+        if self._desc and s.target_world_starts is not None and config.evaluation.eval_random_starts \
+                and any(self.world_starts):
+            self._desc += f" and {s.target_world_starts:.0%} of the world starts"
         self.bar = None
         if self.stream.isatty():
             self.bar = tqdm(total=total, initial=self._value(c), unit=unit, desc=self._desc or None,

@@ -17,7 +17,10 @@ uninterrupted run (DQN: with ``save_buffer``); a run resumed after an interrupt 
 a checkpoint where it stopped) continues from there.
 
 A run stops at the first of its limits (:class:`~apf_physics.learning.config.ScheduleConfig`), and
-as diverged when a logged mean loss is not finite or exceeds ``loss_limit``.
+as diverged when a logged mean loss is not finite or exceeds ``loss_limit``. Its targets are met by
+one evaluation: ``target_success`` of the validation starts and, where the world's own starts are
+evaluated beside them, ``target_world_starts`` of those; ``best.pt`` is the best evaluation that
+met them (by ``select``), or the best by ``select`` if none did.
 """
 
 from __future__ import annotations
@@ -68,18 +71,39 @@ class Evaluations:
     best_state: Optional[dict] = None
 
     def record(self, summary: dict, c: Counters, network: torch.nn.Module, config: TrainConfig) -> bool:
-        """Note an evaluation made at ``c.global_step``; returns whether it is the best so far."""
+        """Note an evaluation made at ``c.global_step``; returns whether it is the best so far: an evaluation
+        that meets the run's targets (:func:`meets_targets`) is better than one that does not, then
+        ``select`` decides."""
         self.latest = summary
         c.last_eval_step = c.global_step
-        c.top_success = max(c.top_success or 0.0, summary["success"])
-        target, select = config.schedule.target_success, config.evaluation.select
-        if target is not None and c.time_to_target is None and summary["success"] >= target:
+        if meets_world_starts_target(summary, config):
+            c.top_success = max(c.top_success or 0.0, summary["success"])
+        if c.time_to_target is None and meets_targets(summary, config):
             c.time_to_target = c.wall_time
-        if self.best is not None and validation.score(summary, select) <= validation.score(self.best, select):
+        if self.best is not None and best_key(summary, config) <= best_key(self.best, config):
             return False
         self.best, c.best_step = summary, c.global_step
         self.best_state = {k: v.clone() for k, v in network.state_dict().items()}
         return True
+
+
+def meets_world_starts_target(summary: dict, config: TrainConfig) -> bool:
+    """Whether an evaluation succeeded from ``target_world_starts`` of the world starts; True where that target
+    does not apply (none set, no world starts evaluated, or the world starts are the validation starts)."""
+    target, world = config.schedule.target_world_starts, summary.get("world_starts_success")
+    return target is None or world is None or not config.evaluation.eval_random_starts or world >= target
+
+
+def meets_targets(summary: dict, config: TrainConfig) -> bool:
+    """Whether an evaluation met the run's targets: ``target_success`` of the validation starts and, where it
+    applies, ``target_world_starts`` of the world starts (False without ``target_success``)."""
+    target = config.schedule.target_success
+    return target is not None and summary["success"] >= target and meets_world_starts_target(summary, config)
+
+
+def best_key(summary: dict, config: TrainConfig) -> tuple:
+    """The sort key of an evaluation for ``best.pt``: whether it meets the targets, then ``select``'s figures."""
+    return (meets_targets(summary, config), *validation.score(summary, config.evaluation.select))
 
 
 @dataclass
@@ -128,7 +152,7 @@ class TrainResult:
 
     @property
     def stopped_early(self) -> bool:
-        """Stopped because an evaluation reached ``target_success``."""
+        """Stopped because an evaluation met the targets (``target_success``, with ``target_world_starts``)."""
         return self.stop_reason is not None and self.stop_reason.startswith("target")
 
     @property
@@ -154,8 +178,17 @@ def stop_reason(config: TrainConfig, phases: Sequence[Phase], c: Counters, wall:
     if s.time_limit is not None and wall >= s.time_limit:
         return f"time_limit {s.time_limit:g} s reached"
     if s.target_success is not None and c.top_success is not None and c.top_success >= s.target_success:
-        return f"target_success {s.target_success:g} reached"
+        reason = f"target_success {s.target_success:g} of the validation starts reached"
+        if s.target_world_starts is not None and world_starts_apart(config, phases[min(c.phase, len(phases) - 1)]):
+            reason += f" with target_world_starts {s.target_world_starts:g} of the world starts"
+        return reason
     return None
+
+
+def world_starts_apart(config: TrainConfig, phase: Phase) -> bool:
+    """Whether the phase's world starts are evaluated beside its validation starts (and not as them)."""
+    return bool(config.evaluation.eval_random_starts) and phase.world_starts is not None \
+        and phase.world_starts is not phase.validation
 
 
 def next_multiple(value: int, every: int) -> int:
