@@ -147,7 +147,7 @@ def test_thesis_presets_stay_as_written():
         1e-3, "relative-log", "reachable", 0.99)
     assert (fast.dqn.gradient_steps, fast.dqn.n_step, fast.network.learning_rate, fast.dqn.eval_network) == (
         4, 5, 5e-4, "target")
-    assert fast.env.failure_starts == 0.5
+    assert fast.env.failure_starts == 0.5 and fast.dqn.exploration_episodes == 1_500
     # validated on 1,000 seeded random free starts never trained on: they pick best.pt and stop the run, which
     # stops by steps (the same run on any machine), not by the clock
     assert fast.evaluation.eval_random_starts == 1000 and fast.evaluation.select == ("success", "world_starts_success")
