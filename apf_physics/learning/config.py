@@ -350,8 +350,10 @@ class EvalConfig:
     """Evaluate with the DQN planner's shield (``apf-physics eval --planner dqn``) rather than the
     network's choices as they are (``dqn-unshielded``)."""
     select: tuple[str, ...] = ("success", "world_starts_success")
-    """Which evaluation is best: compared figure by figure, in this order (a leading ``-``: lower is
-    better; figures of :data:`EVAL_FIGURES`, rounded to 6 decimals); the first of equals is kept."""
+    """Which evaluation is best: one that meets the run's targets (``target_success``, with
+    ``target_world_starts``) before one that does not, then compared figure by figure, in this order
+    (a leading ``-``: lower is better; figures of :data:`EVAL_FIGURES`, rounded to 6 decimals); the
+    first of equals is kept."""
     eval_random_starts: int = 0
     """On a world: the validation starts (which choose ``best.pt``) are this many random free starts
     that can reach a target, drawn once from a generator of their own and never trained from; the
