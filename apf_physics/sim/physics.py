@@ -68,15 +68,17 @@ __all__ = ["CONTACT_MARGIN", "MAX_SPEED", "ContactLog", "Physics", "substeps_for
 
 def hash_cells(pieces: int) -> int:
     """Cells of pymunk's spatial hash for a space of ``pieces`` static pieces (obstacles, a grid's
-    boxes, walls): four per piece, within :data:`HASH_CELLS`.
+    boxes, walls): two per piece, within :data:`HASH_CELLS`.
 
     Chipmunk clears the whole table of its moving shapes at every substep, so every cell costs
     every substep (10,000 cells: about 10 µs, where 256 cells take 2 µs, the rest of a substep
-    of one robot against a wall); too few cells and the static pieces crowd its buckets. The count depends on the worlds
+    of one robot against a wall); too few cells and the static pieces crowd its buckets. Among
+    3,573 boxes, one, two and four cells a piece cost chipmunk about the same; four a little more
+    (``tools/bench_obstacles.py``). The count depends on the worlds
     alone, never on the number of robots: a robot alone and the same robot among a batch meet
     their obstacles in the same order.
     """
-    return int(min(max(HASH_CELLS[0], 4 * pieces), HASH_CELLS[1]))
+    return int(min(max(HASH_CELLS[0], 2 * pieces), HASH_CELLS[1]))
 
 
 class Physics:
