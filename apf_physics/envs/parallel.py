@@ -28,7 +28,29 @@ except ImportError:  # the extra is not installed: the class can still be built,
     ParallelEnv = object
 
 
-class FormationsParallelEnv(ParallelEnv):
+class _OneWorldParallelEnv(ParallelEnv):
+    """What both environments share: one observation space and the nine moves for every agent,
+    a seeded generator, nothing to close."""
+
+    _observation_space: spaces.Space
+    _action_space: spaces.Space   # each env its own (a space is seeded)
+
+    def observation_space(self, agent: str) -> spaces.Space:
+        return self._observation_space
+
+    def action_space(self, agent: str) -> spaces.Space:
+        return self._action_space
+
+    def _seed(self, seed: int | None) -> None:
+        """A new generator from ``seed`` (None: keep the one it has, as Gymnasium's ``reset`` does)."""
+        if seed is not None:
+            self.np_random, _ = seeding.np_random(seed)
+
+    def close(self) -> None:
+        pass
+
+
+class FormationsParallelEnv(_OneWorldParallelEnv):
     """Every formation of a world with ``formations:`` moving at once, each to its own target.
 
     ## Agents
@@ -93,15 +115,8 @@ class FormationsParallelEnv(ParallelEnv):
         self._units = FileUnits([self.world])   # (every formation's world is this world with its own target)
         self.np_random, _ = seeding.np_random(None)
 
-    def observation_space(self, agent: str) -> spaces.Space:
-        return self._observation_space
-
-    def action_space(self, agent: str) -> spaces.Space:
-        return self._action_space
-
     def reset(self, seed: int | None = None, options: dict | None = None):
-        if seed is not None:
-            self.np_random, _ = seeding.np_random(seed)
+        self._seed(seed)
         self.task.start()
         self.agents = list(self.possible_agents)
         obs = self.task._obs
@@ -149,11 +164,8 @@ class FormationsParallelEnv(ParallelEnv):
                             self.task.step_count, families)
         return draw_frame(field_image(self.world), snapshot)
 
-    def close(self) -> None:
-        pass
 
-
-class FleetParallelEnv(ParallelEnv):
+class FleetParallelEnv(_OneWorldParallelEnv):
     """A fleet on one map: every robot an agent with a goal of its own, as POGEMA's environments
     are, through the physics.
 
@@ -214,15 +226,8 @@ class FleetParallelEnv(ParallelEnv):
         self._units = FileUnits([self.world])
         self.np_random, _ = seeding.np_random(None)
 
-    def observation_space(self, agent: str) -> spaces.Space:
-        return self._observation_space
-
-    def action_space(self, agent: str) -> spaces.Space:
-        return self._action_space
-
     def reset(self, seed: int | None = None, options: dict | None = None):
-        if seed is not None:
-            self.np_random, _ = seeding.np_random(seed)
+        self._seed(seed)
         self.task.start(self.np_random, self.random_starts)
         self.agents = list(self.possible_agents)
         obs = self.task.observe()
@@ -259,6 +264,3 @@ class FleetParallelEnv(ParallelEnv):
         image = fleet_image(self.world, 1024)
         return fleet_frame(image, positions, goals, 0, fleet_colours(task.count),
                            (f"{self.world.name}  step {task.steps}",))
-
-    def close(self) -> None:
-        pass
