@@ -184,6 +184,15 @@ class Checker:
             raise Invalid
         return np.array(pts, dtype=float).reshape(-1, 2)
 
+    def entries(self, value: Any, key: str, *, expected: str, what: str, at_most: int, at_least: int = 1) -> list:
+        """``value`` if it is a list of ``at_least`` to ``at_most`` entries (``what``), its length
+        checked before any entry is; ``expected`` says what a wrong value should have been."""
+        if not isinstance(value, list) or len(value) < at_least:
+            raise self.bad(key, f"expected {expected}, got {described(value)}")
+        if len(value) > at_most:
+            raise self.bad(key, f"at most {at_most:,} {what}, got {len(value):,}")
+        return value
+
     def mapping(self, value: Any, key: str, allowed: set[str], required: Sequence[str] = ()) -> Mapping[str, Any]:
         """``value`` if it is a mapping; its unknown and missing keys are recorded (and skipped by the caller)."""
         if not isinstance(value, Mapping):
@@ -341,10 +350,7 @@ def _parse_obstacle(check: Checker, value: Any, index: int, box: tuple[np.ndarra
 def _parse_obstacles(check: Checker, value: Any, box: tuple[np.ndarray, np.ndarray] | None) -> tuple[Obstacle, ...]:
     if value is None:
         return ()
-    if not isinstance(value, list):
-        raise check.bad("obstacles", f"expected a list, got {described(value)}")
-    if len(value) > MAX_OBSTACLES:
-        raise check.bad("obstacles", f"at most {MAX_OBSTACLES:,} obstacles, got {len(value):,}")
+    check.entries(value, "obstacles", expected="a list", what="obstacles", at_most=MAX_OBSTACLES, at_least=0)
     vertices = sum(len(o["polygon"]) for o in value
                    if isinstance(o, Mapping) and isinstance(o.get("polygon"), (list, tuple)))
     if vertices > MAX_VERTICES:
@@ -373,12 +379,8 @@ MAX_ROBOTS = 10_000
 
 def _parse_robots(check: Checker, value: Any) -> Fleet:
     """A world file's ``robots:``: a list of ``{start: [x, y], target: [x, y]}``, in the file's units."""
-    if not isinstance(value, list) or not value:
-        check.bad("robots", f"expected a non-empty list of robots ({{start: [x, y], target: [x, y]}}), got {described(value)}")
-        raise Invalid
-    if len(value) > MAX_ROBOTS:
-        check.bad("robots", f"at most {MAX_ROBOTS:,} robots, got {len(value):,}")
-        raise Invalid
+    check.entries(value, "robots", expected="a non-empty list of robots ({start: [x, y], target: [x, y]})",
+                  what="robots", at_most=MAX_ROBOTS)
     starts, targets = [], []
     for i, entry in enumerate(value):
         key = f"robots[{i}]"
@@ -396,12 +398,8 @@ def _parse_robots(check: Checker, value: Any) -> Fleet:
 
 
 def _parse_formations(check: Checker, value: Any) -> tuple[FormationTask, ...]:
-    if not isinstance(value, list) or not value:
-        check.bad("formations", f"expected a non-empty list of formations, got {described(value)}")
-        raise Invalid
-    if len(value) > MAX_FORMATIONS:
-        check.bad("formations", f"at most {MAX_FORMATIONS} formations, got {len(value):,}")
-        raise Invalid
+    check.entries(value, "formations", expected="a non-empty list of formations", what="formations",
+                  at_most=MAX_FORMATIONS)
     tasks = []
     for i, entry in enumerate(value):
         key = f"formations[{i}]"
