@@ -105,15 +105,20 @@ def test_the_teacher_demonstrates_only_moves_the_exact_room_finds_safe():
 def test_imitation_lowers_the_loss_and_the_planner_follows_the_values():
     world = world_from_dict(WALLED)
     config = preset("map", demo_positions=128, grad_iterations=8, map_moves="fine")
+    losses, episodes = _short_imitation(world, config, Teacher.of(world, config.imitation.map_resolution), 40)
+    assert np.mean(losses[-5:]) < 0.9 * np.mean(losses[:5])
+    assert [e.outcome for e in episodes] == ["reached", "reached"]
+
+
+def _short_imitation(world, config, teacher, updates: int):
+    """``updates`` imitation updates of a fresh map network (seeded), then ``eval`` of its planner on
+    ``world``'s starts: the losses and the episodes."""
     torch.manual_seed(0)
     net = map_network(config)
     optimizer = torch.optim.Adam(net.parameters(), lr=config.network.learning_rate)
-    teacher = Teacher.of(world, config.imitation.map_resolution)
     rng = np.random.default_rng(0)
-    losses = [update(net, optimizer, teacher, batch(teacher, config.imitation, rng), config) for _ in range(40)]
-    assert np.mean(losses[-5:]) < 0.9 * np.mean(losses[:5])
-    episodes = evaluate(DQNPlanner(policy=MapPolicy(net)), [world]).episodes
-    assert [e.outcome for e in episodes] == ["reached", "reached"]
+    losses = [update(net, optimizer, teacher, batch(teacher, config.imitation, rng), config) for _ in range(updates)]
+    return losses, evaluate(DQNPlanner(policy=MapPolicy(net)), [world]).episodes
 
 
 def test_node_moves_train_on_what_the_planner_reads_and_the_teacher_prefers_the_longest_shortest_move():
@@ -140,15 +145,9 @@ def test_node_moves_train_on_what_the_planner_reads_and_the_teacher_prefers_the_
     assert p[0, half] < 0.2 * p[0].max() and p[0, -1] < 1e-3          # a half move, and staying, much less
     # a short imitation on a walled world: the planner on nodes reaches both starts
     walled = world_from_dict(WALLED)
-    torch.manual_seed(0)
-    net = map_network(config)
-    optimizer = torch.optim.Adam(net.parameters(), lr=config.network.learning_rate)
-    teacher = NodeTeacher.of(walled, config.imitation.map_resolution)
-    rng = np.random.default_rng(0)
     # (more moves than the fine set: the cross-entropy starts higher and falls slower; measured 1.91 -> 1.51)
-    losses = [update(net, optimizer, teacher, batch(teacher, config.imitation, rng), config) for _ in range(100)]
+    losses, episodes = _short_imitation(walled, config, NodeTeacher.of(walled, config.imitation.map_resolution), 100)
     assert np.mean(losses[-10:]) < 0.9 * np.mean(losses[:10])
-    episodes = evaluate(DQNPlanner(policy=MapPolicy(net)), [walled]).episodes
     assert [e.outcome for e in episodes] == ["reached", "reached"]
 
 
