@@ -75,13 +75,18 @@ def four_connected_bounds(args):
     return float(np.sum(lengths)), float(np.max(lengths))
 
 
-def mapf(args) -> None:
+def pymapf_grid(args):
+    """pymapf (a clear exit where it is missing), the map as its grid, and the scenario's cell pairs and lines."""
     try:
         import pymapf
     except ImportError:
         raise SystemExit("pymapf is not installed: pip install pymapf")
     occupied, pairs, scen = cells(args)
-    grid = pymapf.GridMap(occupied.astype(int).tolist())
+    return pymapf, pymapf.GridMap(occupied.astype(int).tolist()), pairs, scen
+
+
+def mapf(args) -> None:
+    pymapf, grid, pairs, scen = pymapf_grid(args)
     agents = [pymapf.Agent(f"a{i}", s, g) for i, (s, g) in enumerate(pairs)]
     problem = pymapf.MAPFProblem(grid, agents, allow_diagonals=False)
     lower, longest = four_connected_bounds(args)
@@ -176,13 +181,8 @@ def _overlapping_pairs(positions: np.ndarray, contact: float) -> int:
 
 
 def lifelong(args) -> None:
-    try:
-        import pymapf
-        from pymapf.algorithms.pibt import _DistanceOracle, pibt_step
-    except ImportError:
-        raise SystemExit("pymapf is not installed: pip install pymapf")
-    occupied, pairs, _ = cells(args)
-    grid = pymapf.GridMap(occupied.astype(int).tolist())
+    pymapf, grid, pairs, _ = pymapf_grid(args)
+    from pymapf.algorithms.pibt import _DistanceOracle, pibt_step
     world, fleet = scenario_fleet(args.map, args.scen, args.agents)
     placed = place_fleet(world, fleet)
     lattice = placed.lattice
