@@ -73,15 +73,20 @@ class SpaceBodies:
         if self.stale:
             self.index()
         pool = self.proxies
-        moved = np.flatnonzero(pool.moved)
         if self.few:   # body by body, on Python floats: the moved put where they are to be, the rest at rest
-            bodies, target = pool.bodies, pool.target
-            for k in moved.tolist():
-                bodies[k].position = tuple(target[k].tolist())
-            commanded = dict(zip(proxies.tolist(), map(tuple, velocity.tolist())))
+            bodies = pool.bodies
+            moved = pool.moved.tolist()
+            target = pool.target.tolist()
+            commanded = dict(zip(proxies.tolist(), velocity.tolist()))
             for k, body in enumerate(bodies):
-                body.velocity = commanded.get(k, (0.0, 0.0))
+                if moved[k]:
+                    body.position = target[k]
+                    body.velocity = commanded.get(k, (0.0, 0.0))
+                elif k in commanded:
+                    body.velocity = commanded[k]
+                # (a body neither moved nor commanded is parked, at rest since it was: nothing touches it)
         else:
+            moved = np.flatnonzero(pool.moved)
             every = np.zeros((len(pool), 2))
             every[proxies] = velocity
             # every body's position and velocity in one read and one write (static bodies are
@@ -119,7 +124,8 @@ class SpaceBodies:
     def positions(self, proxies: np.ndarray) -> np.ndarray:
         """(k, 2) where pymunk has the bodies of ``proxies``, in the space's coordinates."""
         if self.few:
-            return np.array([tuple(self.proxies.bodies[k].position) for k in proxies.tolist()], float).reshape(-1, 2)
+            bodies = self.proxies.bodies
+            return np.array([bodies[k].position for k in proxies.tolist()], float).reshape(-1, 2)
         return self._read(pymunk.batch.BodyFields.POSITION, 2)[self._row_of_proxy[proxies]]
 
     def _read(self, fields, width: int) -> np.ndarray:

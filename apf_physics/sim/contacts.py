@@ -4,8 +4,7 @@ Every static body the physics builds (an obstacle, a wall slab, a moving obstacl
 labelled with what it is (:class:`BodyLabels`), and every robot's proxy is known by its body
 id. After a substep in which shapes may touch (:class:`Touching`), the arbiters' body-id pairs are
 read (:func:`touching_pairs`), and at the end of the step they become the rows
-``(robot, kind, other)`` of a :class:`ContactLog` (:func:`contact_rows`, one compiled loop;
-:func:`contact_log`).
+``(robot, kind, other)`` of a :class:`ContactLog` (:func:`contact_log`, one compiled loop).
 """
 
 from __future__ import annotations
@@ -219,37 +218,34 @@ def touching_depths(space: pymunk.Space, buffer: pymunk.batch.Buffer) -> tuple[n
     return ids, values[:, :2].copy(), values[:, 2].copy()
 
 
-def contact_log(rows: np.ndarray, num_robots: int, namer: Callable[[np.ndarray], np.ndarray] | None = None
-                ) -> ContactLog:
-    """The contact log of the rows ``(robot, kind, other)`` (:func:`contact_rows`); ``namer`` names
-    the static obstacles among them when the log's pairs are read."""
-    flags = np.zeros((len(KINDS), num_robots), bool)
-    flags[rows[:, 1], rows[:, 0]] = True
-    return ContactLog(flags[OBSTACLE], flags[WALL], flags[ROBOT], flags[MOVING], rows, namer)
-
-
-def contact_rows(pairs: np.ndarray, labels: BodyLabels, proxy_ids: np.ndarray, proxy_order: np.ndarray,
-                 proxy_robot: np.ndarray) -> np.ndarray:
-    """(K, 3) sorted distinct rows ``(robot, kind, other)`` of the touching body-id pairs.
+def contact_log(pairs: np.ndarray, labels: BodyLabels, proxy_ids: np.ndarray, proxy_order: np.ndarray,
+                proxy_robot: np.ndarray, num_robots: int,
+                namer: Callable[[], Callable[[np.ndarray], np.ndarray]] | None = None) -> ContactLog:
+    """The contact log of the touching body-id pairs: its sorted distinct rows ``(robot, kind,
+    other)`` and each robot's flags, from one compiled loop.
 
     Args:
         pairs: (K, 2) touching body ids (a pair may come several times).
         labels: What the static bodies are.
-        proxy_ids: The proxies' body ids.
-        proxy_order: ``argsort(proxy_ids)``.
+        proxy_ids: The proxies' body ids, sorted (uint64; :attr:`~apf_physics.sim.proxies.ProxyPool.sorted_ids`).
+        proxy_order: The proxy of each of them (the argsort of the ids in the pool's order).
         proxy_robot: The robot each proxy simulates (-1: parked).
+        num_robots: Robots in the log.
+        namer: Makes the namer of the rows' unnamed static obstacles (a tile's obstacles' shared
+            body, ``other`` -1), called only when there are some (:attr:`ContactLog.pairs`).
     """
-    return _contact_rows(np.ascontiguousarray(pairs, np.uint64), proxy_ids[proxy_order].astype(np.uint64), proxy_order,
-                         proxy_robot, labels.ids.astype(np.uint64), labels.label)
+    rows, flags, unnamed = _contact_rows(np.ascontiguousarray(pairs, np.uint64), proxy_ids, proxy_order, proxy_robot,
+                                         labels.ids.astype(np.uint64, copy=False), labels.label, num_robots)
+    return ContactLog(flags[OBSTACLE], flags[WALL], flags[ROBOT], flags[MOVING], rows,
+                      namer() if unnamed and namer is not None else None)
 
 
 def body_robots(pairs: np.ndarray, proxy_ids: np.ndarray, proxy_order: np.ndarray,
                 proxy_robot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For each body of the (K, 2) body-id ``pairs``: ``(robot, proxy)``, both (K, 2), the robot it
     simulates (-1: not a lent proxy) and which proxy it is (-1: not a proxy); arguments as
-    :func:`contact_rows`."""
-    return _body_robots(np.ascontiguousarray(pairs, np.uint64), proxy_ids[proxy_order].astype(np.uint64), proxy_order,
-                        proxy_robot)
+    :func:`contact_log`."""
+    return _body_robots(np.ascontiguousarray(pairs, np.uint64), proxy_ids, proxy_order, proxy_robot)
 
 
 def deep_planes(ids: np.ndarray, normal: np.ndarray, distance: np.ndarray, tolerance: float, proxy_ids: np.ndarray,
@@ -263,10 +259,10 @@ def deep_planes(ids: np.ndarray, normal: np.ndarray, distance: np.ndarray, toler
         slots (``proxy_solo``) that overlap static shapes, sorted, robot ``robots[i]``'s planes
         being ``planes[first[i]:first[i + 1]]``, each ``(way out x, y, depth)`` in the arbiters'
         order; and the indices of the other deep pairs (two robots, or a robot of a formation
-        or near moving obstacles) in ``ids``. Other arguments as :func:`contact_rows`.
+        or near moving obstacles) in ``ids``. Other arguments as :func:`contact_log`.
     """
     return _deep_planes(np.ascontiguousarray(ids, np.uint64), normal, distance, float(tolerance),
-                        proxy_ids[proxy_order].astype(np.uint64), proxy_order, proxy_robot, proxy_solo)
+                        proxy_ids, proxy_order, proxy_robot, proxy_solo)
 
 
 @kernel
@@ -323,11 +319,16 @@ def _body_robots(pairs, proxy_ids, proxy_order, proxy_robot):
 
 
 @kernel
-def _contact_rows(pairs, proxy_ids, proxy_order, proxy_robot, label_ids, label):
-    """:func:`contact_rows` over ``proxy_ids`` sorted (``proxy_order``: their proxies) and
+def _contact_rows(pairs, proxy_ids, proxy_order, proxy_robot, label_ids, label, num_robots):
+    """:func:`contact_log`'s loop over ``proxy_ids`` sorted (``proxy_order``: their proxies) and
     ``label_ids`` sorted with their ``label`` rows: each body of a pair that is a lent proxy gives
     one row, ``(its robot, kind, index)`` for a static body or ``(its robot, ROBOT, the other's
-    robot)`` for another lent proxy; rows sorted, each once."""
+    robot)`` for another lent proxy; rows sorted, each once.
+
+    Returns:
+        ``(rows (K, 3), flags (kinds, num_robots), unnamed)``: the rows, whether each robot
+        touched each kind, and whether a row's static obstacle is unnamed (``other`` -1).
+    """
     n = pairs.shape[0]
     robot, proxy = _body_robots(pairs, proxy_ids, proxy_order, proxy_robot)
     rows = np.empty((2 * n, 3), np.int64)
@@ -351,7 +352,11 @@ def _contact_rows(pairs, proxy_ids, proxy_order, proxy_robot, label_ids, label):
         span = max(span, rows[i, 2] + 2)
     key = np.unique((rows[:, 0] * _KIND_COUNT + rows[:, 1]) * span + rows[:, 2] + 1)
     out = np.empty((len(key), 3), np.intp)
+    flags = np.zeros((_KIND_COUNT, num_robots), np.bool_)
+    unnamed = False
     for i in range(len(key)):
         out[i, 0], out[i, 1] = key[i] // (_KIND_COUNT * span), key[i] // span % _KIND_COUNT
         out[i, 2] = key[i] % span - 1
-    return out
+        flags[out[i, 1], out[i, 0]] = True
+        unnamed = unnamed or out[i, 2] == -1   # a tile's obstacles' shared body (tiles.ANY_OBSTACLE)
+    return out, flags, unnamed

@@ -43,7 +43,7 @@ import pymunk
 import pymunk.batch
 
 from apf_physics.sim.bodies import SpaceBodies
-from apf_physics.sim.contacts import (BodyLabels, ContactLog, Touching, contact_log, contact_rows, touching_depths,
+from apf_physics.sim.contacts import (BodyLabels, ContactLog, Touching, contact_log, touching_depths,
                                       touching_pair_bytes)
 from apf_physics.sim.freemove import CONTACT_MARGIN, FreeMoveTest, move_free
 from apf_physics.sim.movers import MoverPool
@@ -330,7 +330,7 @@ class Physics:
             moved_free = not self.slots.meet and not self._any_moving
             simulate, count = self.free.step(self._positions, v, self.max_speed, self.control_dt, self.substeps,
                                              self.slots.offset, movable, move=moved_free)
-            if moved_free and not count and not self.proxies.held:
+            if moved_free and not count and not self.proxies.lent:
                 return self._touch_free   # nobody near anything: every robot moved, by the compiled pass
             if not moved_free:
                 simulate = self.free.close(self._positions, v * self.control_dt, simulate, None, self._any_moving)
@@ -343,7 +343,7 @@ class Physics:
         self.proxies.release(np.flatnonzero(held & ~simulate))
         self._lend(np.flatnonzero(simulate & ~held))
         robots = np.flatnonzero(simulate)
-        if len(robots):
+        if len(robots) and not self._tiles.complete:
             self._ensure_obstacles(robots, (v.mean(axis=1) if v.ndim == 3 else v) * self.control_dt)
         if self._any_moving:
             self.movers.lend(self.free.movers_needed, self.slots.time, self.slots.offset, self.control_dt,
@@ -401,13 +401,12 @@ class Physics:
 
     def _log(self, pairs: np.ndarray) -> ContactLog:
         """The contact log of the touching body-id pairs (a pair may come several times)."""
-        rows = contact_rows(pairs, self._labels, self.proxies.ids, self.proxies.order, self.proxies.robot)
-        if len(rows) and (rows[:, 2] == ANY_OBSTACLE).any():
-            return contact_log(rows, self.num_robots, self._namer(self._positions.copy()))
-        return contact_log(rows, self.num_robots)
+        return contact_log(pairs, self._labels, self.proxies.sorted_ids, self.proxies.order, self.proxies.robot,
+                           self.num_robots, self._namer)
 
-    def _namer(self, positions: np.ndarray):
-        """Names the obstacles of a log's rows from where the robots stood at the end of its step."""
+    def _namer(self):
+        """Names the obstacles of a log's rows from where the robots stand now (the end of its step)."""
+        positions = self._positions.copy()
         return lambda rows: self._name_obstacles(rows, positions)
 
     def _name_obstacles(self, rows: np.ndarray, positions: np.ndarray) -> np.ndarray:

@@ -46,10 +46,12 @@ class ProxyPool:
         dirty: (P,) parked since pymunk last stepped (it may still carry solver state: not lent).
         radius: (P,) each proxy's radius.
         solo: (P,) in the collision group of proxies that never meet (:data:`SOLO_FILTER`).
-        ids: (P,) their body ids; ``order`` the argsort of ``ids``; ``of_id`` the same as a dict.
+        ids: (P,) their body ids; ``order`` the argsort of ``ids``, ``sorted_ids`` the ids in that
+            order (uint64), ``of_id`` the same as a dict.
         target: (P, 2) where each is to be put before pymunk next steps, in the space's
             coordinates; ``moved`` (P,) those that must be put there.
         held: Some robot held a proxy at the last step.
+        lent: How many robots hold a proxy now.
         changed: The pool grew since the physics last mapped pymunk.batch's rows to bodies.
     """
 
@@ -63,11 +65,13 @@ class ProxyPool:
         self.solo = np.zeros(0, bool)
         self.ids = np.zeros(0, np.uintp)
         self.order = np.zeros(0, np.intp)
+        self.sorted_ids = np.zeros(0, np.uint64)
         self.of_id: dict[int, int] = {}
         self.target = np.zeros((0, 2))
         self.parked = np.zeros((0, 2))
         self.moved = np.zeros(0, bool)
         self.held = False
+        self.lent = 0
         self.changed = True
 
     def __len__(self) -> int:
@@ -92,6 +96,7 @@ class ProxyPool:
         self.solo = np.append(self.solo, solo)
         self.ids = np.append(self.ids, np.uintp(body.id))
         self.order = np.argsort(self.ids)
+        self.sorted_ids = self.ids[self.order].astype(np.uint64)
         self.of_id[body.id] = k
         self.target = np.vstack([self.target, parking(k)])
         self.parked = np.vstack([self.parked, parking(k)])
@@ -105,6 +110,7 @@ class ProxyPool:
         proxies = proxies[proxies >= 0]
         if not len(proxies):
             return
+        self.lent -= len(proxies)
         self.target[proxies] = self.parked[proxies]
         self.moved[proxies] = True
         self.of_robot[self.robot[proxies]] = -1
@@ -117,6 +123,7 @@ class ProxyPool:
         (:func:`_lend_free`), then new ones for those left, kind by kind."""
         if not len(robots):
             return
+        self.lent += len(robots)
         left = _lend_free(robots, radius, solo, self.robot, self.dirty, self.radius, self.solo, self.of_robot)
         if len(left):   # the pool is short: new proxies, kind by kind in order (as the pool grew before)
             kinds = sorted(set(zip(radius[left].tolist(), solo[left].tolist())))

@@ -94,7 +94,7 @@ class Settler:
             return
         ids, normal, distance = depths if depths is not None else (np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
         alone, first, planes, deep = deep_planes(ids, normal, distance, min(SETTLE_OBSTACLE, SETTLE_ROBOT),
-                                                 self.proxies.ids, self.proxies.order, self.proxies.robot,
+                                                 self.proxies.sorted_ids, self.proxies.order, self.proxies.robot,
                                                  self.proxies.solo)
         if len(alone):   # robots alone in their slots (most of them): _alone
             self._alone(alone, first, planes, simulated, before)
@@ -108,7 +108,7 @@ class Settler:
         """The deep overlaps of the last substep's arbiters (``ids`` (K, 2) body ids, their normals and
         depths), and what the ``undone`` robots overlap where they were put back; None: nothing."""
         # a robot and a static shape: the robot's way out is against the normal if it is a, along it if b
-        robot, _ = body_robots(ids, self.proxies.ids, self.proxies.order, self.proxies.robot)
+        robot, _ = body_robots(ids, self.proxies.sorted_ids, self.proxies.order, self.proxies.robot)
         both = (robot[:, 0] >= 0) & (robot[:, 1] >= 0)
         first_side = robot[:, 0] >= 0
         one = ~both
