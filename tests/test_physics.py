@@ -301,6 +301,40 @@ def test_a_released_proxy_carries_nothing_to_its_next_robot(worlds_dir):
         np.testing.assert_allclose(physics.positions, fresh.positions, atol=1e-12)
 
 
+def test_a_step_after_a_reset_in_the_open_leaves_pymunk_alone(worlds_dir, monkeypatch):
+    # a robot ends an episode against a wall and starts the next in open space: its proxy was taken
+    # back at the start, so its next step is a free move, computed without stepping pymunk
+    world = load_world(worlds_dir / "fixed20.yaml")
+    physics = Physics([world])
+    physics.place([0], [[0.3, 10.0]])
+    log = physics.step(np.array([[-1.0, 0.0]]))
+    assert log.wall[0] and physics.proxies.lent == 1
+    physics.place([0], [[10.0, 10.0]])
+    assert physics.proxies.lent == 0
+    steps = []
+    step = pymunk.Space.step
+    monkeypatch.setattr(pymunk.Space, "step", lambda space, dt: (steps.append(dt), step(space, dt)))
+    log = physics.step(np.array([[0.5, 0.25]]))
+    assert not steps and not log.any[0]
+    fresh = Physics([world])
+    fresh.place([0], [[10.0, 10.0]])
+    fresh.step(np.array([[0.5, 0.25]]))
+    np.testing.assert_array_equal(physics.positions, fresh.positions)
+
+
+def test_the_pool_counts_the_proxies_lent(worlds_dir):
+    world = load_world(worlds_dir / "fixed20.yaml")
+    rng = np.random.default_rng(5)
+    physics = Physics([world] * 16)
+    physics.place(np.arange(16), world.random_free_positions(rng, 16, margin=0.6))
+    for _ in range(60):
+        log = physics.step(rng.uniform(-1.4, 1.4, (16, 2)))
+        assert physics.proxies.lent == np.count_nonzero(physics.in_pymunk)
+        touched = np.flatnonzero(log.any)
+        physics.place(touched, world.random_free_positions(rng, len(touched), margin=0.6))
+        assert physics.proxies.lent == np.count_nonzero(physics.in_pymunk)
+
+
 # -- crowds and spawns: nothing pushes a robot through a wall -----------------------------------
 
 def _thin_wall_world(thickness=0.001):

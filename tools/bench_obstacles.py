@@ -12,6 +12,15 @@ only the count grows; the starts and target scale with the map):
 - the vector env (``NavigateVectorEnv``, random actions and random starts) in robot-steps per
   second at N = ``--envs``, and its ratio to the smallest K.
 Aim: both ratios at K = 3,600 within 1.5 of K = 25.
+
+    python tools/bench_obstacles.py --chipmunk [--counts 25 3600] [--env-steps 200] [--rounds 3]
+
+instead splits the vector env's step by this thread's CPU time (``time.thread_time``, what a
+loaded machine's scheduler takes away is not in it), in rounds over the counts: the whole step,
+chipmunk's ``Space.step`` timed apart, and the rest; how many robots end an episode, are in
+pymunk, and wait parked in its pool per step; and chipmunk's floor: a bare pymunk space of the
+same boxes (the physics' spatial hash) with as many discs moving among them as were in pymunk,
+no parked bodies, stepped as often.
 """
 
 from __future__ import annotations
@@ -76,6 +85,89 @@ def vector_rate(world, envs: int, steps: int) -> float:
     return steps * envs / (time.perf_counter() - t)
 
 
+def chipmunk_split(world, envs: int, steps: int) -> dict:
+    """CPU ms per step of the vector env among ``world``'s boxes, chipmunk's ``Space.step`` timed apart."""
+    import pymunk
+
+    spent = [0.0]
+    step = pymunk.Space.step
+
+    def timed(space, dt):
+        t = time.thread_time()
+        step(space, dt)
+        spent[0] += time.thread_time() - t
+
+    env = NavigateVectorEnv(world=world, num_envs=envs, starts="random")
+    env.reset(seed=0)
+    physics = env.task.stepper.physics
+    actions = np.random.default_rng(0).integers(0, 9, (steps + 20, envs))
+    for a in actions[:20]:
+        env.step(a)
+    ended = in_pymunk = parked = 0
+    pymunk.Space.step = timed
+    try:
+        t = time.thread_time()
+        for a in actions[20:]:
+            _, _, terminated, truncated, _ = env.step(a)
+            ended += int(np.count_nonzero(terminated | truncated))
+            in_pymunk += int(np.count_nonzero(physics.in_pymunk))
+            parked += len(physics.proxies) - physics.proxies.lent
+        whole = (time.thread_time() - t) / steps
+    finally:
+        pymunk.Space.step = step
+    return {"whole": whole * 1e3, "chipmunk": spent[0] / steps * 1e3, "ended": ended / steps,
+            "in_pymunk": in_pymunk / steps, "parked": parked / steps, "substeps": physics.substeps,
+            "hash": (physics.hash_cells, world.robot_radius)}
+
+
+def chipmunk_floor(world, discs: int, substeps: int, steps: int, cells: int) -> float:
+    """CPU ms per control step of a bare pymunk space: ``world``'s boxes, ``discs`` of the robot's
+    radius moving among them at random velocities of one unit per step, no parked bodies."""
+    import pymunk
+
+    space = pymunk.Space()
+    space.iterations, space.collision_slop, space.collision_persistence = 10, 0.002, 1
+    space.use_spatial_hash(min(max(4.0 * world.robot_radius, 0.5), 16.0), cells)
+    space.add(*[pymunk.Poly(space.static_body, [tuple(v) for v in np.asarray(o.vertices)]) for o in world.obstacles])
+    rng = np.random.default_rng(0)
+    for _ in range(discs):
+        body = pymunk.Body(1.0, float("inf"))
+        body.position = tuple(rng.uniform(1.0, world.size[0] - 1.0, 2))
+        body.velocity = tuple(rng.uniform(-1.0, 1.0, 2))
+        space.add(body, pymunk.Circle(body, world.robot_radius))
+    for _ in range(substeps):
+        space.step(1.0 / substeps)
+    t = time.thread_time()
+    for _ in range(steps * substeps):
+        space.step(1.0 / substeps)
+    return (time.thread_time() - t) / steps * 1e3
+
+
+def chipmunk_main(args) -> None:
+    worlds = [lattice_world(count, spacing=args.spacing) for count in args.counts]
+    runs: list[list[dict]] = [[] for _ in worlds]
+    for _ in range(args.rounds):   # rounds over the counts: a change of the machine's load hits all alike
+        for i, world in enumerate(worlds):
+            runs[i].append(chipmunk_split(world, args.envs, args.env_steps))
+    print(f"the vector env at N = {args.envs}, random actions, CPU ms per step; {args.rounds} rounds (median, range)")
+    print(f"{'K':>6} {'whole step':>20} {'Space.step':>20} {'the rest':>20} {'ended':>6} {'in pymunk':>10} "
+          f"{'parked':>7} {'bare space':>11} {'rate / smallest K':>18}")
+    base = None
+    for world, rounds in zip(worlds, runs):
+        whole = [r["whole"] for r in rounds]
+        chip = [r["chipmunk"] for r in rounds]
+        rest = [w - c for w, c in zip(whole, chip)]
+        r0 = rounds[0]
+        floor = chipmunk_floor(world, int(round(np.median([r["in_pymunk"] for r in rounds]))), r0["substeps"],
+                               args.env_steps, r0["hash"][0])
+        base = base or whole
+        span = lambda xs: f"{np.median(xs):.3f} ({min(xs):.2f}-{max(xs):.2f})"   # noqa: E731
+        print(f"{len(world.obstacles):>6} {span(whole):>20} {span(chip):>20} {span(rest):>20} "
+              f"{np.median([r['ended'] for r in rounds]):>6.1f} {np.median([r['in_pymunk'] for r in rounds]):>10.1f} "
+              f"{np.median([r['parked'] for r in rounds]):>7.1f} {floor:>11.3f} "
+              f"{'1/' + format(np.median(whole) / np.median(base), '.2f'):>18}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--counts", type=int, nargs="+", default=[25, 100, 400, 1600, 3600])
@@ -83,7 +175,13 @@ def main() -> None:
     parser.add_argument("--env-steps", type=int, default=200, help="vector env steps per K")
     parser.add_argument("--envs", type=int, default=256)
     parser.add_argument("--spacing", type=float, help="boxes this far apart on a map that grows with K (fixed density)")
+    parser.add_argument("--chipmunk", action="store_true",
+                        help="split the vector env's step by CPU time: chipmunk, the rest, and chipmunk's floor")
+    parser.add_argument("--rounds", type=int, default=3, help="with --chipmunk: rounds over the counts")
     args = parser.parse_args()
+    if args.chipmunk:
+        chipmunk_main(args)
+        return
     rows = []
     for count in args.counts:
         t = time.perf_counter()
