@@ -116,18 +116,21 @@ def chipmunk_split(world, envs: int, steps: int) -> dict:
     finally:
         pymunk.Space.step = step
     return {"whole": whole * 1e3, "chipmunk": spent[0] / steps * 1e3, "ended": ended / steps,
-            "in_pymunk": in_pymunk / steps, "parked": parked / steps, "substeps": physics.substeps,
-            "hash": (physics.hash_cells, world.robot_radius)}
+            "in_pymunk": in_pymunk / steps, "parked": parked / steps, "physics": physics}
 
 
-def chipmunk_floor(world, discs: int, substeps: int, steps: int, cells: int) -> float:
-    """CPU ms per control step of a bare pymunk space: ``world``'s boxes, ``discs`` of the robot's
-    radius moving among them at random velocities of one unit per step, no parked bodies."""
+def chipmunk_floor(world, physics, discs: int, steps: int) -> float:
+    """CPU ms per control step of a bare pymunk space set up as ``physics``'s (solver, spatial hash,
+    substeps): ``world``'s boxes, ``discs`` of the robot's radius moving among them at random
+    velocities of one unit per step, no parked bodies."""
     import pymunk
 
     space = pymunk.Space()
-    space.iterations, space.collision_slop, space.collision_persistence = 10, 0.002, 1
-    space.use_spatial_hash(min(max(4.0 * world.robot_radius, 0.5), 16.0), cells)
+    space.iterations = physics.space.iterations
+    space.collision_slop = physics.space.collision_slop
+    space.collision_persistence = physics.space.collision_persistence
+    space.use_spatial_hash(physics.hash_dim, physics.hash_cells)
+    substeps = physics.substeps
     space.add(*[pymunk.Poly(space.static_body, [tuple(v) for v in np.asarray(o.vertices)]) for o in world.obstacles])
     rng = np.random.default_rng(0)
     for _ in range(discs):
@@ -158,8 +161,8 @@ def chipmunk_main(args) -> None:
         chip = [r["chipmunk"] for r in rounds]
         rest = [w - c for w, c in zip(whole, chip)]
         r0 = rounds[0]
-        floor = chipmunk_floor(world, int(round(np.median([r["in_pymunk"] for r in rounds]))), r0["substeps"],
-                               args.env_steps, r0["hash"][0])
+        floor = chipmunk_floor(world, r0["physics"], int(round(np.median([r["in_pymunk"] for r in rounds]))),
+                               args.env_steps)
         base = base or whole
         span = lambda xs: f"{np.median(xs):.3f} ({min(xs):.2f}-{max(xs):.2f})"   # noqa: E731
         print(f"{len(world.obstacles):>6} {span(whole):>20} {span(chip):>20} {span(rest):>20} "

@@ -137,7 +137,8 @@ class Physics:
         # A spatial hash of cells about a robot's size: among thousands of small obstacles it finds a
         # robot's candidates faster than the default bounding-box tree (tools/bench_obstacles.py)
         # (sized to the static pieces once the tiles are made: _fit_hash)
-        self._hash_dim = min(max(4.0 * min_radius, 0.5), 16.0)
+        self.hash_dim = min(max(4.0 * min_radius, 0.5), 16.0)
+        """Side of the spatial hash's cells [units]."""
         self.hash_cells = 0
         """Cells of pymunk's spatial hash (:func:`hash_cells` of the tiles' static pieces)."""
         # Chipmunk tolerates 0.1 of overlap by default; a robot resting against an obstacle with
@@ -206,14 +207,15 @@ class Physics:
         only grows (re-hashing every shape)."""
         cells = hash_cells(self._tiles.piece_count)
         if cells > self.hash_cells:
-            self.space.use_spatial_hash(self._hash_dim, cells)
+            self.space.use_spatial_hash(self.hash_dim, cells)
             self.hash_cells = cells
 
-    def _ensure_obstacles(self, robots: np.ndarray, moves: np.ndarray) -> None:
-        """Build the static obstacles near the moves of ``robots`` that are not built yet
-        (:meth:`~apf_physics.sim.tiles.Tiles.build_near`)."""
+    def _ensure_obstacles(self, robots: np.ndarray, v: np.ndarray) -> None:
+        """Build the static obstacles near the moves of ``robots`` (commands ``v``, (N, 2) or one
+        per substep) that are not built yet (:meth:`~apf_physics.sim.tiles.Tiles.build_near`)."""
         if self._tiles.complete:
             return   # every obstacle of every tile is built (small maps soon are)
+        moves = (v.mean(axis=1) if v.ndim == 3 else v) * self.control_dt
         slots = robots // self.robots_per_slot
         p = self._positions[robots]
         reach = self.slots.radius[slots] + CONTACT_MARGIN + 0.5
@@ -343,8 +345,8 @@ class Physics:
         self.proxies.release(np.flatnonzero(held & ~simulate))
         self._lend(np.flatnonzero(simulate & ~held))
         robots = np.flatnonzero(simulate)
-        if len(robots) and not self._tiles.complete:
-            self._ensure_obstacles(robots, (v.mean(axis=1) if v.ndim == 3 else v) * self.control_dt)
+        if len(robots):
+            self._ensure_obstacles(robots, v)
         if self._any_moving:
             self.movers.lend(self.free.movers_needed, self.slots.time, self.slots.offset, self.control_dt,
                              None if active is None else active.reshape(-1, self.robots_per_slot).any(axis=1))
